@@ -1,0 +1,333 @@
+"""The ``session.toml`` schema: rig constants, marker settings, protocol, angle sign.
+
+All validation of a session.toml lives here (:func:`config_from_dict`); each message
+names the key (``rig.arm_radius_m``) and says what was expected, and every problem of
+the file is listed in one :class:`~vision_torsion.errors.SessionError`.
+
+Mass tolerance
+--------------
+``rig.mass_tolerance_kg`` is the **± bound** on the mass of one weight piece (a
+tolerance class or "within ±0.1 g" as in the paper). Without more knowledge the
+error is taken as uniformly distributed within the bound, so its standard
+uncertainty is ``mass_tolerance_kg / sqrt(3)`` (GUM 4.3.7). Give ``rig.mass_std_kg``
+instead when a calibration certificate states a 1σ value; giving both is an error.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import tomli_w
+
+from ..errors import SessionError, VisionTorsionError
+from ..fileio import atomic_write_text
+from ..settings import MeasureSettings
+
+__all__ = [
+    "RigConfig",
+    "ProtocolConfig",
+    "SessionConfig",
+    "load_config",
+    "write_config",
+    "config_from_dict",
+    "config_to_dict",
+    "DEFAULT_ORIENTATIONS_DEG",
+    "CONFIG_NAME",
+]
+
+#: File name of the session description inside a session folder.
+CONFIG_NAME = "session.toml"
+#: The six flexspline orientations of the paper's protocol (degrees).
+DEFAULT_ORIENTATIONS_DEG = (0.0, 60.0, 120.0, 180.0, 240.0, 300.0)
+_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class RigConfig:
+    """Constants of the force-couple loading rig (SI units).
+
+    Attributes
+    ----------
+    arm_radius_m : float
+        Radius r of the torque disk at which the wires pull (m).
+    gravity_m_per_s2 : float
+        Local gravitational acceleration g (m/s²), 9.81 by default.
+    mass_std_kg : float
+        Standard uncertainty (1σ) of the mass of one weight piece (kg); derived from
+        ``mass_tolerance_kg / sqrt(3)`` when the file gives a ± tolerance.
+    mass_tolerance_kg : float or None
+        The ± bound as written in the file, kept for writing it back.
+    friction_torque_std_nm : float
+        Standard uncertainty of the torque lost or added by pulley friction (N·m), 0
+        by default.
+    arm_radius_std_m : float
+        Standard uncertainty of r (m), 0 by default.
+    gravity_std_m_per_s2 : float
+        Standard uncertainty of g (m/s²), 0 by default. When 9.81 is used instead of
+        the local value, the latitude range 9.780-9.832 m/s² suggests 0.015.
+    """
+
+    arm_radius_m: float
+    mass_std_kg: float
+    gravity_m_per_s2: float = 9.81
+    mass_tolerance_kg: float | None = None
+    friction_torque_std_nm: float = 0.0
+    arm_radius_std_m: float = 0.0
+    gravity_std_m_per_s2: float = 0.0
+
+
+@dataclass(frozen=True)
+class ProtocolConfig:
+    """The planned protocol (what :func:`~vision_torsion.session.plan.plan_session` wrote).
+
+    Attributes
+    ----------
+    orientations_deg : tuple of float
+        Flexspline orientations relative to the circular spline (degrees).
+    max_torque_nm : float
+        Largest torque magnitude of a cycle (N·m), a whole number of step masses.
+    step_mass_kg : float
+        Mass of one weight piece, added to or removed from each pan per step (kg).
+    cycles : int
+        Cycles of the four phases per orientation.
+    """
+
+    orientations_deg: tuple[float, ...]
+    max_torque_nm: float
+    step_mass_kg: float
+    cycles: int = 1
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """Everything ``session.toml`` says.
+
+    Attributes
+    ----------
+    rig : RigConfig
+    markers : MeasureSettings
+        How markers are found; ``correction`` (if any) is stored as written, relative
+        to the session folder.
+    protocol : ProtocolConfig
+    angle_sign : int
+        +1 or -1: the factor applied to measured angles (CCW positive as displayed)
+        so that positive torque gives a positive angle.
+    """
+
+    rig: RigConfig
+    protocol: ProtocolConfig
+    markers: MeasureSettings = field(default_factory=MeasureSettings)
+    angle_sign: int = 1
+
+
+# -- validation ---------------------------------------------------------------------
+
+
+class _Problems:
+    """Collects every problem of a file so they are reported together."""
+
+    def __init__(self):
+        self.items: list[str] = []
+
+    def add(self, key: str, what: str) -> None:
+        self.items.append(f"{key}: {what}")
+
+    def raise_if_any(self, source: str) -> None:
+        if self.items:
+            lines = "\n  ".join(self.items)
+            raise SessionError(f"{source}: {len(self.items)} problem(s)\n  {lines}")
+
+
+def _number(table, key, problems, prefix, *, required, default=None, positive=False,
+            nonnegative=False):
+    name = f"{prefix}.{key}"
+    if key not in table:
+        if required:
+            problems.add(name, "missing; expected a number")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        problems.add(name, f"expected a finite number, got {value!r}")
+        return default
+    if positive and value <= 0:
+        problems.add(name, f"expected a number > 0, got {value!r}")
+        return default
+    if nonnegative and value < 0:
+        problems.add(name, f"expected a number >= 0, got {value!r}")
+        return default
+    return float(value)
+
+
+def _table(data, key, problems, *, required):
+    value = data.get(key)
+    if value is None:
+        if required:
+            problems.add(key, "missing table")
+        return {}
+    if not isinstance(value, dict):
+        problems.add(key, f"expected a table, got {type(value).__name__}")
+        return {}
+    return value
+
+
+def _unknown(table, known, prefix, problems):
+    for key in sorted(set(table) - set(known)):
+        problems.add(f"{prefix}.{key}" if prefix else key, "unknown key")
+
+
+_RIG_KEYS = ("arm_radius_m", "gravity_m_per_s2", "mass_tolerance_kg", "mass_std_kg",
+             "friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2")
+_PROTOCOL_KEYS = ("orientations_deg", "max_torque_nm", "step_mass_kg", "cycles")
+
+
+def _rig_from(table, problems) -> RigConfig | None:
+    _unknown(table, _RIG_KEYS, "rig", problems)
+    kw = dict(
+        arm_radius_m=_number(table, "arm_radius_m", problems, "rig", required=True,
+                             positive=True),
+        gravity_m_per_s2=_number(table, "gravity_m_per_s2", problems, "rig",
+                                 required=False, default=9.81, positive=True),
+    )
+    for key in ("friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2"):
+        kw[key] = _number(table, key, problems, "rig", required=False, default=0.0,
+                          nonnegative=True)
+    tol = _number(table, "mass_tolerance_kg", problems, "rig", required=False,
+                  nonnegative=True)
+    std = _number(table, "mass_std_kg", problems, "rig", required=False, nonnegative=True)
+    if "mass_tolerance_kg" in table and "mass_std_kg" in table:
+        problems.add("rig.mass_std_kg", "give either mass_tolerance_kg (± bound) or "
+                     "mass_std_kg (1σ), not both")
+    elif "mass_tolerance_kg" not in table and "mass_std_kg" not in table:
+        problems.add("rig.mass_tolerance_kg", "missing; expected the ± tolerance of one "
+                     "weight piece in kg (or rig.mass_std_kg, a 1σ value)")
+    if tol is not None:
+        std = tol / math.sqrt(3.0)  # uniform distribution within ±tol (GUM 4.3.7)
+    if None in kw.values() or std is None:
+        return None
+    return RigConfig(mass_std_kg=std, mass_tolerance_kg=tol, **kw)
+
+
+def _protocol_from(table, problems) -> ProtocolConfig | None:
+    _unknown(table, _PROTOCOL_KEYS, "protocol", problems)
+    max_torque = _number(table, "max_torque_nm", problems, "protocol", required=True,
+                         positive=True)
+    step = _number(table, "step_mass_kg", problems, "protocol", required=True,
+                   positive=True)
+    cycles = table.get("cycles", 1)
+    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
+        problems.add("protocol.cycles", f"expected a whole number >= 1, got {cycles!r}")
+        cycles = None
+    orient = table.get("orientations_deg")
+    if orient is None:
+        problems.add("protocol.orientations_deg", "missing; expected a list of angles in "
+                     "degrees")
+    elif (not isinstance(orient, list) or not orient or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
+            for v in orient)):
+        problems.add("protocol.orientations_deg",
+                     f"expected a non-empty list of numbers (degrees), got {orient!r}")
+        orient = None
+    elif len(set(orient)) != len(orient):
+        problems.add("protocol.orientations_deg", f"repeated orientation in {orient!r}")
+        orient = None
+    if None in (max_torque, step, cycles, orient):
+        return None
+    return ProtocolConfig(orientations_deg=tuple(float(v) for v in orient),
+                          max_torque_nm=max_torque, step_mass_kg=step, cycles=cycles)
+
+
+def _markers_from(table, problems) -> MeasureSettings | None:
+    try:
+        return MeasureSettings.from_dict(table)
+    except (VisionTorsionError, TypeError, ValueError) as exc:
+        problems.add("markers", str(exc))
+        return None
+
+
+def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
+    """Validate a parsed session.toml and build the :class:`SessionConfig`.
+
+    Parameters
+    ----------
+    data : dict
+        The parsed TOML document.
+    source : str
+        What to call the file in messages.
+
+    Raises
+    ------
+    SessionError
+        Listing every problem, each naming its key (``rig.arm_radius_m``) and what
+        was expected.
+    """
+    problems = _Problems()
+    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol"), "",
+             problems)
+    version = data.get("format_version", _FORMAT_VERSION)
+    if version != _FORMAT_VERSION:
+        problems.add("format_version", f"expected {_FORMAT_VERSION}, got {version!r}")
+    sign = data.get("angle_sign", 1)
+    if isinstance(sign, bool) or sign not in (1, -1):
+        problems.add("angle_sign", f"expected 1 or -1, got {sign!r}")
+    rig = _rig_from(_table(data, "rig", problems, required=True), problems)
+    protocol = _protocol_from(_table(data, "protocol", problems, required=True), problems)
+    markers = _markers_from(_table(data, "markers", problems, required=False), problems)
+    problems.raise_if_any(source)
+    return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign))
+
+
+def load_config(path) -> SessionConfig:
+    """Read and validate a ``session.toml``.
+
+    Raises
+    ------
+    SessionError
+        The file is missing, is not valid TOML, or has invalid keys (all listed).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SessionError(f"{p}: no such file (a session folder needs {CONFIG_NAME})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SessionError(f"{p}: cannot be read ({exc})") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SessionError(f"{p}: not valid TOML ({exc})") from exc
+    return config_from_dict(data, source=str(p))
+
+
+def config_to_dict(config: SessionConfig) -> dict:
+    """The TOML document for `config` (inverse of :func:`config_from_dict`)."""
+    rig = config.rig
+    rig_d = {"arm_radius_m": rig.arm_radius_m, "gravity_m_per_s2": rig.gravity_m_per_s2}
+    if rig.mass_tolerance_kg is not None:
+        rig_d["mass_tolerance_kg"] = rig.mass_tolerance_kg
+    else:
+        rig_d["mass_std_kg"] = rig.mass_std_kg
+    for key in ("friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2"):
+        rig_d[key] = getattr(rig, key)
+    markers = {k: v for k, v in config.markers.to_dict().items() if v is not None}
+    p = config.protocol
+    return {
+        "format_version": _FORMAT_VERSION,
+        "angle_sign": config.angle_sign,
+        "rig": rig_d,
+        "markers": markers,
+        "protocol": {
+            "orientations_deg": list(p.orientations_deg),
+            "max_torque_nm": p.max_torque_nm,
+            "step_mass_kg": p.step_mass_kg,
+            "cycles": p.cycles,
+        },
+    }
+
+
+def write_config(path, config: SessionConfig, *, header: str = "") -> Path:
+    """Write `config` as TOML atomically; `header` lines are prepended as comments."""
+    comment = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
+    return atomic_write_text(path, comment + tomli_w.dumps(config_to_dict(config)))

@@ -1,0 +1,121 @@
+"""Force-couple torque from the weights on the pans, with its GUM standard uncertainty.
+
+The rig of the main paper (seed 001) applies a pure couple: two wires pull
+tangentially at radius r on opposite sides of the torque disk, each carrying a pan
+with mass m, so ``tau = 2 * m * g * r`` (0.0981 N·m per 100 g at r = 0.05 m). One pair
+of pans gives positive torque, the other negative; the phase of a manifest row says
+which pair is loaded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .config import RigConfig
+
+__all__ = ["TorqueValue", "PHASES", "PHASE_SIGN", "couple_torque", "pieces_per_pan"]
+
+#: The phases of a cycle, in protocol order (a ``reference`` image comes first).
+PHASES = ("reference", "positive_unloading", "negative_loading", "negative_unloading",
+          "positive_loading")
+#: Sign of the torque in each phase.
+PHASE_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1,
+              "negative_unloading": -1, "positive_loading": 1}
+
+
+@dataclass(frozen=True)
+class TorqueValue:
+    """A torque with its uncertainty.
+
+    Attributes
+    ----------
+    torque_nm : float
+        Signed torque (N·m).
+    torque_std_nm : float
+        Combined standard uncertainty of this image's torque (N·m).
+    torque_common_std_nm : float
+        The part of `torque_std_nm` that is fully correlated between all images of the
+        session (from r and g: a common scale error, N·m). It does not scatter the
+        points of a torque-angle curve; it scales every stiffness by the same factor.
+    """
+
+    torque_nm: float
+    torque_std_nm: float
+    torque_common_std_nm: float
+
+
+def pieces_per_pan(mass_kg: float, step_mass_kg: float) -> int:
+    """Number of weight pieces making up a pan load of `mass_kg`.
+
+    A load that is not a whole number of step masses counts as the next whole number
+    (the conservative choice for the mass uncertainty).
+
+    >>> pieces_per_pan(0.06, 0.02), pieces_per_pan(0.0, 0.02), pieces_per_pan(0.05, 0.02)
+    (3, 0, 3)
+    """
+    if mass_kg <= 0:
+        return 0
+    return max(1, math.ceil(mass_kg / step_mass_kg - 1e-6))
+
+
+def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: float
+                  ) -> TorqueValue:
+    """Torque of a force couple with `mass_kg` on each pan of the loaded pair.
+
+    Parameters
+    ----------
+    mass_kg : float
+        Mass on each of the two pans of the loaded pair (kg), >= 0.
+    phase : str
+        One of :data:`PHASES`; gives the sign (``positive_*`` +, ``negative_*`` -,
+        ``reference`` 0).
+    rig : RigConfig
+        r, g and their uncertainties, the mass uncertainty of one weight piece and
+        the friction term.
+    step_mass_kg : float
+        Mass of one weight piece (kg), to count the pieces on a pan.
+
+    Returns
+    -------
+    TorqueValue
+
+    Notes
+    -----
+    The model is ``tau = s * g * r * (m1 + m2) + tau_f`` with ``m1 = m2 = m`` the
+    masses on the two pans, ``s`` the sign of the phase and ``tau_f`` the friction
+    torque of the pulleys (nominally 0, standard uncertainty ``u_f``). Each pan
+    holds ``n = ceil(m / step_mass_kg)`` pieces whose mass errors are independent,
+    each with standard uncertainty ``u_w`` (``mass_tolerance_kg / sqrt(3)`` or
+    ``mass_std_kg``). By the law of propagation of uncertainty (GUM 5.1.2) with
+    uncorrelated inputs:
+
+    .. math::
+
+        u^2(\\tau) = (2 m r)^2 u^2(g) + (2 m g)^2 u^2(r)
+                     + (g r)^2 \\, 2 n u_w^2 + u_f^2
+
+    Correlation between images: ``g`` and ``r`` are the same for every image, so
+    their part ``|tau| * sqrt((u_g/g)^2 + (u_r/r)^2)`` is fully correlated
+    (:attr:`TorqueValue.torque_common_std_nm`). The pieces are reused, so mass
+    errors of images sharing pieces are partly correlated, and pulley friction
+    depends on the direction of motion; both are treated as independent per image,
+    which is what a point-by-point fit needs.
+
+    Examples
+    --------
+    >>> from vision_torsion.session.config import RigConfig
+    >>> rig = RigConfig(arm_radius_m=0.05, mass_std_kg=0.0)
+    >>> round(couple_torque(0.1, "negative_loading", rig, step_mass_kg=0.02).torque_nm, 6)
+    -0.0981
+    """
+    sign = PHASE_SIGN[phase]
+    g, r = rig.gravity_m_per_s2, rig.arm_radius_m
+    n = pieces_per_pan(mass_kg, step_mass_kg)
+    tau = sign * 2.0 * mass_kg * g * r
+    var_g = (2.0 * mass_kg * r * rig.gravity_std_m_per_s2) ** 2
+    var_r = (2.0 * mass_kg * g * rig.arm_radius_std_m) ** 2
+    var_m = (g * r) ** 2 * 2.0 * n * rig.mass_std_kg**2
+    std = math.sqrt(var_g + var_r + var_m + rig.friction_torque_std_nm**2)
+    return TorqueValue(torque_nm=tau + 0.0, torque_std_nm=std,
+                       torque_common_std_nm=math.sqrt(var_g + var_r))
