@@ -1,0 +1,96 @@
+"""A session folder as a whole: ``session.toml`` + ``manifest.csv`` + the images.
+
+:func:`load_session` is what ``process`` calls before measuring anything: it
+validates the configuration (:mod:`.config`), the manifest and every image file
+(:mod:`.manifest`), and resolves what the rows need (measurement settings, torques).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..errors import SessionError
+from ..settings import MeasureSettings
+from .config import CONFIG_NAME, SessionConfig, load_config
+from .manifest import MANIFEST_NAME, Manifest, ManifestRow, load_manifest
+from .torque import TorqueValue, couple_torque
+
+__all__ = ["Session", "load_session"]
+
+
+@dataclass(frozen=True)
+class Session:
+    """A validated session folder.
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+    config : SessionConfig
+    manifest : Manifest
+    """
+
+    folder: Path
+    config: SessionConfig
+    manifest: Manifest
+
+    @property
+    def settings(self) -> MeasureSettings:
+        """Measurement settings, with a relative ``correction`` path made absolute."""
+        markers = self.config.markers
+        if markers.correction is None:
+            return markers
+        return replace(markers, correction=str((self.folder / markers.correction).resolve()))
+
+    def torque(self, row: ManifestRow) -> TorqueValue:
+        """Torque of `row`: the measured ``torque_nm`` if given, else from the weights.
+
+        A measured torque has no part known to be common to all images, so its
+        ``torque_common_std_nm`` is NaN (unknown).
+        """
+        if row.torque_nm is not None:
+            return TorqueValue(row.torque_nm, row.torque_std_nm, math.nan)
+        return couple_torque(row.mass_kg, row.phase, self.config.rig,
+                             step_mass_kg=self.config.protocol.step_mass_kg)
+
+    def image_path(self, row: ManifestRow) -> Path:
+        """Absolute path of `row`'s image."""
+        return self.manifest.image_path(row)
+
+
+def load_session(session_dir, *, check_files: bool = True) -> Session:
+    """Read and validate a session folder.
+
+    Parameters
+    ----------
+    session_dir : str or os.PathLike
+        Folder holding ``session.toml``, ``manifest.csv`` and the images.
+    check_files : bool
+        Check that every image exists and can be opened (see :func:`load_manifest`).
+
+    Returns
+    -------
+    Session
+
+    Raises
+    ------
+    SessionError
+        The folder does not exist, or session.toml is missing or invalid (every
+        problem listed), or ``markers.correction`` names a missing file.
+    ManifestError
+        manifest.csv is missing or has problems (every problem listed with its CSV
+        line number).
+    """
+    folder = Path(session_dir)
+    if not folder.is_dir():
+        raise SessionError(f"{folder}: no such folder (expected a session folder with "
+                           f"{CONFIG_NAME} and {MANIFEST_NAME})")
+    config = load_config(folder / CONFIG_NAME)
+    if config.markers.correction is not None:
+        corr = folder / config.markers.correction
+        if not corr.is_file():
+            raise SessionError(f"{folder / CONFIG_NAME}: markers.correction: no such file "
+                               f"{corr}")
+    manifest = load_manifest(folder / MANIFEST_NAME, check_files=check_files)
+    return Session(folder=folder, config=config, manifest=manifest)

@@ -1,0 +1,330 @@
+"""``manifest.csv``: one row per image of a session, and its validation.
+
+This module is the single place where a manifest is checked. :func:`load_manifest`
+reads the whole file and checks every row, and every image file the rows name,
+before anything is measured; all problems are listed in one
+:class:`~vision_torsion.errors.ManifestError`, each prefixed with its **CSV line
+number** (the header is line 1, the first data row line 2), which is the number a
+spreadsheet or text editor shows.
+
+Columns: ``image,orientation_deg,cycle,phase,step,mass_kg`` are required, in any
+order; ``torque_nm`` and ``torque_std_nm`` are optional (a measured torque that
+overrides the weights, with its 1σ uncertainty); other columns are kept and passed
+through to ``measurements.csv`` unchanged.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+from ..errors import ManifestError
+from ..images import IMAGE_SUFFIXES
+from .torque import PHASES
+
+__all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
+           "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
+
+MANIFEST_NAME = "manifest.csv"
+REQUIRED_COLUMNS = ("image", "orientation_deg", "cycle", "phase", "step", "mass_kg")
+OPTIONAL_COLUMNS = ("torque_nm", "torque_std_nm")
+
+
+@dataclass(frozen=True)
+class ManifestRow:
+    """One validated manifest row.
+
+    Attributes
+    ----------
+    line : int
+        CSV line number of the row (header = line 1).
+    image : str
+        Path of the image relative to the session folder, with ``/`` separators.
+    orientation_deg : float
+    cycle : int
+        1, 2, ...
+    phase : str
+        One of :data:`~vision_torsion.session.torque.PHASES`.
+    step : int
+        Step within the phase (>= 0), increasing down the file.
+    mass_kg : float or None
+        Mass on each pan of the loaded pair (kg); None only when `torque_nm` is given.
+    torque_nm, torque_std_nm : float or None
+        A measured torque and its 1σ uncertainty (N·m) overriding the weights.
+    fields : tuple of (str, str)
+        Every column of the row as written, in file order (passed through).
+    """
+
+    line: int
+    image: str
+    orientation_deg: float
+    cycle: int
+    phase: str
+    step: int
+    mass_kg: float | None
+    torque_nm: float | None
+    torque_std_nm: float | None
+    fields: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A validated manifest: the columns as written and the rows in file order."""
+
+    path: Path
+    columns: tuple[str, ...]
+    rows: tuple[ManifestRow, ...]
+
+    @property
+    def session_dir(self) -> Path:
+        """The folder the image paths are relative to."""
+        return self.path.parent
+
+    def image_path(self, row: ManifestRow) -> Path:
+        """Absolute path of `row`'s image."""
+        return self.session_dir / row.image
+
+
+def _number(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _whole(text: str) -> int | None:
+    value = _number(text)
+    if value is None or not value.is_integer():
+        return None
+    return int(value)
+
+
+class _RowChecker:
+    """Parses rows, collecting "line N: problem" messages."""
+
+    def __init__(self, session_dir: Path):
+        self.session_dir = session_dir
+        self.root = session_dir.resolve()
+        self.problems: list[str] = []
+
+    def add(self, line: int, what: str) -> None:
+        self.problems.append(f"line {line}: {what}")
+
+    def image(self, line: int, text: str) -> str | None:
+        if not text:
+            self.add(line, "image is empty; expected a path relative to the session folder")
+            return None
+        posix = PurePosixPath(text)
+        if posix.is_absolute() or Path(text).is_absolute() or (len(text) > 1 and text[1] == ":"):
+            self.add(line, f"image {text!r} is an absolute path; expected a path relative "
+                           "to the session folder")
+            return None
+        norm = os.path.normpath(text).replace(os.sep, "/")
+        if norm == ".." or norm.startswith("../"):
+            self.add(line, f"image {text!r} leaves the session folder ('..')")
+            return None
+        if posix.suffix.lower() not in IMAGE_SUFFIXES:
+            self.add(line, f"image {text!r} is not an image file name; expected one of "
+                           f"{', '.join(IMAGE_SUFFIXES)}")
+            return None
+        return norm
+
+    def image_file(self, line: int, rel: str) -> None:
+        path = self.session_dir / rel
+        try:
+            path.resolve().relative_to(self.root)
+        except ValueError:
+            self.add(line, f"image {rel!r} leaves the session folder (through a symbolic "
+                           "link)")
+            return
+        if not path.exists():
+            self.add(line, f"image {rel!r}: no such file")
+        elif not path.is_file():
+            self.add(line, f"image {rel!r} is not a regular file")
+        else:
+            try:
+                with open(path, "rb") as fh:
+                    fh.read(1)
+            except OSError as exc:
+                self.add(line, f"image {rel!r} cannot be read ({exc.strerror or exc})")
+
+    def number(self, line, column, text, *, expected, blank_ok=False, nonnegative=False):
+        if text == "" and blank_ok:
+            return None
+        value = _number(text)
+        if value is None:
+            self.add(line, f"{column} {text!r} is not a number; expected {expected}")
+        elif nonnegative and value < 0:
+            self.add(line, f"{column} {text!r} is negative; expected {expected}")
+            return None
+        return value
+
+    def whole(self, line, column, text, *, minimum):
+        value = _whole(text)
+        if value is None or value < minimum:
+            self.add(line, f"{column} {text!r} is not a whole number >= {minimum}")
+            return None
+        return value
+
+
+def _parse_row(check: _RowChecker, line: int, rec: dict[str, str], has: set[str],
+               check_files: bool):
+    image = check.image(line, rec["image"])
+    if image is not None and check_files:
+        check.image_file(line, image)
+    orient = check.number(line, "orientation_deg", rec["orientation_deg"],
+                          expected="an angle in degrees")
+    cycle = check.whole(line, "cycle", rec["cycle"], minimum=1)
+    step = check.whole(line, "step", rec["step"], minimum=0)
+    phase = rec["phase"]
+    if phase not in PHASES:
+        check.add(line, f"phase {phase!r} is unknown; expected one of {', '.join(PHASES)}")
+        phase = None
+    torque = std = None
+    if "torque_nm" in has:
+        torque = check.number(line, "torque_nm", rec["torque_nm"], blank_ok=True,
+                              expected="a measured torque in N·m (or blank)")
+    if "torque_std_nm" in has:
+        std = check.number(line, "torque_std_nm", rec["torque_std_nm"], blank_ok=True,
+                           nonnegative=True, expected="a 1σ uncertainty >= 0 in N·m")
+    if torque is not None and std is None and rec.get("torque_std_nm", "") == "":
+        check.add(line, "torque_nm is given without torque_std_nm; expected its 1σ "
+                        "uncertainty in N·m")
+    mass = check.number(line, "mass_kg", rec["mass_kg"], nonnegative=True,
+                        blank_ok=torque is not None,
+                        expected="the mass on each pan in kg (>= 0)")
+    if phase == "reference" and mass:
+        check.add(line, f"mass_kg {rec['mass_kg']!r} on a reference row; a reference "
+                        "image is taken at zero load (mass_kg 0)")
+    if None in (image, orient, cycle, step, phase) or (mass is None and torque is None):
+        return None
+    return dict(image=image, orientation_deg=orient, cycle=cycle, phase=phase, step=step,
+                mass_kg=mass, torque_nm=torque, torque_std_nm=std)
+
+
+def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
+    """Duplicates, step order and reference count: checks across rows."""
+    by_image: dict[str, int] = {}
+    by_key: dict[tuple, int] = {}
+    last_step: dict[tuple, tuple[int, int]] = {}
+    reference: dict[float, int] = {}
+    for row in rows:
+        where = (f"orientation {row.orientation_deg:g}, cycle {row.cycle}, {row.phase}")
+        key = (row.orientation_deg, row.cycle, row.phase, row.step)
+        if row.image in by_image:
+            check.add(row.line, f"duplicate row: image {row.image!r} is already listed on "
+                                f"line {by_image[row.image]}")
+        elif key in by_key:
+            check.add(row.line, f"duplicate row: {where}, step {row.step} is already on "
+                                f"line {by_key[key]}")
+        by_image.setdefault(row.image, row.line)
+        by_key.setdefault(key, row.line)
+        group = key[:3]
+        if group in last_step and row.step < last_step[group][0]:
+            prev_step, prev_line = last_step[group]
+            check.add(row.line, f"steps out of order: {where}, step {row.step} comes after "
+                                f"step {prev_step} (line {prev_line}); steps must increase "
+                                "down the file")
+        last_step[group] = (row.step, row.line)
+        if row.phase == "reference":
+            if row.orientation_deg in reference:
+                check.add(row.line, f"second reference row of orientation "
+                                    f"{row.orientation_deg:g} (the first is on line "
+                                    f"{reference[row.orientation_deg]}); an orientation has "
+                                    "one reference image")
+            reference.setdefault(row.orientation_deg, row.line)
+
+
+def _read_records(path: Path):
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise ManifestError(f"{path}: no such file (a session folder needs "
+                            f"{MANIFEST_NAME})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ManifestError(f"{path}: cannot be read ({exc})") from exc
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header = next(reader, None)
+    if not header:
+        raise ManifestError(f"{path}: empty file; expected the header line "
+                            f"{','.join(REQUIRED_COLUMNS)}")
+    columns = tuple(h.strip() for h in header)
+    missing = [c for c in REQUIRED_COLUMNS if c not in columns]
+    repeated = sorted({c for c in columns if columns.count(c) > 1})
+    if missing or repeated:
+        what = (f"missing column(s) {', '.join(missing)}" if missing
+                else f"repeated column(s) {', '.join(repeated)}")
+        raise ManifestError(f"{path}: line 1: {what}; expected the header "
+                            f"{','.join(REQUIRED_COLUMNS)}[,torque_nm,torque_std_nm]")
+    records = [(reader.line_num, fields) for fields in reader if any(f.strip() for f in fields)]
+    return columns, records
+
+
+def load_manifest(path, *, check_files: bool = True) -> Manifest:
+    """Read and validate a ``manifest.csv`` and the image files it names.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The manifest; image paths are relative to its folder (the session folder).
+    check_files : bool
+        Also check that every image exists inside the session folder and can be
+        opened (True for processing; False to check only the table).
+
+    Returns
+    -------
+    Manifest
+
+    Raises
+    ------
+    ManifestError
+        The file is missing, empty or lacks a required column; or rows have
+        problems: wrong number of fields, empty/absolute/escaping (``..`` or a
+        symbolic link leading outside) image paths, names that are not images,
+        missing or unreadable files, unknown phases, non-numeric or negative masses,
+        non-whole cycles or steps, a reference row with a mass, a torque_nm without
+        torque_std_nm, duplicate images or duplicate (orientation, cycle, phase,
+        step), steps out of order within a phase, a second reference row of an
+        orientation, or no rows at all. Every problem is listed, one line each,
+        with its CSV line number.
+    """
+    path = Path(path)
+    columns, records = _read_records(path)
+    check = _RowChecker(path.parent)
+    has = set(columns)
+    rows: list[ManifestRow] = []
+    for line, fields in records:
+        if len(fields) != len(columns):
+            check.add(line, f"{len(fields)} fields; expected {len(columns)} (one per "
+                            "header column)")
+            continue
+        values = [f.strip() for f in fields]
+        rec = dict(zip(columns, values))
+        parsed = _parse_row(check, line, rec, has, check_files)
+        if parsed is None:
+            continue
+        rows.append(ManifestRow(line=line, fields=tuple(zip(columns, values)), **parsed))
+    if not records:
+        check.problems.append("no image rows below the header")
+    _check_sequence(check, rows)
+    if check.problems:
+        listing = "\n  ".join(check.problems)
+        raise ManifestError(f"{path}: {len(check.problems)} problem(s) (line numbers are "
+                            f"CSV lines, the header is line 1)\n  {listing}")
+    return Manifest(path=path, columns=columns, rows=tuple(rows))
+
+
+def manifest_text(columns, rows) -> str:
+    """CSV text of `rows` (dicts or sequences) under `columns`, ``\\n`` line endings."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([row[c] for c in columns] if isinstance(row, dict) else row)
+    return buf.getvalue()
