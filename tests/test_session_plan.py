@@ -1,0 +1,130 @@
+"""plan_session and the `plan` command: protocol order, file names, round trip."""
+
+import argparse
+import logging
+
+import pytest
+
+from vision_torsion.cli import plan as plan_cli
+from vision_torsion.errors import SessionError
+from vision_torsion.session import load_session, plan_session
+from vision_torsion.session.torque import couple_torque
+
+
+def plan(folder, **kw):
+    args = dict(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05)
+    args.update(kw)
+    return plan_session(folder, **args)
+
+
+def test_protocol_order_and_counts(tmp_path):
+    p = plan(tmp_path, orientations_deg=(0, 60), cycles=2)
+    n = p.steps_per_phase
+    assert n == 18  # 0.36 / (2 * 0.02 * 9.81 * 0.05) = 18.35 -> 18 (never above the request)
+    assert not p.exact and p.max_torque_nm == pytest.approx(0.35316, abs=1e-12)
+    per_orientation = 1 + 1 + 4 * n * 2
+    assert len(p.rows) == 2 * per_orientation
+    o0 = p.rows[:per_orientation]
+    assert o0[0]["phase"] == "reference" and o0[0]["mass_kg"] == "0"
+    # cycle 1 starts at +Tmax (step 0 after the pre-load), then one step mass per image
+    assert [(r["phase"], r["step"], r["mass_kg"]) for r in o0[1:4]] == [
+        ("positive_unloading", "0", "0.36"), ("positive_unloading", "1", "0.34"),
+        ("positive_unloading", "2", "0.32")]
+    phases = [r["phase"] for r in o0[1:]]
+    firsts = [phases.index(ph) for ph in ("positive_unloading", "negative_loading",
+                                          "negative_unloading", "positive_loading")]
+    assert firsts == sorted(firsts)
+    # every load state is photographed once: cycle 2 has no step 0
+    cycle2 = [r for r in o0 if r["cycle"] == "2"]
+    assert len(cycle2) == 4 * n and min(int(r["step"]) for r in cycle2) == 1
+    assert o0[-1]["phase"] == "positive_loading" and o0[-1]["mass_kg"] == "0.36"
+    assert p.rows[per_orientation]["orientation_deg"] == "60"
+
+
+def test_file_names(tmp_path):
+    p = plan(tmp_path, orientations_deg=(60, 22.5))
+    names = [r["image"] for r in p.rows]
+    assert "images/o060_c1_03_negative_loading_s02.png" in names
+    assert "images/o22p5_c1_01_reference_s00.png" in names
+    assert len(set(names)) == len(names)
+
+
+def test_exact_maximum_is_kept(tmp_path):
+    p = plan(tmp_path, max_torque_nm=0.0981 * 3.6, step_mass_kg=0.02, orientations_deg=(0,))
+    assert p.exact and p.steps_per_phase == 18
+
+
+def test_snapping_is_logged(tmp_path, caplog):
+    with caplog.at_level(logging.WARNING, logger="vision_torsion.session.plan"):
+        plan(tmp_path)
+    assert "not a whole number of 0.02 kg steps; planned 18 steps = 0.35316 N·m" in caplog.text
+
+
+def test_plan_then_load_round_trip(tmp_path):
+    p = plan(tmp_path, orientations_deg=(0, 120), cycles=3, mass_tolerance_kg=2e-4,
+             friction_torque_std_nm=1e-4, polarity="bright", radius_range=(4, 20),
+             angle_sign=-1)
+    s = load_session(tmp_path, check_files=False)
+    assert s.config == p.config
+    assert s.config.markers.polarity == "bright" and s.config.angle_sign == -1
+    assert [r.image for r in s.manifest.rows] == [r["image"] for r in p.rows]
+    top = s.manifest.rows[1]
+    assert s.torque(top).torque_nm == pytest.approx(p.max_torque_nm, rel=1e-12)
+    assert s.config.protocol.max_torque_nm == p.max_torque_nm == 0.35316
+
+
+def test_capture_sheet(tmp_path):
+    plan(tmp_path, orientations_deg=(0,))
+    sheet = (tmp_path / "capture_sheet.md").read_text()
+    assert "requested 0.36 N·m is not a whole number of steps; snapped down" in sheet
+    step = couple_torque(0.1, "negative_loading", load_session(
+        tmp_path, check_files=False).config.rig, step_mass_kg=0.02).torque_nm
+    assert f"{step:+.5f}" == "-0.09810"
+    assert ("| negative_loading | 5 | empty | 100 g (5 × 20 g) | -0.09810 | "
+            "`images/o000_c1_03_negative_loading_s05.png` |") in sheet
+    assert "add 20 g to each + pan 18 times" in sheet
+
+
+def test_refuses_to_overwrite(tmp_path):
+    plan(tmp_path)
+    with pytest.raises(SessionError, match=r"already holds a session \(session\.toml, "
+                       r"manifest\.csv\)"):
+        plan(tmp_path)
+    plan(tmp_path, overwrite=True, cycles=2)
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(max_torque_nm=0.01), r"max_torque_nm 0\.01 is less than one step"),
+    (dict(arm_radius_m=0), r"rig\.arm_radius_m: expected a number > 0"),
+    (dict(cycles=0), r"protocol\.cycles: expected a whole number >= 1"),
+    (dict(image_suffix=".gif"), r"image_suffix '\.gif' is not an image type"),
+])
+def test_invalid_parameters(tmp_path, kw, message):
+    with pytest.raises(SessionError, match=message):
+        plan(tmp_path, **kw)
+    assert not (tmp_path / "session.toml").exists()
+
+
+def parser():
+    p = argparse.ArgumentParser(prog="vision-torsion")
+    plan_cli.register(p.add_subparsers(dest="command"))
+    return p
+
+
+def test_cli_plan(tmp_path, capsys):
+    args = parser().parse_args(["plan", str(tmp_path / "s"), "--max-torque", "0.36",
+                                "--step-mass", "0.02", "--arm-radius", "0.05",
+                                "--orientations", "0", "90", "--cycles", "2"])
+    assert args.func(args) == 0
+    s = load_session(tmp_path / "s", check_files=False)
+    assert s.config.protocol.orientations_deg == (0.0, 90.0)
+    assert s.config.protocol.cycles == 2
+    # 2 orientations x (reference + step 0 + 4 phases x 18 steps x 2 cycles) = 292
+    assert "292 images in 2 orientations, 18 steps per phase" in capsys.readouterr().out
+
+
+def test_cli_plan_help(capsys):
+    with pytest.raises(SystemExit) as info:
+        parser().parse_args(["plan", "--help"])
+    assert info.value.code == 0
+    assert "--max-torque NM" in capsys.readouterr().out

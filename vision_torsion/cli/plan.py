@@ -1,0 +1,80 @@
+"""``vision-torsion plan``: write a new session folder for the six-orientation protocol."""
+
+from __future__ import annotations
+
+import argparse
+
+from . import add_common_options
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    """Add the ``plan`` subcommand."""
+    p = subparsers.add_parser(
+        "plan",
+        help="plan a test session (session.toml, manifest.csv, capture sheet)",
+        description="Write session.toml, manifest.csv (every image of the protocol in "
+        "capture order, with the file name to save it under) and a printable "
+        "capture_sheet.md into OUT_DIR. Per orientation: a reference image at zero "
+        "load, an unphotographed pre-load to +Tmax, then CYCLES x (positive unloading, "
+        "negative loading, negative unloading, positive loading). Torque is "
+        "tau = 2*m*g*r with m the mass on each pan.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("out_dir", metavar="OUT_DIR", help="session folder to create")
+    p.add_argument("--max-torque", type=float, required=True, metavar="NM",
+                   help="largest torque magnitude in N·m (snapped down to whole steps)")
+    p.add_argument("--step-mass", type=float, required=True, metavar="KG",
+                   help="mass added to or removed from each pan per step, kg")
+    p.add_argument("--arm-radius", type=float, required=True, metavar="M",
+                   help="radius of the torque disk at the wires, m")
+    p.add_argument("--orientations", type=float, nargs="+", metavar="DEG",
+                   default=[0, 60, 120, 180, 240, 300],
+                   help="flexspline orientations, degrees")
+    p.add_argument("--cycles", type=int, default=1, help="cycles per orientation")
+    p.add_argument("--gravity", type=float, default=9.81, metavar="M_PER_S2",
+                   help="local gravitational acceleration, m/s²")
+    p.add_argument("--gravity-std", type=float, default=0.0, metavar="M_PER_S2",
+                   help="1σ uncertainty of g, m/s²")
+    p.add_argument("--arm-radius-std", type=float, default=0.0, metavar="M",
+                   help="1σ uncertainty of the arm radius, m")
+    p.add_argument("--mass-tolerance", type=float, default=1e-4, metavar="KG",
+                   help="± tolerance of one weight piece, kg (uniform: σ = tol/√3)")
+    p.add_argument("--friction-std", type=float, default=0.0, metavar="NM",
+                   help="1σ uncertainty of the pulley friction torque, N·m")
+    p.add_argument("--polarity", choices=("dark", "bright"), default="dark",
+                   help="dark markers on a bright disk, or the reverse")
+    p.add_argument("--radius-range", type=float, nargs=2, metavar=("MIN", "MAX"),
+                   help="marker radius range in pixels")
+    p.add_argument("--angle-sign", type=int, choices=(1, -1), default=1,
+                   help="factor making positive torque give a positive angle")
+    p.add_argument("--image-type", default=".png", metavar="SUFFIX",
+                   help="file type of the images to save")
+    p.add_argument("--force", action="store_true",
+                   help="overwrite an existing session.toml and manifest.csv")
+    add_common_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Plan the session; returns 0."""
+    from ..session.plan import plan_session
+
+    plan = plan_session(
+        args.out_dir, max_torque_nm=args.max_torque, step_mass_kg=args.step_mass,
+        arm_radius_m=args.arm_radius, orientations_deg=args.orientations,
+        cycles=args.cycles, gravity_m_per_s2=args.gravity,
+        gravity_std_m_per_s2=args.gravity_std, arm_radius_std_m=args.arm_radius_std,
+        mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
+        polarity=args.polarity, radius_range=args.radius_range,
+        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force)
+    if not args.quiet:
+        print(f"{plan.folder}: {len(plan.rows)} images in "
+              f"{len(plan.config.protocol.orientations_deg)} orientations, "
+              f"{plan.steps_per_phase} steps per phase, max torque "
+              f"{plan.max_torque_nm:.5f} N·m"
+              + ("" if plan.exact else f" (requested {plan.requested_max_torque_nm:g})"))
+        print(f"print {plan.folder / 'capture_sheet.md'} and save each image under the "
+              "name it gives")
+    return 0

@@ -1,0 +1,290 @@
+"""Plan a test session: session.toml, the manifest of every image, a capture sheet.
+
+The protocol
+------------
+Per orientation (default the paper's six: 0°, 60°, ..., 300°):
+
+1. **reference**: one image with no weight on any pan (zero torque), taken before
+   anything is loaded at this orientation. All angles of the orientation are
+   measured against it.
+2. **pre-load** (not photographed): add one step mass at a time to each positive
+   pan up to +Tmax. The state reached this way is not on the hysteresis loop yet,
+   so it is not measured, except its end point (step 0 below).
+3. ``cycles`` times the paper's four phases, each in N steps of one step mass per
+   pan: **positive_unloading** (+Tmax → 0), **negative_loading** (0 → −Tmax),
+   **negative_unloading** (−Tmax → 0), **positive_loading** (0 → +Tmax).
+
+Every load state is photographed once: step k of a phase is the state after the
+k-th weight change of that phase, so a phase's starting state is the last image of
+the phase before it. The only step 0 is the start of the first positive_unloading of
+an orientation (+Tmax right after the pre-load). An orientation thus has
+``1 + 1 + 4 N cycles`` images.
+
+Tmax is snapped **down** to a whole number N of step masses per pan
+(``N = floor(max_torque_nm / (2 g r step_mass_kg))``) so the requested maximum is
+never exceeded; the capture sheet and the returned plan say when it was not exact.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import SessionError
+from ..fileio import atomic_write_text
+from ..images import IMAGE_SUFFIXES
+from .config import (CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig,
+                     config_from_dict, write_config)
+from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
+from .torque import PHASES, couple_torque
+
+__all__ = ["SessionPlan", "plan_session", "plan_rows", "CAPTURE_SHEET_NAME"]
+
+logger = logging.getLogger(__name__)
+
+CAPTURE_SHEET_NAME = "capture_sheet.md"
+_CYCLE_PHASES = PHASES[1:]
+
+
+@dataclass(frozen=True)
+class SessionPlan:
+    """What :func:`plan_session` wrote.
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+    config : SessionConfig
+    rows : tuple of dict
+        The manifest rows (column name → text), in capture order.
+    steps_per_phase : int
+        N, the step masses per pan at full torque.
+    requested_max_torque_nm, max_torque_nm : float
+        The maximum asked for and the one planned (a whole number of steps).
+    """
+
+    folder: Path
+    config: SessionConfig
+    rows: tuple[dict, ...]
+    steps_per_phase: int
+    requested_max_torque_nm: float
+    max_torque_nm: float
+
+    @property
+    def exact(self) -> bool:
+        """True when the requested maximum torque is a whole number of steps."""
+        return math.isclose(self.max_torque_nm, self.requested_max_torque_nm,
+                            rel_tol=1e-9)
+
+
+def _num(value: float) -> str:
+    """Short, exact-looking text for a planned number (0.06, not 0.060000000000000005)."""
+    value = round(float(value), 10)
+    return str(int(value)) if value.is_integer() else repr(value)
+
+
+def _image_name(orientation: float, cycle: int, phase: str, step: int, *,
+                cycle_width: int, step_width: int, suffix: str) -> str:
+    o = f"{int(orientation):03d}" if float(orientation).is_integer() else \
+        _num(orientation).replace(".", "p")
+    return (f"images/o{o}_c{cycle:0{cycle_width}d}_{PHASES.index(phase) + 1:02d}_{phase}"
+            f"_s{step:0{step_width}d}{suffix}")
+
+
+def _phase_masses(phase: str, n: int, first: bool) -> list[tuple[int, int]]:
+    """(step, pieces per pan) of a phase; `first` adds step 0 (+Tmax) to an unloading."""
+    steps = range(0 if first else 1, n + 1)
+    unloading = phase.endswith("unloading")
+    return [(k, n - k if unloading else k) for k in steps]
+
+
+def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".png"
+              ) -> list[dict]:
+    """Manifest rows of the protocol described in the module docstring, in order.
+
+    >>> from vision_torsion.session.config import config_from_dict
+    >>> cfg = config_from_dict({"rig": {"arm_radius_m": 0.05, "mass_tolerance_kg": 0},
+    ...     "protocol": {"orientations_deg": [0], "max_torque_nm": 0.04,
+    ...                  "step_mass_kg": 0.02}})
+    >>> [(r["phase"], r["step"], r["mass_kg"]) for r in plan_rows(cfg, 2)][:4]
+    [('reference', '0', '0'), ('positive_unloading', '0', '0.04'), ('positive_unloading', '1', '0.02'), ('positive_unloading', '2', '0')]
+    """
+    proto = config.protocol
+    widths = dict(cycle_width=len(str(proto.cycles)),
+                  step_width=max(2, len(str(steps_per_phase))), suffix=suffix)
+    rows = []
+
+    def add(orientation, cycle, phase, step, pieces):
+        rows.append({
+            "image": _image_name(orientation, cycle, phase, step, **widths),
+            "orientation_deg": _num(orientation), "cycle": str(cycle), "phase": phase,
+            "step": str(step), "mass_kg": _num(pieces * proto.step_mass_kg)})
+
+    for orientation in proto.orientations_deg:
+        add(orientation, 1, "reference", 0, 0)
+        for cycle in range(1, proto.cycles + 1):
+            for phase in _CYCLE_PHASES:
+                first = cycle == 1 and phase == "positive_unloading"
+                for step, pieces in _phase_masses(phase, steps_per_phase, first):
+                    add(orientation, cycle, phase, step, pieces)
+    return rows
+
+
+def _pan_text(pieces: int, step_mass_kg: float) -> str:
+    if pieces == 0:
+        return "empty"
+    return f"{_num(pieces * step_mass_kg * 1000)} g ({pieces} × {_num(step_mass_kg * 1000)} g)"
+
+
+def _capture_sheet(plan: SessionPlan) -> str:
+    cfg, n = plan.config, plan.steps_per_phase
+    step = cfg.protocol.step_mass_kg
+    rig = cfg.rig
+    per_step = couple_torque(step, "positive_loading", rig, step_mass_kg=step).torque_nm
+    lines = [
+        "# Capture sheet",
+        "",
+        f"Arm radius r = {_num(rig.arm_radius_m)} m, g = {_num(rig.gravity_m_per_s2)} m/s², "
+        f"step mass {_num(step * 1000)} g per pan = {per_step:.5f} N·m per step "
+        "(τ = 2·m·g·r).",
+        f"Maximum torque {plan.max_torque_nm:.5f} N·m = {n} steps"
+        + ("." if plan.exact else
+           f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of "
+           "steps; snapped down)."),
+        "",
+        "\"+ pans\" are the two pans whose wires turn the disk in the positive direction, "
+        "\"− pans\" the other two. Masses are per pan: both pans of a pair always carry "
+        "the same mass. Wait for the disk to settle before each photograph, and save it "
+        "under the file name given (relative to this folder).",
+        "",
+    ]
+    current = None
+    number = 0
+    for row in plan.rows:
+        orientation = row["orientation_deg"]
+        if orientation != current:
+            current = orientation
+            lines += [f"## Orientation {orientation}°", "",
+                      f"Rotate the flexspline to {orientation}° relative to the circular "
+                      "spline. Remove all weights.", "",
+                      "| # | cycle | phase | step | + pans (each) | − pans (each) | "
+                      "torque (N·m) | save as | done |",
+                      "|---|---|---|---|---|---|---|---|---|"]
+        pieces = round(float(row["mass_kg"]) / step)
+        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig,
+                               step_mass_kg=step).torque_nm
+        plus = _pan_text(pieces if row["phase"].startswith("positive") else 0, step)
+        minus = _pan_text(pieces if row["phase"].startswith("negative") else 0, step)
+        number += 1
+        lines.append(f"| {number} | {row['cycle']} | {row['phase']} | {row['step']} | "
+                     f"{plus} | {minus} | {torque:+.5f} | `{row['image']}` | ☐ |")
+        if row["phase"] == "reference":
+            lines.append(f"| | | *pre-load, no photographs* | | add {_num(step * 1000)} g "
+                         f"to each + pan {n} times | empty | → {plan.max_torque_nm:+.5f} | "
+                         "| ☐ |")
+    return "\n".join(lines) + "\n"
+
+
+def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
+                 arm_radius_m: float, orientations_deg=DEFAULT_ORIENTATIONS_DEG,
+                 cycles: int = 1, gravity_m_per_s2: float = 9.81,
+                 mass_tolerance_kg: float = 1e-4, friction_torque_std_nm: float = 0.0,
+                 arm_radius_std_m: float = 0.0, gravity_std_m_per_s2: float = 0.0,
+                 polarity: str = "dark", radius_range=None, angle_sign: int = 1,
+                 image_suffix: str = ".png", overwrite: bool = False) -> SessionPlan:
+    """Write a new session folder: session.toml, manifest.csv, capture_sheet.md, images/.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+        The session folder to create (may exist if it holds no session yet).
+    max_torque_nm : float
+        Largest torque magnitude (N·m); snapped down to whole step masses.
+    step_mass_kg : float
+        Mass added to or removed from each pan per step (kg).
+    arm_radius_m : float
+        Radius of the torque disk at the wires (m).
+    orientations_deg : sequence of float
+        Flexspline orientations (degrees), the paper's six by default.
+    cycles : int
+        Cycles of the four phases per orientation.
+    gravity_m_per_s2, mass_tolerance_kg, friction_torque_std_nm, arm_radius_std_m,
+    gravity_std_m_per_s2 :
+        Rig constants written to ``[rig]`` (see :class:`RigConfig`);
+        `mass_tolerance_kg` is the ± bound of one weight piece (the paper's ±0.1 g
+        by default).
+    polarity, radius_range :
+        Marker settings written to ``[markers]``.
+    angle_sign : {1, -1}
+        Written to ``angle_sign``.
+    image_suffix : str
+        File type of the images to save (".png", ".tif", ...).
+    overwrite : bool
+        Replace an existing session.toml / manifest.csv in `out_dir`.
+
+    Returns
+    -------
+    SessionPlan
+
+    Raises
+    ------
+    SessionError
+        Invalid parameters (named as their session.toml keys), a maximum torque
+        below one step, or a folder that already holds a session.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> plan = plan_session(tempfile.mkdtemp(), max_torque_nm=0.36, step_mass_kg=0.02,
+    ...                     arm_radius_m=0.05)
+    >>> plan.steps_per_phase, round(plan.max_torque_nm, 5), plan.exact, len(plan.rows)
+    (18, 0.35316, False, 444)
+    """
+    folder = Path(out_dir)
+    markers = {"polarity": polarity}
+    if radius_range is not None:
+        markers["radius_range"] = list(radius_range)
+    doc = {
+        "angle_sign": angle_sign,
+        "rig": {"arm_radius_m": arm_radius_m, "gravity_m_per_s2": gravity_m_per_s2,
+                "mass_tolerance_kg": mass_tolerance_kg,
+                "friction_torque_std_nm": friction_torque_std_nm,
+                "arm_radius_std_m": arm_radius_std_m,
+                "gravity_std_m_per_s2": gravity_std_m_per_s2},
+        "markers": markers,
+        "protocol": {"orientations_deg": [float(o) for o in orientations_deg],
+                     "max_torque_nm": max_torque_nm, "step_mass_kg": step_mass_kg,
+                     "cycles": cycles},
+    }
+    config = config_from_dict(doc, source="plan_session")
+    if image_suffix.lower() not in IMAGE_SUFFIXES:
+        raise SessionError(f"plan_session: image_suffix {image_suffix!r} is not an image "
+                           f"type; expected one of {', '.join(IMAGE_SUFFIXES)}")
+    per_step = 2.0 * step_mass_kg * config.rig.gravity_m_per_s2 * arm_radius_m
+    n = math.floor(max_torque_nm / per_step + 1e-9)
+    planned_max = float(f"{n * per_step:.12g}")  # no 0.35316000000000003 in the file
+    if n < 1:
+        raise SessionError(f"plan_session: max_torque_nm {max_torque_nm:g} is less than one "
+                           f"step (2·step_mass_kg·g·r = {per_step:.6g} N·m)")
+    existing = [name for name in (CONFIG_NAME, MANIFEST_NAME) if (folder / name).exists()]
+    if existing and not overwrite:
+        raise SessionError(f"{folder}: already holds a session ({', '.join(existing)}); "
+                           "choose another folder or overwrite")
+    planned = config_from_dict({**doc, "protocol": {**doc["protocol"],
+                                                    "max_torque_nm": planned_max}})
+    plan = SessionPlan(folder=folder, config=planned,
+                       rows=tuple(plan_rows(planned, n, suffix=image_suffix)),
+                       steps_per_phase=n, requested_max_torque_nm=float(max_torque_nm),
+                       max_torque_nm=planned_max)
+    if not plan.exact:
+        logger.warning("maximum torque %.6g N·m is not a whole number of %.6g kg steps; "
+                       "planned %d steps = %.6g N·m", max_torque_nm, step_mass_kg, n,
+                       plan.max_torque_nm)
+    (folder / "images").mkdir(parents=True, exist_ok=True)
+    write_config(folder / CONFIG_NAME, planned,
+                 header="vision-torsion session (written by `vision-torsion plan`).\n"
+                        "Units are in the key names; see the README for the format.")
+    atomic_write_text(folder / MANIFEST_NAME, manifest_text(REQUIRED_COLUMNS, plan.rows))
+    atomic_write_text(folder / CAPTURE_SHEET_NAME, _capture_sheet(plan))
+    return plan
