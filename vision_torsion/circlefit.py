@@ -1,0 +1,416 @@
+"""Circle and ellipse fits to edge points, each reporting failure with a reason.
+
+Three estimators, chosen by name:
+
+``algebraic``
+    The paper's fit (Kasa): minimise Q = Σ[(xᵢ-a)² + (yᵢ-b)² - r²]². Linear and
+    fast, but it minimises an algebraic, not a geometric, distance: its radius is
+    biased by noise and, with weighted or uneven point coverage, so is its centre.
+``geometric`` (default)
+    Orthogonal-distance fit: minimise Σ wᵢ(|pᵢ - c| - r)² by Gauss-Newton from the
+    algebraic start, with iterative rejection of outliers (normalised residuals
+    beyond ``clip`` robust standard deviations). With wᵢ = 1/σᵢ² this is the
+    maximum-likelihood circle for independent Gaussian edge errors.
+``ellipse``
+    For oblique views: the direct least-squares ellipse (Fitzgibbon; Halír-Flusser
+    numerics) refined geometrically, centre covariance from the refinement.
+
+Points are centred and scaled before fitting, as scikit-image does, so fits stay
+well conditioned at large image coordinates. Coordinates are image pixels (x, y),
+origin at the centre of the top-left pixel, y downwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import FitError
+
+__all__ = ["CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse"]
+
+
+@dataclass(frozen=True)
+class CircleFit:
+    """A fitted circle.
+
+    Attributes
+    ----------
+    x, y : float
+        Centre (px).
+    radius : float
+        Radius (px).
+    cov : numpy.ndarray
+        3x3 covariance of (x, y, radius) in px².
+    residual_rms : float
+        RMS orthogonal distance of the inlier points to the circle (px).
+    inliers : numpy.ndarray
+        Boolean mask of the points kept.
+    method : str
+        Name of the estimator.
+    """
+
+    x: float
+    y: float
+    radius: float
+    cov: np.ndarray
+    residual_rms: float
+    inliers: np.ndarray = field(repr=False)
+    method: str = "geometric"
+
+    @property
+    def centre_std(self) -> tuple[float, float]:
+        """Standard uncertainties of x and y (px)."""
+        return float(np.sqrt(self.cov[0, 0])), float(np.sqrt(self.cov[1, 1]))
+
+
+@dataclass(frozen=True)
+class EllipseFit:
+    """A fitted ellipse: centre (px), semi-axes a ≥ b (px), orientation (deg, CCW as displayed), centre covariance (px²)."""
+
+    x: float
+    y: float
+    a: float
+    b: float
+    angle_deg: float
+    cov: np.ndarray
+    residual_rms: float
+    inliers: np.ndarray = field(repr=False)
+    method: str = "ellipse"
+
+
+def _check_points(x, y, weights, minimum):
+    x = np.asarray(x, dtype=np.float64).ravel()
+    y = np.asarray(y, dtype=np.float64).ravel()
+    if x.shape != y.shape:
+        raise FitError(f"x and y have different lengths ({x.size} and {y.size})")
+    if weights is None:
+        w = np.ones_like(x)
+    else:
+        w = np.asarray(weights, dtype=np.float64).ravel()
+        if w.shape != x.shape:
+            raise FitError(f"weights have length {w.size}, points {x.size}")
+        if np.any(~np.isfinite(w)) or np.any(w < 0):
+            raise FitError("weights must be finite and not negative")
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < minimum:
+        raise FitError(f"need at least {minimum} finite edge points, got {int(ok.sum())}")
+    return x, y, w, ok
+
+
+def _normalise(x, y):
+    mx, my = x.mean(), y.mean()
+    scale = np.sqrt(np.mean((x - mx) ** 2 + (y - my) ** 2))
+    if not scale > 0:
+        raise FitError("all edge points coincide")
+    return mx, my, scale
+
+
+def fit_circle_algebraic(x, y, *, weights=None) -> CircleFit:
+    """The paper's algebraic (Kasa) circle fit, minimising Σ wᵢ[(xᵢ-a)² + (yᵢ-b)² - r²]².
+
+    Parameters
+    ----------
+    x, y : array_like
+        Edge points (px).
+    weights : array_like, optional
+        Non-negative weights of the points.
+
+    Returns
+    -------
+    CircleFit
+        Covariance from the linear least-squares problem with the residual variance
+        (first-order; it carries the method's bias unseen).
+
+    Raises
+    ------
+    FitError
+        Fewer than 3 points or collinear points.
+
+    Examples
+    --------
+    >>> t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    >>> f = fit_circle_algebraic(3 + 2 * np.cos(t), 4 + 2 * np.sin(t))
+    >>> round(f.x, 9), round(f.y, 9), round(f.radius, 9)
+    (3.0, 4.0, 2.0)
+    """
+    x, y, w, ok = _check_points(x, y, weights, 3)
+    x, y, w = x[ok], y[ok], w[ok]
+    mx, my, s = _normalise(x, y)
+    u, v = (x - mx) / s, (y - my) / s
+    A = np.stack([u, v, np.ones_like(u)], axis=1)
+    b = u * u + v * v
+    sw = np.sqrt(w)
+    sol, *_ = np.linalg.lstsq(A * sw[:, None], b * sw, rcond=None)
+    ua, va = sol[0] / 2, sol[1] / 2
+    r2 = sol[2] + ua * ua + va * va
+    if not r2 > 0 or not np.all(np.isfinite(sol)):
+        raise FitError("algebraic circle fit is degenerate (points collinear?)")
+    r = np.sqrt(r2)
+    dist = np.hypot(u - ua, v - va) - r
+    dof = max(u.size - 3, 1)
+    resid = A @ sol - b
+    sigma2 = np.sum(w * resid**2) / dof
+    try:
+        cov_sol = np.linalg.inv((A * w[:, None]).T @ A) * sigma2
+    except np.linalg.LinAlgError as exc:
+        raise FitError("algebraic circle fit is singular (points collinear?)") from exc
+    # (a, b, r) = (s0/2, s1/2, sqrt(s2 + a² + b²)) in normalised units
+    J = np.array([[0.5, 0, 0], [0, 0.5, 0], [ua / (2 * r), va / (2 * r), 1 / (2 * r)]])
+    cov = J @ cov_sol @ J.T * s * s
+    return CircleFit(
+        x=float(mx + ua * s),
+        y=float(my + va * s),
+        radius=float(r * s),
+        cov=cov,
+        residual_rms=float(np.sqrt(np.mean(dist**2)) * s),
+        inliers=ok.copy(),
+        method="algebraic",
+    )
+
+
+def fit_circle_geometric(
+    x, y, *, weights=None, initial=None, clip: float = 4.0, max_iter: int = 30
+) -> CircleFit:
+    """Orthogonal-distance circle fit with outlier rejection.
+
+    Parameters
+    ----------
+    x, y : array_like
+        Edge points (px).
+    weights : array_like, optional
+        Weights 1/σᵢ² of the points (px⁻²). With true inverse variances the returned
+        covariance is the Cramér-Rao covariance of the fit.
+    initial : tuple of float, optional
+        Starting (x, y, radius); the algebraic fit otherwise.
+    clip : float
+        Points whose weighted residual exceeds `clip` robust standard deviations
+        (1.4826·MAD) are rejected, and the fit repeated until no point changes.
+    max_iter : int
+        Gauss-Newton iterations per pass.
+
+    Returns
+    -------
+    CircleFit
+        Covariance (JᵀWJ)⁻¹ scaled by the reduced χ² of the inliers when it exceeds 1
+        (so unmodelled scatter widens the uncertainty; it is never narrowed).
+
+    Raises
+    ------
+    FitError
+        Fewer than 5 points, degenerate geometry, or no convergence.
+
+    Notes
+    -----
+    Residual of point i: dᵢ = |pᵢ - c| - r. Jacobian rows: (-(xᵢ-a)/ρᵢ, -(yᵢ-b)/ρᵢ, -1).
+    """
+    x, y, w, ok = _check_points(x, y, weights, 5)
+    mx, my, s = _normalise(x[ok], y[ok])
+    u, v = (x - mx) / s, (y - my) / s
+    ws = w * s * s  # weights in normalised units
+    if initial is None:
+        start = fit_circle_algebraic(x[ok], y[ok], weights=w[ok])
+        p = np.array([(start.x - mx) / s, (start.y - my) / s, start.radius / s])
+    else:
+        p = np.array([(initial[0] - mx) / s, (initial[1] - my) / s, initial[2] / s], dtype=np.float64)
+    inl = ok.copy()
+    for _pass in range(6):
+        uu, vv, ww = u[inl], v[inl], ws[inl]
+        if uu.size < 5:
+            raise FitError(f"only {uu.size} edge points left after outlier rejection")
+        for _ in range(max_iter):
+            du, dv = uu - p[0], vv - p[1]
+            rho = np.hypot(du, dv)
+            if np.any(rho == 0):
+                raise FitError("an edge point coincides with the circle centre")
+            res = rho - p[2]
+            J = np.stack([-du / rho, -dv / rho, -np.ones_like(rho)], axis=1)
+            JTW = J.T * ww
+            H = JTW @ J
+            try:
+                step = np.linalg.solve(H, -JTW @ res)
+            except np.linalg.LinAlgError as exc:
+                raise FitError("geometric circle fit is singular (points on a line?)") from exc
+            p = p + step
+            if np.max(np.abs(step)) < 1e-12:
+                break
+        else:
+            raise FitError("geometric circle fit did not converge")
+        du, dv = u - p[0], v - p[1]
+        res_all = np.hypot(du, dv) - p[2]
+        z = res_all * np.sqrt(ws)
+        med = np.median(np.abs(z[inl]))
+        scale = 1.4826 * med if med > 0 else np.inf
+        new = ok & (np.abs(z) <= clip * max(scale, 1e-300))
+        if np.array_equal(new, inl):
+            break
+        inl = new
+    dof = max(int(inl.sum()) - 3, 1)
+    chi2 = float(np.sum(ws[inl] * res_all[inl] ** 2)) / dof
+    if weights is None:
+        factor = chi2  # unit weights: the residual variance is the only scale
+    else:
+        factor = max(chi2, 1.0)
+    try:
+        cov = np.linalg.inv(H) * factor * s * s
+    except np.linalg.LinAlgError as exc:  # pragma: no cover - H was solvable above
+        raise FitError("geometric circle fit covariance is singular") from exc
+    if not (p[2] > 0 and np.all(np.isfinite(p))):
+        raise FitError("geometric circle fit gave a non-positive radius")
+    return CircleFit(
+        x=float(mx + p[0] * s),
+        y=float(my + p[1] * s),
+        radius=float(p[2] * s),
+        cov=cov,
+        residual_rms=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
+        inliers=inl,
+        method="geometric",
+    )
+
+
+def fit_circle(x, y, *, method: str = "geometric", weights=None, **options) -> CircleFit:
+    """Fit a circle to edge points by the named method (``"geometric"`` or ``"algebraic"``).
+
+    Raises
+    ------
+    FitError
+        Unknown method, or the chosen fit failed (the message says why).
+    """
+    if method == "geometric":
+        return fit_circle_geometric(x, y, weights=weights, **options)
+    if method == "algebraic":
+        return fit_circle_algebraic(x, y, weights=weights)
+    raise FitError(f"unknown circle-fit method {method!r}; use 'geometric' or 'algebraic'")
+
+
+def _ellipse_params_from_conic(c):
+    A, B, C, D, E, F = c
+    den = B * B - 4 * A * C
+    if den >= 0:
+        raise FitError("fitted conic is not an ellipse")
+    x0 = (2 * C * D - B * E) / den
+    y0 = (2 * A * E - B * D) / den
+    num = 2 * (A * E * E + C * D * D - B * D * E + den * F)
+    root = np.sqrt((A - C) ** 2 + B * B)
+    a = -np.sqrt(num * (A + C + root)) / den
+    b = -np.sqrt(num * (A + C - root)) / den
+    theta = 0.5 * np.arctan2(-B, C - A)
+    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
+        raise FitError("fitted conic is not a real ellipse")
+    if b > a:
+        a, b = b, a
+        theta += np.pi / 2
+    return x0, y0, a, b, theta
+
+
+def _direct_ellipse(u, v, w):
+    """Direct least-squares ellipse (Halír-Flusser form of Fitzgibbon's method)."""
+    sw = np.sqrt(w)[:, None]
+    D1 = np.stack([u * u, u * v, v * v], axis=1) * sw
+    D2 = np.stack([u, v, np.ones_like(u)], axis=1) * sw
+    S1, S2, S3 = D1.T @ D1, D1.T @ D2, D2.T @ D2
+    try:
+        T = -np.linalg.solve(S3, S2.T)
+    except np.linalg.LinAlgError as exc:
+        raise FitError("ellipse fit is singular") from exc
+    M = S1 + S2 @ T
+    M = np.array([M[2] / 2, -M[1], M[0] / 2])
+    vals, vecs = np.linalg.eig(M)
+    vecs = np.real(vecs)
+    cond = 4 * vecs[0] * vecs[2] - vecs[1] ** 2
+    idx = np.where(cond > 0)[0]
+    if idx.size == 0:
+        raise FitError("no ellipse solution (points too few or degenerate)")
+    a1 = vecs[:, idx[0]]
+    return np.concatenate([a1, T @ a1])
+
+
+def _ellipse_residuals(p, u, v):
+    """Approximate orthogonal distances (Sampson) of points to the ellipse p = (x0, y0, a, b, θ)."""
+    x0, y0, a, b, th = p
+    c, s = np.cos(th), np.sin(th)
+    xr = (u - x0) * c + (v - y0) * s
+    yr = -(u - x0) * s + (v - y0) * c
+    f = (xr / a) ** 2 + (yr / b) ** 2 - 1
+    gx, gy = 2 * xr / a**2, 2 * yr / b**2
+    return f / np.hypot(gx, gy)
+
+
+def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
+    """Fit an ellipse to edge points: direct least squares, then geometric refinement.
+
+    Parameters
+    ----------
+    x, y : array_like
+        Edge points (px).
+    weights : array_like, optional
+        Weights 1/σᵢ² (px⁻²).
+    clip : float
+        Outlier threshold in robust standard deviations.
+
+    Returns
+    -------
+    EllipseFit
+        Centre covariance from the Gauss-Newton refinement, scaled by the reduced χ²
+        when it exceeds 1.
+
+    Raises
+    ------
+    FitError
+        Fewer than 6 points, or no ellipse fits them.
+
+    Examples
+    --------
+    >>> t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    >>> e = fit_ellipse(10 + 5 * np.cos(t), 20 + 3 * np.sin(t))
+    >>> round(e.x, 6), round(e.y, 6), round(e.a, 6), round(e.b, 6)
+    (10.0, 20.0, 5.0, 3.0)
+    """
+    x, y, w, ok = _check_points(x, y, weights, 6)
+    mx, my, s = _normalise(x[ok], y[ok])
+    u, v = (x - mx) / s, (y - my) / s
+    ws = w * s * s
+    conic = _direct_ellipse(u[ok], v[ok], ws[ok] / ws[ok].max())
+    p = np.array(_ellipse_params_from_conic(conic), dtype=np.float64)
+    inl = ok.copy()
+    for _pass in range(5):
+        uu, vv, ww = u[inl], v[inl], ws[inl]
+        for _ in range(30):
+            r0 = _ellipse_residuals(p, uu, vv)
+            J = np.empty((uu.size, 5))
+            for k in range(5):
+                h = 1e-7 * max(1.0, abs(p[k]))
+                dp = p.copy()
+                dp[k] += h
+                J[:, k] = (_ellipse_residuals(dp, uu, vv) - r0) / h
+            JTW = J.T * ww
+            H = JTW @ J + 1e-12 * np.eye(5)
+            step = np.linalg.solve(H, -JTW @ r0)
+            p = p + step
+            if np.max(np.abs(step)) < 1e-11:
+                break
+        res_all = _ellipse_residuals(p, u, v)
+        z = res_all * np.sqrt(ws)
+        scale = 1.4826 * np.median(np.abs(z[inl]))
+        new = ok & (np.abs(z) <= clip * max(scale, 1e-300))
+        if np.array_equal(new, inl) or new.sum() < 6:
+            break
+        inl = new
+    dof = max(int(inl.sum()) - 5, 1)
+    chi2 = float(np.sum(ws[inl] * res_all[inl] ** 2)) / dof
+    factor = chi2 if weights is None else max(chi2, 1.0)
+    cov = np.linalg.inv(H)[:2, :2] * factor * s * s
+    x0, y0, a, b, th = p
+    if b > a:
+        a, b, th = b, a, th + np.pi / 2
+    return EllipseFit(
+        x=float(mx + x0 * s),
+        y=float(my + y0 * s),
+        a=float(a * s),
+        b=float(b * s),
+        angle_deg=float(np.rad2deg(-th) % 180.0),
+        cov=cov,
+        residual_rms=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
+        inliers=inl,
+    )

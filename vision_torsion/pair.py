@@ -1,0 +1,171 @@
+"""The target: choosing the two markers whose line gives the angle.
+
+By default the target is the two largest round markers of matching radius. When a
+third marker of the same size is present the choice would be a guess, so it is an
+error instead (the right pair or a clear error, never a wrong pair): narrow
+``radius_range`` in the settings, or cover the extra circle.
+
+Coordinates are image pixels (x, y), origin at the centre of the top-left pixel,
+y downwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+import pandas as pd
+
+from .errors import MarkerError
+from .markers import Marker, find_markers
+from .settings import MeasureSettings
+
+__all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance"]
+
+
+def radius_tolerance(r: float) -> float:
+    """Largest radius difference (px) for two markers to count as a matching pair: max(1.5 px, 6 %)."""
+    return max(1.5, 0.06 * r)
+
+
+@dataclass(frozen=True)
+class PairMeasurement:
+    """The two target markers found in one image.
+
+    Attributes
+    ----------
+    first, second : Marker
+        The two markers, in a canonical order (smaller x first). Which one is which
+        between images is decided by the angle (:mod:`vision_torsion.angle`),
+        not by this order.
+    n_candidates : int
+        Marker candidates found in the image, of any status.
+    """
+
+    first: Marker
+    second: Marker
+    n_candidates: int = 2
+
+    @property
+    def markers(self) -> tuple[Marker, Marker]:
+        return self.first, self.second
+
+    def to_dict(self) -> dict:
+        """JSON-safe dict (NaN written as None)."""
+
+        def clean(m):
+            return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(m).items()}
+
+        return {"first": clean(self.first), "second": clean(self.second), "n_candidates": self.n_candidates}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PairMeasurement":
+        """Rebuild from :meth:`to_dict` output."""
+        names = {f.name for f in fields(Marker)}
+
+        def marker(m):
+            return Marker(**{k: (np.nan if v is None else v) for k, v in m.items() if k in names})
+
+        return cls(first=marker(d["first"]), second=marker(d["second"]), n_candidates=int(d.get("n_candidates", 2)))
+
+
+def _as_markers(table) -> list[Marker]:
+    if isinstance(table, pd.DataFrame):
+        names = [f.name for f in fields(Marker)]
+        missing = [c for c in ("x_px", "y_px", "radius_px", "status") if c not in table.columns]
+        if missing:
+            raise MarkerError(f"marker table lacks column(s) {missing}")
+        rows = table.to_dict("records")
+        return [Marker(**{k: r[k] for k in names if k in r}) for r in rows]
+    return list(table)
+
+
+def select_pair(markers, *, pair="largest", name: str = "image") -> PairMeasurement:
+    """Pick the target's two markers from a marker table.
+
+    Parameters
+    ----------
+    markers : pandas.DataFrame or list of Marker
+        Output of :func:`~vision_torsion.markers.find_markers`.
+    pair : "largest" or tuple of int
+        ``"largest"``: the two largest ``ok`` markers of matching radius (within
+        :func:`radius_tolerance`); a tuple picks rows by position.
+    name : str
+        What to call the image in messages.
+
+    Returns
+    -------
+    PairMeasurement
+
+    Raises
+    ------
+    MarkerError
+        Fewer than two usable markers (the message lists what was found and why the
+        others were rejected), no two of matching radius, or a third marker as large
+        as the pair (ambiguous).
+    """
+    ms = _as_markers(markers)
+    if isinstance(pair, (tuple, list)):
+        if len(pair) != 2:
+            raise MarkerError(f"{name}: pair must name two markers, got {pair!r}")
+        try:
+            chosen = [ms[int(i)] for i in pair]
+        except IndexError:
+            raise MarkerError(f"{name}: pair {tuple(pair)} but only {len(ms)} markers were found") from None
+        bad = [m for m in chosen if not m.ok]
+        if bad:
+            raise MarkerError(f"{name}: chosen marker is unusable ({bad[0].status}: {bad[0].message})")
+    elif pair == "largest":
+        ok = sorted((m for m in ms if m.ok), key=lambda m: -m.radius_px)
+        if len(ok) < 2:
+            rejected = [f"{m.status} at ({m.x_px:.0f}, {m.y_px:.0f}): {m.message}" for m in ms if not m.ok]
+            why = f"; rejected: {'; '.join(rejected)}" if rejected else ""
+            raise MarkerError(f"{name}: found {len(ok)} usable marker(s), need 2{why}")
+        chosen = None
+        for i in range(len(ok) - 1):
+            a, b = ok[i], ok[i + 1]
+            if abs(a.radius_px - b.radius_px) <= radius_tolerance(a.radius_px):
+                chosen = [a, b]
+                if i + 2 < len(ok) and abs(ok[i + 2].radius_px - b.radius_px) <= radius_tolerance(b.radius_px):
+                    raise MarkerError(
+                        f"{name}: ambiguous target: {3 if i + 3 >= len(ok) else 'more than 2'} markers of radius "
+                        f"≈{b.radius_px:.1f} px; narrow radius_range to pick two"
+                    )
+                break
+        if chosen is None:
+            radii = ", ".join(f"{m.radius_px:.1f}" for m in ok)
+            raise MarkerError(f"{name}: no two markers of matching radius (radii {radii} px)")
+    else:
+        raise MarkerError(f"{name}: pair must be 'largest' or two indices, got {pair!r}")
+    chosen.sort(key=lambda m: (m.x_px, m.y_px))
+    return PairMeasurement(first=chosen[0], second=chosen[1], n_candidates=len(ms))
+
+
+def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | None = None) -> PairMeasurement:
+    """Find the target's two markers in one image.
+
+    Parameters
+    ----------
+    image : path, GreyImage or array_like
+        The image (a file is loaded and validated by :func:`~vision_torsion.images.load_image`).
+    settings : MeasureSettings, optional
+        Polarity, radius range, fit method and pair choice; defaults otherwise.
+    name : str, optional
+        What to call the image in messages (the file name by default).
+
+    Returns
+    -------
+    PairMeasurement
+
+    Raises
+    ------
+    ImageReadError
+        The file is missing, corrupt or not an image.
+    MarkerError
+        The pair cannot be found (see :func:`select_pair`).
+    """
+    settings = settings or MeasureSettings()
+    if name is None:
+        name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
+    table = find_markers(image, settings=settings)
+    return select_pair(table, pair=settings.pair, name=name)
