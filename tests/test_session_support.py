@@ -1,0 +1,161 @@
+"""Shared helpers for the session tests (imported by the other test_session_* files).
+
+- :func:`draw_target` renders two dark discs at sub-pixel centres with OpenCV, the
+  way a camera sees the marker target rotated by a known angle.
+- :func:`make_session` plans a small session and renders every image of it with a
+  known angle, returning the truth.
+- :func:`install_fake_core` replaces ``vision_torsion.pair`` / ``vision_torsion.angle``
+  by a simple centroid measurer so the bookkeeping of ``process`` (cache, resume,
+  failures, output table) can be tested independently of the measurement core, and
+  counts the images it measured.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import sys
+import types
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from vision_torsion.errors import MarkerError
+from vision_torsion.images import load_image, write_image
+from vision_torsion.session.plan import plan_session
+
+# Image geometry: non-square, target centre off the pixel grid.
+WIDTH, HEIGHT = 200, 150
+CENTRE = (101.3, 74.6)
+ARM_PX = 45.0
+MARKER_RADIUS_PX = 9.0
+BACKGROUND = 220
+
+
+def draw_target(angle_deg: float, *, width=WIDTH, height=HEIGHT, centre=CENTRE,
+                arm_px=ARM_PX, radius_px=MARKER_RADIUS_PX) -> np.ndarray:
+    """8-bit image of two dark discs on a bright background, the marker-to-marker
+    vector at `angle_deg` CCW as displayed (y grows downwards)."""
+    img = np.full((height, width), BACKGROUND, np.uint8)
+    a = math.radians(angle_deg)
+    for s in (-1, 1):
+        x = centre[0] + s * arm_px * math.cos(a)
+        y = centre[1] - s * arm_px * math.sin(a)
+        cv2.circle(img, (round(x * 256), round(y * 256)), round(radius_px * 256), 30,
+                   thickness=-1, lineType=cv2.LINE_AA, shift=8)
+    return img
+
+
+def true_angle(orientation: float, torque_nm: float, phase: str, index: int) -> float:
+    """The angle rendered for a row: an orientation offset, a linear response, a
+    hysteresis offset (unloading lags), and a small drift with the image index that
+    makes every image of a session different (identical files would share a cache
+    entry)."""
+    lag = 0.5 if phase.endswith("unloading") else 0.0
+    return 0.3 * orientation / 60.0 + 40.0 * torque_nm + lag + 0.01 * index
+
+
+def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, **plan_kw):
+    """Plan a small session and render all of its images; returns (plan, truth).
+
+    `truth` maps the manifest image path to the angle (degrees) drawn in it.
+    """
+    step_mass = 0.02
+    plan = plan_session(folder, max_torque_nm=steps * 2 * step_mass * 9.81 * 0.05,
+                        step_mass_kg=step_mass, arm_radius_m=0.05,
+                        orientations_deg=orientations, cycles=cycles, **plan_kw)
+    truth = {}
+    for index, row in enumerate(plan.rows):
+        sign = {"pos": 1, "neg": -1, "ref": 0}[row["phase"][:3]]
+        torque = sign * 2 * float(row["mass_kg"]) * 9.81 * 0.05
+        angle = true_angle(float(row["orientation_deg"]), torque, row["phase"], index)
+        write_image(Path(folder) / row["image"], draw_target(angle))
+        truth[row["image"]] = angle
+    return plan, truth
+
+
+def tree_digest(folder, *, exclude=()) -> dict[str, tuple[str, int]]:
+    """Every file under `folder` (outside `exclude` subfolders): content hash and mtime."""
+    folder = Path(folder)
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder).as_posix()
+        if any(rel == e or rel.startswith(e + "/") for e in exclude):
+            continue
+        st = p.lstat()
+        digest = hashlib.blake2b(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+        out[rel] = (digest, st.st_mtime_ns)
+    return out
+
+
+# -- a stand-in for the measurement core ----------------------------------------------
+
+
+@dataclass(frozen=True)
+class FakePair:
+    x1: float
+    y1: float
+    x2: float
+    y2: float
+
+    def to_dict(self):
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d):
+        return cls(**d)
+
+
+@dataclass(frozen=True)
+class FakeAngle:
+    angle_deg: float
+    angle_std_deg: float
+
+
+class FakeCore:
+    """Centroids of the two largest dark blobs; counts what it measured."""
+
+    def __init__(self, *, interrupt_after: int | None = None):
+        self.measured: list[str] = []
+        self.interrupt_after = interrupt_after
+
+    def measure_pair(self, image, *, settings):
+        if self.interrupt_after is not None and len(self.measured) >= self.interrupt_after:
+            raise KeyboardInterrupt
+        data = load_image(image).data
+        weight = np.clip(BACKGROUND - data, 0, None)  # darkness, anti-aliased edges included
+        n, labels, stats, _ = cv2.connectedComponentsWithStats((weight > 0).astype(np.uint8))
+        if n - 1 < 2:
+            raise MarkerError(f"{image}: found {n - 1} marker(s), expected 2")
+        big = 1 + np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:2]
+        ys, xs = np.indices(data.shape)
+        centres = []
+        for label in big:
+            w = np.where(labels == label, weight, 0)
+            centres.append((float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())))
+        (x1, y1), (x2, y2) = sorted(centres)
+        self.measured.append(str(image))
+        return FakePair(x1, y1, x2, y2)
+
+    @staticmethod
+    def _direction(p):
+        return math.degrees(math.atan2(-(p.y2 - p.y1), p.x2 - p.x1))
+
+    def sequence_angles(self, reference, pairs):
+        ref = self._direction(reference)
+        return [None if p is None else FakeAngle(self._direction(p) - ref, 0.01)
+                for p in pairs]
+
+
+def install_fake_core(monkeypatch, core: FakeCore) -> FakeCore:
+    pair = types.ModuleType("vision_torsion.pair")
+    pair.measure_pair = core.measure_pair
+    pair.PairMeasurement = FakePair
+    angle = types.ModuleType("vision_torsion.angle")
+    angle.sequence_angles = core.sequence_angles
+    angle.AngleResult = FakeAngle
+    monkeypatch.setitem(sys.modules, "vision_torsion.pair", pair)
+    monkeypatch.setitem(sys.modules, "vision_torsion.angle", angle)
+    return core

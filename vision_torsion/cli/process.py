@@ -1,0 +1,44 @@
+"""``vision-torsion process``: measure a session folder into measurements.csv."""
+
+from __future__ import annotations
+
+import sys
+
+from . import add_common_options, progress_enabled
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    """Add the ``process`` subcommand."""
+    p = subparsers.add_parser(
+        "process",
+        help="measure every image of a session folder into measurements.csv",
+        description="Validate the whole session (session.toml, manifest.csv, image "
+        "files) and stop with every problem listed if anything is wrong; then measure "
+        "every image in parallel and write measurements.csv to the output folder. "
+        "Re-running measures only new or changed images (cache in OUT_DIR/.cache). "
+        "Exit status: 0 all images measured, 1 some image failed, 2 unusable session.",
+    )
+    p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
+    p.add_argument("-o", "--out-dir", metavar="OUT_DIR",
+                   help="output folder (default: SESSION_DIR/results)")
+    p.add_argument("-j", "--jobs", type=int, metavar="N",
+                   help="worker processes (default: all cores)")
+    add_common_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Process the session; 0 when every image was measured, 1 when some failed."""
+    from ..session.process import process_session
+
+    result = process_session(args.session_dir, out_dir=args.out_dir, jobs=args.jobs,
+                             progress=progress_enabled(args))
+    for image, message in result.failures:
+        print(f"failed: {image}: {message}", file=sys.stderr)
+    if not args.quiet:
+        print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed "
+              f"of {result.n_images} images ({result.n_measured} measured, "
+              f"{result.n_cached} from the cache)")
+    return 0 if result.ok else 1

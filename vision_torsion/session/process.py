@@ -1,0 +1,305 @@
+"""Process a session folder into ``measurements.csv``: parallel, streaming, resumable.
+
+Steps
+-----
+1. :func:`~vision_torsion.session.load.load_session` validates the whole session
+   (configuration, every manifest row, every image file) before anything is
+   measured.
+2. Every image is measured by :func:`vision_torsion.pair.measure_pair` in a pool of
+   worker processes. A worker reads the file itself (images are never all in
+   memory), hashes its bytes (BLAKE2b), and looks up ``OUT_DIR/.cache/`` for a
+   result with the same image hash and measurement settings; only on a miss does
+   it measure, writing the result (or the reason it failed) to the cache
+   atomically right away. So an interrupted run keeps everything it finished, and a
+   re-run (after an interruption, after images were added or replaced, after the
+   settings changed) measures only what is new or changed.
+3. Per orientation, in manifest order, :func:`vision_torsion.angle.sequence_angles`
+   turns the marker pairs into unwrapped angles relative to the orientation's
+   reference image (its ``reference`` row, else its first row), multiplied by the
+   session's ``angle_sign``. This step is cheap and is not cached.
+4. ``measurements.csv`` is written atomically. Its content depends only on the
+   cached results, so an interrupted-and-resumed run writes byte for byte the same
+   file as an uninterrupted one.
+
+Only the output folder (``SESSION_DIR/results/`` by default) is written.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import multiprocessing
+import os
+from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import pandas as pd
+from tqdm import tqdm
+
+from ..errors import SessionError, VisionTorsionError
+from ..fileio import atomic_write_text, write_csv
+from ..settings import MeasureSettings
+from .load import Session, load_session
+
+__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
+
+logger = logging.getLogger(__name__)
+
+MEASUREMENTS_NAME = "measurements.csv"
+#: Columns added after the manifest's own (whose torque_nm/torque_std_nm, if any,
+#: are replaced by these).
+OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
+                  "angle_deg", "angle_std_deg", "status", "message")
+#: Bump when the cache entry layout changes; part of every cache key.
+_CACHE_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    """Summary of :func:`process_session`.
+
+    Attributes
+    ----------
+    measurements_path : pathlib.Path
+        The ``measurements.csv`` written.
+    n_images, n_ok, n_failed : int
+        Rows of the manifest, and how many got status ``ok`` / ``failed``.
+    n_measured, n_cached : int
+        Images measured in this run, and images whose result came from the cache.
+    failures : tuple of (str, str)
+        (image, message) of every failed row, in manifest order.
+    """
+
+    measurements_path: Path
+    n_images: int
+    n_ok: int
+    n_failed: int
+    n_measured: int
+    n_cached: int
+    failures: tuple[tuple[str, str], ...]
+
+    @property
+    def ok(self) -> bool:
+        """True when every image was measured."""
+        return self.n_failed == 0
+
+
+def _file_hash(path: Path) -> str:
+    return hashlib.blake2b(path.read_bytes(), digest_size=20).hexdigest()
+
+
+def _settings_key(settings: MeasureSettings) -> str:
+    """JSON identifying how images are measured: settings, correction content, versions."""
+    d = settings.to_dict()
+    if d.get("correction"):
+        d["correction"] = _file_hash(Path(d["correction"]))
+    try:
+        from .. import __version__ as version
+    except ImportError:  # the package metadata is not there (source checkout)
+        version = "unknown"
+    return json.dumps({"settings": d, "vision_torsion": version, "cache": _CACHE_FORMAT},
+                      sort_keys=True)
+
+
+@lru_cache(maxsize=4)
+def _settings_from(settings_json: str) -> MeasureSettings:
+    return MeasureSettings.from_dict(json.loads(settings_json))
+
+
+def _measure_task(task: tuple[str, str, str, str]) -> tuple[str, str]:
+    """Measure one image, or take it from the cache; runs in a worker process.
+
+    Returns the cache entry as JSON text and where it came from: "measured",
+    "cached" or "unread" (the file could not be read). An unexpected exception is
+    reported as a failure but not cached, so it is retried on the next run.
+    """
+    path, settings_json, settings_key, cache_dir = task
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        return json.dumps({"status": "failed",
+                           "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"
+    image_hash = hashlib.blake2b(data, digest_size=20).hexdigest()
+    del data
+    key = hashlib.blake2b(f"{image_hash}\n{settings_key}".encode(), digest_size=20).hexdigest()
+    cache_file = Path(cache_dir) / key[:2] / f"{key}.json"
+    try:
+        text = cache_file.read_text(encoding="utf-8")
+        if json.loads(text).get("status") in ("ok", "failed"):
+            return text, "cached"
+    except (OSError, ValueError, AttributeError):
+        pass  # no entry, or a damaged one: measure again
+    from ..pair import measure_pair
+
+    try:
+        pair = measure_pair(path, settings=_settings_from(settings_json))
+        entry = {"status": "ok", "pair": pair.to_dict()}
+    except VisionTorsionError as exc:
+        entry = {"status": "failed", "message": str(exc)}
+    except Exception as exc:  # noqa: BLE001 - one broken image must not stop a batch
+        logger.exception("unexpected error measuring %s", path)
+        return json.dumps({"status": "failed", "message":
+                           f"internal error: {type(exc).__name__}: {exc}"}), "measured"
+    entry["image_blake2b"] = image_hash
+    text = json.dumps(entry, sort_keys=True)
+    atomic_write_text(cache_file, text)
+    return text, "measured"
+
+
+def _default_jobs() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _run_tasks(tasks, *, jobs: int, progress: bool):
+    """Yield each task's result in task order, in parallel when jobs > 1."""
+    bar = tqdm(total=len(tasks), unit="image", desc="measuring", disable=not progress)
+    try:
+        if jobs == 1 or len(tasks) <= 1:
+            for task in tasks:
+                yield _measure_task(task)
+                bar.update()
+            return
+        # forkserver/spawn rather than fork: the parent may hold threads (tqdm's
+        # monitor, BLAS) and forking a threaded process can deadlock.
+        methods = multiprocessing.get_all_start_methods()
+        context = multiprocessing.get_context("forkserver" if "forkserver" in methods
+                                              else "spawn")
+        chunksize = max(1, min(16, len(tasks) // (jobs * 8)))
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+        try:
+            for result in pool.map(_measure_task, tasks, chunksize=chunksize):
+                yield result
+                bar.update()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+    finally:
+        bar.close()
+
+
+def _relative_message(message: str, absolute: Path, relative: str) -> str:
+    """Name the image by its manifest path rather than the absolute one."""
+    return message.replace(str(absolute), relative)
+
+
+def _angles(session: Session, entries: list[dict]) -> list[tuple[float, float, str]]:
+    """Per row: (angle_deg, angle_std_deg, failure message or "")."""
+    from ..angle import sequence_angles
+    from ..pair import PairMeasurement
+
+    rows = session.manifest.rows
+    out: list[tuple[float, float, str]] = [(math.nan, math.nan, "")] * len(rows)
+    groups: dict[float, list[int]] = defaultdict(list)
+    for i, row in enumerate(rows):
+        groups[row.orientation_deg].append(i)
+    sign = session.config.angle_sign
+    for orientation, idx in groups.items():
+        ref = next((i for i in idx if rows[i].phase == "reference"), idx[0])
+        pairs = [PairMeasurement.from_dict(entries[i]["pair"])
+                 if entries[i]["status"] == "ok" else None for i in idx]
+        if pairs[idx.index(ref)] is None:
+            why = (f"reference image {rows[ref].image} (line {rows[ref].line}) of "
+                   f"orientation {orientation:g} failed, so no angle can be measured")
+            for i in idx:
+                out[i] = (math.nan, math.nan, entries[i].get("message") or why)
+            continue
+        try:
+            angles = sequence_angles(pairs[idx.index(ref)], pairs)
+        except VisionTorsionError as exc:
+            angles = [None] * len(idx)
+            reason = f"angles of orientation {orientation:g} failed: {exc}"
+        else:
+            reason = "no angle relative to the reference (marker identity lost)"
+        for i, angle in zip(idx, angles):
+            if angle is not None:
+                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, "")
+            else:
+                out[i] = (math.nan, math.nan, entries[i].get("message") or reason)
+    return out
+
+
+def _table(session: Session, entries: list[dict]) -> pd.DataFrame:
+    manifest = session.manifest
+    keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
+    records = []
+    for row, entry, (angle, angle_std, why) in zip(manifest.rows, entries,
+                                                    _angles(session, entries)):
+        torque = session.torque(row)
+        rec = {c: v for c, v in row.fields if c in keep}
+        rec.update(torque_nm=torque.torque_nm, torque_std_nm=torque.torque_std_nm,
+                   torque_common_std_nm=torque.torque_common_std_nm,
+                   torque_source="weights" if row.torque_nm is None else "measured",
+                   angle_deg=angle, angle_std_deg=angle_std,
+                   status="failed" if why else "ok",
+                   message=_relative_message(why, manifest.image_path(row), row.image))
+        records.append(rec)
+    return pd.DataFrame.from_records(records, columns=keep + list(OUTPUT_COLUMNS))
+
+
+def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
+                    progress: bool = False) -> ProcessResult:
+    """Measure every image of a session and write ``measurements.csv``.
+
+    Parameters
+    ----------
+    session_dir : str or os.PathLike
+        The session folder (session.toml, manifest.csv, images).
+    out_dir : str or os.PathLike, optional
+        Output folder; ``SESSION_DIR/results`` by default. It holds
+        ``measurements.csv`` and the cache ``.cache/``.
+    jobs : int, optional
+        Worker processes; all available cores by default; 1 measures in this
+        process.
+    progress : bool
+        Show a progress bar (on stderr).
+
+    Returns
+    -------
+    ProcessResult
+        Counts of ok/failed rows and of measured/cached images. One image failing
+        does not stop the run; it gets status ``failed`` and a message.
+
+    Raises
+    ------
+    SessionError
+        Invalid session folder or session.toml, or `out_dir` is the session folder.
+    ManifestError
+        Any problem with manifest.csv or the image files it names (all listed).
+    """
+    session = load_session(session_dir)
+    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    if out.resolve() == session.folder.resolve():
+        raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
+                           "use a subfolder such as results/")
+    if jobs is not None and jobs < 1:
+        raise SessionError(f"jobs must be >= 1, got {jobs}")
+    settings = session.settings
+    settings_json = json.dumps(settings.to_dict(), sort_keys=True)
+    key = _settings_key(settings)
+    cache_dir = str(out / ".cache")
+    tasks = [(str(session.manifest.image_path(row)), settings_json, key, cache_dir)
+             for row in session.manifest.rows]
+    entries, sources = [], []
+    jobs = min(jobs or _default_jobs(), len(tasks))
+    for text, source in _run_tasks(tasks, jobs=jobs, progress=progress):
+        entries.append(json.loads(text))
+        sources.append(source)
+    table = _table(session, entries)
+    path = write_csv(out / MEASUREMENTS_NAME, table)
+    failed = table[table["status"] == "failed"]
+    failures = tuple(zip(failed["image"], failed["message"]))
+    logger.info("%s: %d images, %d ok, %d failed (%d measured, %d from the cache)", path,
+                len(table), len(table) - len(failed), len(failed),
+                sources.count("measured"), sources.count("cached"))
+    return ProcessResult(measurements_path=path, n_images=len(table),
+                         n_ok=len(table) - len(failed), n_failed=len(failed),
+                         n_measured=sources.count("measured"),
+                         n_cached=sources.count("cached"),
+                         failures=failures)
