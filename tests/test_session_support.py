@@ -57,11 +57,14 @@ def true_angle(orientation: float, torque_nm: float, phase: str, index: int) -> 
     return 0.3 * orientation / 60.0 + 40.0 * torque_nm + lag + 0.01 * index
 
 
-def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, **plan_kw):
+def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, draw=None,
+                 **plan_kw):
     """Plan a small session and render all of its images; returns (plan, truth).
 
+    `draw(angle_deg, index)` returns the image of a row (default: :func:`draw_target`);
     `truth` maps the manifest image path to the angle (degrees) drawn in it.
     """
+    draw = draw or (lambda angle, index: draw_target(angle))
     step_mass = 0.02
     plan = plan_session(folder, max_torque_nm=steps * 2 * step_mass * 9.81 * 0.05,
                         step_mass_kg=step_mass, arm_radius_m=0.05,
@@ -71,7 +74,7 @@ def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, **plan_kw):
         sign = {"pos": 1, "neg": -1, "ref": 0}[row["phase"][:3]]
         torque = sign * 2 * float(row["mass_kg"]) * 9.81 * 0.05
         angle = true_angle(float(row["orientation_deg"]), torque, row["phase"], index)
-        write_image(Path(folder) / row["image"], draw_target(angle))
+        write_image(Path(folder) / row["image"], draw(angle, index))
         truth[row["image"]] = angle
     return plan, truth
 
