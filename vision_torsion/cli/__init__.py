@@ -22,6 +22,8 @@ __all__ = ["main", "build_parser"]
 _COMMAND_MODULES = [
     "measure",
     "synth",
+    "plan",
+    "process",
 ]
 
 
