@@ -1,0 +1,176 @@
+"""Turn a ``measurements.csv`` table into loops: one validation place for the input.
+
+A *loop* is one cycle at one orientation: positive unloading (+Tmax → 0), negative
+loading (0 → −Tmax), negative unloading (−Tmax → 0), positive loading (0 → +Tmax).
+Its samples are ordered by phase (in that order) and by ``step`` inside a phase.
+
+For the model-free figures a loop is also seen as two monotone *runs*:
+the **descending run** (positive unloading then negative loading, +Tmax → −Tmax) and
+the **ascending run** (negative unloading then positive loading, −Tmax → +Tmax).
+At equal torque the descending run is the unloading branch on the positive side and
+the loading branch on the negative side, so "loading vs unloading at equal torque"
+over the whole loop is simply "descending vs ascending". Inside a run, images at the
+same nominal torque (the zero at the phase boundary) are merged by averaging.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..errors import AnalysisError
+from .uncertainty import torque_groups
+
+__all__ = ["PHASES", "LOOP_PHASES", "REQUIRED_COLUMNS", "validate_measurements", "Loop", "build_loops"]
+
+#: Phase names of ``measurements.csv``, in acquisition order.
+PHASES = ("reference", "positive_unloading", "negative_loading", "negative_unloading", "positive_loading")
+#: The four phases of one cycle.
+LOOP_PHASES = PHASES[1:]
+#: Columns ``measurements.csv`` must have.
+REQUIRED_COLUMNS = (
+    "image", "orientation_deg", "cycle", "phase", "step", "mass_kg", "torque_nm", "torque_std_nm",
+    "angle_deg", "angle_std_deg", "status", "message",
+)
+_NUMERIC = ("orientation_deg", "cycle", "step", "torque_nm", "torque_std_nm", "angle_deg", "angle_std_deg")
+
+
+def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Check a measurements table and split it into usable rows and failed images.
+
+    Parameters
+    ----------
+    measurements : pandas.DataFrame
+        The table of ``measurements.csv`` (columns :data:`REQUIRED_COLUMNS`).
+
+    Returns
+    -------
+    usable : pandas.DataFrame
+        Rows with ``status == "ok"`` and finite numbers, loop phases only (the
+        ``reference`` rows only define the zero angle), sorted by orientation, cycle,
+        phase order, step; a copy (the input is not modified).
+    failed : pandas.DataFrame
+        ``image, orientation_deg, cycle, phase, step, message`` of every image that
+        cannot be used, with the reason.
+
+    Raises
+    ------
+    AnalysisError
+        Not a DataFrame, missing columns, an unknown phase name, a non-numeric value in
+        a numeric column, a negative uncertainty, or no usable row at all.
+    """
+    if not isinstance(measurements, pd.DataFrame):
+        raise AnalysisError(f"measurements must be a pandas DataFrame, got {type(measurements).__name__}")
+    missing = [c for c in REQUIRED_COLUMNS if c not in measurements.columns]
+    if missing:
+        raise AnalysisError(f"measurements table is missing column(s): {', '.join(missing)}")
+    df = measurements.loc[:, list(REQUIRED_COLUMNS)].copy()
+    df["phase"] = df["phase"].astype(str)
+    bad_phase = ~df["phase"].isin(PHASES)
+    if bad_phase.any():
+        i = int(np.flatnonzero(bad_phase.to_numpy())[0])
+        raise AnalysisError(
+            f"measurements table row {i} (image {df['image'].iloc[i]!r}): unknown phase "
+            f"{df['phase'].iloc[i]!r}, expected one of {', '.join(PHASES)}"
+        )
+    for col in _NUMERIC:
+        num = pd.to_numeric(df[col], errors="coerce")
+        bad = num.isna() & df[col].notna() & (df[col].astype(str).str.strip() != "")
+        if bad.any():
+            i = int(np.flatnonzero(bad.to_numpy())[0])
+            raise AnalysisError(f"measurements table row {i}: column {col} is not a number ({df[col].iloc[i]!r})")
+        df[col] = num.astype(float)
+    for col in ("torque_std_nm", "angle_std_deg"):
+        neg = df[col] < 0
+        if neg.any():
+            i = int(np.flatnonzero(neg.to_numpy())[0])
+            raise AnalysisError(f"measurements table row {i}: {col} is negative ({df[col].iloc[i]})")
+    df["message"] = df["message"].fillna("").astype(str)
+    df["status"] = df["status"].astype(str)
+
+    reason = pd.Series("", index=df.index)
+    not_ok = df["status"] != "ok"
+    reason[not_ok] = df.loc[not_ok, "message"].where(df.loc[not_ok, "message"] != "", "status " + df.loc[not_ok, "status"])
+    for col in ("orientation_deg", "cycle", "step", "torque_nm", "angle_deg", "torque_std_nm", "angle_std_deg"):
+        nan = (~not_ok) & (reason == "") & ~np.isfinite(df[col])
+        reason[nan] = f"marked ok but {col} is not a finite number"
+    failed_mask = reason != ""
+    failed = df.loc[failed_mask, ["image", "orientation_deg", "cycle", "phase", "step"]].copy()
+    failed["message"] = reason[failed_mask]
+    usable = df.loc[~failed_mask & (df["phase"] != "reference")].copy()
+    if usable.empty:
+        raise AnalysisError("measurements table has no usable rows (status == 'ok' with finite torque and angle)")
+    usable["_phase_order"] = usable["phase"].map({p: i for i, p in enumerate(PHASES)})
+    usable = usable.sort_values(["orientation_deg", "cycle", "_phase_order", "step"], kind="stable")
+    return usable.drop(columns="_phase_order").reset_index(drop=True), failed.reset_index(drop=True)
+
+
+@dataclass(frozen=True)
+class Loop:
+    """Samples of one orientation and cycle, in acquisition order.
+
+    Arrays are in N·m and **radians**. ``groups`` indexes the shared torque error of
+    each sample (see :mod:`.uncertainty`), ``group_std`` its 1σ.
+    """
+
+    orientation_deg: float
+    cycle: int
+    phase: np.ndarray
+    torque_nm: np.ndarray
+    torque_std_nm: np.ndarray
+    angle_rad: np.ndarray
+    angle_std_rad: np.ndarray
+    groups: np.ndarray
+    images: np.ndarray
+
+    def phase_counts(self) -> dict:
+        """Number of usable samples in each of the four phases."""
+        return {p: int(np.sum(self.phase == p)) for p in LOOP_PHASES}
+
+    def runs(self):
+        """Merged descending and ascending runs: ``(tau, theta, theta_std, tau_std, groups, is_desc)``.
+
+        The descending run comes first, sorted by decreasing torque; the ascending run
+        follows, sorted by increasing torque. Samples of the same torque group inside a
+        run are averaged (angle std divided by sqrt(count)).
+        """
+        out = []
+        for phases, descending in ((LOOP_PHASES[:2], True), (LOOP_PHASES[2:], False)):
+            m = np.isin(self.phase, phases)
+            g = self.groups[m]
+            uniq, inv = np.unique(g, return_inverse=True)
+            cnt = np.bincount(inv).astype(float)
+            tau = np.bincount(inv, self.torque_nm[m]) / cnt
+            th = np.bincount(inv, self.angle_rad[m]) / cnt
+            var = np.bincount(inv, self.angle_std_rad[m] ** 2) / cnt**2
+            tstd = np.zeros(uniq.size)
+            np.maximum.at(tstd, inv, self.torque_std_nm[m])
+            order = np.argsort(-tau if descending else tau, kind="stable")
+            out.append((tau[order], th[order], np.sqrt(var[order]), tstd[order], uniq[order],
+                        np.full(order.size, descending)))
+        return tuple(np.concatenate(parts) for parts in zip(*out))
+
+
+def build_loops(usable: pd.DataFrame, *, torque_correlation="level") -> list[Loop]:
+    """Group usable rows into :class:`Loop` objects, one per (orientation, cycle).
+
+    Torque groups are formed over the whole session, so a level shares its error
+    across orientations and cycles (see :mod:`.uncertainty`).
+    """
+    groups = torque_groups(usable["torque_nm"].to_numpy(), correlation=torque_correlation)
+    loops = []
+    for (orient, cycle), idx in usable.groupby(["orientation_deg", "cycle"], sort=True).indices.items():
+        sub = usable.iloc[idx]
+        loops.append(Loop(
+            orientation_deg=float(orient), cycle=int(cycle),
+            phase=sub["phase"].to_numpy(dtype=object),
+            torque_nm=sub["torque_nm"].to_numpy(float),
+            torque_std_nm=sub["torque_std_nm"].to_numpy(float),
+            angle_rad=np.radians(sub["angle_deg"].to_numpy(float)),
+            angle_std_rad=np.radians(sub["angle_std_deg"].to_numpy(float)),
+            groups=groups[idx],
+            images=sub["image"].astype(str).to_numpy(dtype=object),
+        ))
+    return loops

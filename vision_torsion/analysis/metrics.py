@@ -1,0 +1,352 @@
+"""Figures of one torque–angle loop: stiffness per phase, hysteresis, lost motion,
+three-segment and secant stiffness, loop energy and loss factor.
+
+The model-free figures work on *runs* (see :mod:`.loops`): the descending run
+(+Tmax → −Tmax) and the ascending run (−Tmax → +Tmax), each given sorted by
+increasing torque. They accept 2-D arrays ``(draws, points)`` so that the Monte Carlo
+of :mod:`.uncertainty` evaluates all draws at once; 1-D input gives scalars.
+Angles are in radians, torques in N·m.
+
+Definitions (formulas)
+----------------------
+- **Loop width** ``w(τ) = θ_desc(τ) − θ_asc(τ)``, both runs linearly interpolated
+  on a common torque grid (the union of their torque levels inside the range both
+  cover; the maximum of a difference of two polylines lies on such a level).
+  **Hysteresis** (paper): ``max_τ |w(τ)|``. **Hysteresis loss** (catalogue, loop
+  width at zero torque): ``w(0)`` = angle left after returning to zero from +Tmax
+  minus that after returning from −Tmax.
+- **Lost motion** at ``±x·Tmax`` (catalogue / GB/T 35089 style, mid-point formula):
+  ``LM = m(+x·Tmax) − m(−x·Tmax)`` with the loop mid-point
+  ``m(τ) = (θ_desc(τ) + θ_asc(τ))/2``; x = 3 % and 4 %.
+- **Secant stiffness** over ``[τ_a, τ_b]`` (0 ≤ τ_a < τ_b ≤ Tmax) on the *loading*
+  branches (ascending run for τ > 0, descending run for τ < 0):
+  ``k_sec = (τ_b − τ_a) / mean(θ_asc(τ_b) − θ_asc(τ_a), θ_desc(−τ_a) − θ_desc(−τ_b))``.
+- **Loop energy** (paper): ``W = ∮ τ dθ`` over the closed polygon descending run →
+  ascending run → back to the start (trapezoids; positive for a dissipating loop), J.
+- **Loss factor** ``η = W / (2π·U)`` with ``U = ½·τ_a·θ_a`` the peak elastic energy
+  of the equivalent linear spring through the loop tips
+  (``τ_a``, ``θ_a`` = half the torque and angle ranges between the tips).
+- **Phase stiffness**: least-squares slope of angle on torque within a phase with
+  effective-variance weights ``1/(σθ² + b²στ²)`` (Orear 1982), ``k = 1/b``; standard
+  uncertainty by first-order propagation (:func:`.uncertainty.linearised_covariance`).
+- **Three-segment stiffness** (catalogue K1, K2, K3 with break torques T1, T2): a
+  continuous piecewise-linear fit of the loading branches ``θ = θ₀± ± h(|τ|)`` with
+  ``h`` of slopes 1/K1, 1/K2, 1/K3 and breaks T1 < T2, both branches sharing K and T.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import optimize
+
+from ..errors import AnalysisError
+from .uncertainty import (
+    least_squares_weights,
+    linearised_covariance,
+    numeric_jacobian,
+    parameter_stds,
+    torque_jacobian,
+)
+
+__all__ = [
+    "interp_rows",
+    "loop_width",
+    "lost_motion",
+    "secant_stiffness",
+    "loop_energy",
+    "loss_factor",
+    "phase_stiffness",
+    "fit_three_segment",
+]
+
+
+def _rows(*arrays):
+    return tuple(np.atleast_2d(np.asarray(a, dtype=float)) for a in arrays)
+
+
+def _out(v, one_d):
+    return float(v[0]) if one_d else v
+
+
+def interp_rows(xq, x, y, *, tol=0.0):
+    """Row-wise linear interpolation; NaN outside ``[x_min − tol, x_max + tol]``.
+
+    Parameters
+    ----------
+    xq : ndarray (D, q) or (q,)
+        Query points per row (or shared).
+    x, y : ndarray (D, m)
+        Abscissae sorted increasing along each row (m ≥ 2), and ordinates.
+    tol : float
+        How far beyond the data a query may lie (linear extrapolation there).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> interp_rows(np.array([[0.5, 3.0]]), np.array([[0.0, 1.0, 2.0]]), np.array([[0.0, 2.0, 4.0]])).tolist()
+    [[1.0, nan]]
+    """
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    xq = np.broadcast_to(np.asarray(xq, float), (x.shape[0],) + np.shape(xq)[-1:])
+    idx = np.sum(x[:, None, :] <= xq[:, :, None], axis=-1) - 1
+    idx = np.clip(idx, 0, x.shape[1] - 2)
+    x0 = np.take_along_axis(x, idx, 1)
+    x1 = np.take_along_axis(x, idx + 1, 1)
+    y0 = np.take_along_axis(y, idx, 1)
+    y1 = np.take_along_axis(y, idx + 1, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (xq - x0) / (x1 - x0)
+    out = y0 + t * (y1 - y0)
+    outside = (xq < x[:, :1] - tol) | (xq > x[:, -1:] + tol)
+    return np.where(outside, np.nan, out)
+
+
+def _sorted(tau, th):
+    order = np.argsort(tau, axis=1, kind="stable")
+    return np.take_along_axis(tau, order, 1), np.take_along_axis(th, order, 1)
+
+
+def loop_width(tau_desc, th_desc, tau_asc, th_asc, *, tol=0.0):
+    """Largest loop width and width at zero torque, rad: ``(hysteresis, hysteresis_loss)``.
+
+    Runs need not be sorted. See the module notes for the definitions.
+    """
+    one_d = np.ndim(tau_desc) == 1
+    td, yd, ta, ya = _rows(tau_desc, th_desc, tau_asc, th_asc)
+    td, yd = _sorted(td, yd)
+    ta, ya = _sorted(ta, ya)
+    lo = np.maximum(td[:, :1], ta[:, :1])
+    hi = np.minimum(td[:, -1:], ta[:, -1:])
+    grid = np.clip(np.concatenate([td, ta], axis=1), lo, hi)
+    w = interp_rows(grid, td, yd, tol=tol) - interp_rows(grid, ta, ya, tol=tol)
+    with np.errstate(invalid="ignore"):
+        absw = np.abs(w)
+        hyst = np.where(np.all(np.isnan(w), axis=1), np.nan, np.nanmax(np.where(np.isnan(absw), -np.inf, absw), axis=1))
+    zero = np.zeros((td.shape[0], 1))
+    w0 = (interp_rows(zero, td, yd, tol=tol) - interp_rows(zero, ta, ya, tol=tol))[:, 0]
+    return _out(hyst, one_d), _out(w0, one_d)
+
+
+def lost_motion(tau_desc, th_desc, tau_asc, th_asc, *, torque_nm, tol=0.0):
+    """Lost motion, rad: mid-point of the loop at +torque_nm minus that at −torque_nm."""
+    one_d = np.ndim(tau_desc) == 1
+    td, yd, ta, ya = _rows(tau_desc, th_desc, tau_asc, th_asc)
+    td, yd = _sorted(td, yd)
+    ta, ya = _sorted(ta, ya)
+    q = np.array([[torque_nm, -torque_nm]])
+    mid = 0.5 * (interp_rows(q, td, yd, tol=tol) + interp_rows(q, ta, ya, tol=tol))
+    return _out(mid[:, 0] - mid[:, 1], one_d)
+
+
+def secant_stiffness(tau_desc, th_desc, tau_asc, th_asc, *, lower_nm, upper_nm, tol=0.0):
+    """Secant stiffness of the loading branches between ``lower_nm`` and ``upper_nm``, N·m/rad."""
+    if not 0 <= lower_nm < upper_nm:
+        raise AnalysisError(f"secant interval must satisfy 0 <= lower < upper, got [{lower_nm}, {upper_nm}] N·m")
+    one_d = np.ndim(tau_desc) == 1
+    td, yd, ta, ya = _rows(tau_desc, th_desc, tau_asc, th_asc)
+    td, yd = _sorted(td, yd)
+    ta, ya = _sorted(ta, ya)
+    pos = interp_rows(np.array([[lower_nm, upper_nm]]), ta, ya, tol=tol)
+    neg = interp_rows(np.array([[-lower_nm, -upper_nm]]), td, yd, tol=tol)
+    dtheta = 0.5 * ((pos[:, 1] - pos[:, 0]) + (neg[:, 0] - neg[:, 1]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = (upper_nm - lower_nm) / dtheta
+    return _out(np.where(dtheta > 0, k, np.nan), one_d)
+
+
+def loop_energy(torque_nm, angle_rad):
+    """Energy ``∮ τ dθ`` (J) of the closed polygon through the samples in order.
+
+    Examples
+    --------
+    >>> loop_energy([1.0, -1.0, -1.0, 1.0], [1.0, 1.0, -1.0, -1.0])  # 2 rad × 2 N·m square
+    4.0
+    """
+    one_d = np.ndim(torque_nm) == 1
+    tau, th = _rows(torque_nm, angle_rad)
+    tau_c = np.concatenate([tau, tau[:, :1]], axis=1)
+    th_c = np.concatenate([th, th[:, :1]], axis=1)
+    w = np.sum(0.5 * (tau_c[:, 1:] + tau_c[:, :-1]) * np.diff(th_c, axis=1), axis=1)
+    # no sign is imposed: in the order descending run → ascending run a dissipating
+    # loop is positive, and a negative value would be worth seeing
+    return _out(w, one_d)
+
+
+def loss_factor(energy_j, torque_top_nm, angle_top_rad, torque_bottom_nm, angle_bottom_rad):
+    """Loss factor ``η = W/(2π·U)``, ``U = ½·τ_a·θ_a`` from the loop tips (see module notes)."""
+    tau_a = 0.5 * (np.asarray(torque_top_nm) - np.asarray(torque_bottom_nm))
+    th_a = 0.5 * (np.asarray(angle_top_rad) - np.asarray(angle_bottom_rad))
+    u = 0.5 * tau_a * th_a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(u > 0, np.asarray(energy_j) / (2 * np.pi * u), np.nan)
+
+
+def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_points=3):
+    """Least-squares stiffness dτ/dθ of one phase, N·m/rad, with its uncertainty.
+
+    Parameters
+    ----------
+    torque_nm, angle_rad : array_like (n,)
+        Samples of the phase (N·m, rad).
+    angle_std_rad, torque_std_nm : array_like (n,)
+        1σ per sample; torque errors are taken independent inside one phase (each
+        torque level occurs once in a phase).
+    min_points : int
+        Fewest samples accepted (3: two for a line, one to check it).
+
+    Returns
+    -------
+    dict
+        ``value`` (N·m/rad), ``std_angle``, ``std_torque`` (1σ, N·m/rad),
+        ``residual_rms_rad``, ``n_points``.
+
+    Raises
+    ------
+    AnalysisError
+        Fewer than ``min_points`` samples, no torque change, or no angle change.
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_rad, float)
+    sa = np.asarray(angle_std_rad, float)
+    st = np.asarray(torque_std_nm, float)
+    if tau.size < min_points:
+        raise AnalysisError(f"phase has {tau.size} usable point(s); a stiffness needs at least {min_points}")
+    if np.ptp(tau) <= 0:
+        raise AnalysisError("torque does not change within the phase; no stiffness can be computed")
+    x = np.column_stack([np.ones_like(tau), tau])
+    b = np.polyfit(tau, th, 1)[0]
+    for _ in range(3):  # effective-variance iteration: weights depend on the slope
+        var = sa**2 + (b * st) ** 2
+        w = least_squares_weights(np.sqrt(var))
+        sw = np.sqrt(w)
+        coef = np.linalg.lstsq(x * sw[:, None], th * sw, rcond=None)[0]
+        b = coef[1]
+    if not b > 0:
+        raise AnalysisError(f"angle does not increase with torque within the phase (slope {b:.3g} rad/(N·m))")
+    resid = th - x @ coef
+    # torque errors enter as −b·δτ in the residual: Jacobian d(model)/d(τ_i) = b
+    cov_a, cov_t = linearised_covariance(x, w, sa**2, np.diag(np.full(tau.size, b)), st**2)
+    k = 1.0 / b
+    return {
+        "value": k,
+        "std_angle": float(np.sqrt(cov_a[1, 1])) * k * k,
+        "std_torque": float(np.sqrt(cov_t[1, 1])) * k * k,
+        "residual_rms_rad": float(np.sqrt(np.mean(resid**2))),
+        "n_points": int(tau.size),
+    }
+
+
+_SEG_NAMES = ["theta0_pos", "theta0_neg", "k1", "k2", "k3", "t1", "t2"]
+
+
+def _hinge_columns(x, t1, t2):
+    """Torque taken at each of the three compliances for |τ| = x."""
+    return np.column_stack([np.minimum(x, t1), np.clip(x - t1, 0.0, t2 - t1), np.maximum(x - t2, 0.0)])
+
+
+def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm=None, groups=None):
+    """Three-segment stiffness K1, K2, K3 and break torques T1 < T2 of the loading branches.
+
+    Parameters
+    ----------
+    torque_nm, angle_rad : array_like (n,)
+        Samples of the loading branches: 0 → +Tmax (τ ≥ 0) and 0 → −Tmax (τ ≤ 0);
+        each branch must contain its zero-torque start.
+    branch : array_like of ±1
+        Loading branch of each sample: +1 for 0 → +Tmax, −1 for 0 → −Tmax (the two
+        zero-torque samples differ by the hysteresis loss, so the sign of the torque
+        cannot tell them apart).
+    angle_std_rad, torque_std_nm : array_like (n,)
+        1σ per sample.
+    groups : array_like of int, optional
+        Shared torque error index per sample.
+
+    Returns
+    -------
+    dict
+        ``k1, k2, k3`` (N·m/rad), ``t1, t2`` (N·m), each with ``std_angle``/
+        ``std_torque`` dicts, ``residual_rms_rad``.
+
+    Raises
+    ------
+    AnalysisError
+        A branch without its zero-torque sample, fewer than 6 distinct torque
+        magnitudes, non-positive compliance, or unidentified parameters.
+
+    Notes
+    -----
+    For fixed (T1, T2) the model is linear in (θ₀₊, θ₀₋, 1/K1, 1/K2, 1/K3); the break
+    torques are found by an exhaustive search over the mid-points between torque
+    levels (every segment keeps at least two levels) followed by Nelder–Mead refinement
+    of the profiled weighted sum of squares.
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_rad, float)
+    sa = np.asarray(angle_std_rad, float)
+    st = np.zeros_like(tau) if torque_std_nm is None else np.asarray(torque_std_nm, float)
+    grp = np.arange(tau.size) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    sign = np.sign(np.asarray(branch, float)).reshape(-1)
+    if sign.shape != tau.shape or np.any(sign == 0):
+        raise AnalysisError("branch must give +1 (0 → +Tmax) or -1 (0 → -Tmax) for every sample")
+    if np.any(tau * sign < 0):
+        raise AnalysisError("a sample's torque has the opposite sign of its loading branch")
+    for s_ in (1.0, -1.0):
+        if not (np.any((sign == s_) & (tau == 0)) and np.any(tau * s_ > 0)):
+            raise AnalysisError("three-segment fit needs both loading branches with their zero-torque start")
+    x_all, y, s_all, g_all = np.abs(tau), th, sa, grp
+    levels = np.unique(x_all)
+    if levels.size < 6:
+        raise AnalysisError(f"three-segment fit needs at least 6 distinct torque magnitudes, got {levels.size}")
+    w = least_squares_weights(s_all)
+    sw = np.sqrt(w)
+    is_pos = (sign > 0).astype(float)
+
+    def design(x, t1, t2):
+        h = _hinge_columns(x, t1, t2) * sign[:, None]
+        return np.column_stack([is_pos, 1.0 - is_pos, h])
+
+    def sse(t):
+        t1, t2 = t
+        if not (levels[1] < t1 < t2 < levels[-2]):
+            return np.inf
+        a = design(x_all, t1, t2)
+        coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+        r = y - a @ coef
+        return float(np.sum(w * r * r))
+
+    mids = 0.5 * (levels[1:] + levels[:-1])  # mids[k] lies between levels[k] and levels[k+1]
+    best, best_t = np.inf, None
+    for i in range(1, mids.size):
+        for j in range(i + 2, mids.size - 1):
+            v = sse((mids[i], mids[j]))
+            if v < best:
+                best, best_t = v, (mids[i], mids[j])
+    if best_t is None:
+        raise AnalysisError("three-segment fit: too few torque levels to place two break torques")
+    res = optimize.minimize(sse, np.array(best_t), method="Nelder-Mead",
+                            options={"xatol": levels[-1] * 1e-7, "fatol": 1e-12 * max(best, 1e-300)})
+    t1, t2 = (float(v) for v in (res.x if res.fun <= best else best_t))
+    a = design(x_all, t1, t2)
+    coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+    if not np.all(coef[2:] > 0):
+        raise AnalysisError("three-segment fit gives a non-positive compliance: the branches are not monotone")
+
+    def model(p, taus=tau):
+        return design(np.abs(taus), p[5], p[6]) @ p[:5]
+
+    p = np.concatenate([coef, [t1, t2]])
+    r = y - model(p)
+    jac = numeric_jacobian(model, p, np.concatenate([[1e-7, 1e-7], np.abs(coef[2:]) * 1e-6, [levels[-1] * 1e-7] * 2]))
+    g_var = np.zeros(int(g_all.max()) + 1)
+    np.maximum.at(g_var, g_all, st**2)
+    jac_tau = torque_jacobian(lambda t: model(p, t), tau, g_all)
+    try:
+        cov_a, cov_t = linearised_covariance(jac, w, s_all**2, jac_tau, g_var)
+    except np.linalg.LinAlgError:
+        raise AnalysisError("three-segment fit: the break torques are not identified (singular normal matrix)") from None
+    conv = np.diag([1.0, 1.0, -1 / coef[2] ** 2, -1 / coef[3] ** 2, -1 / coef[4] ** 2, 1.0, 1.0])
+    s_a, s_t = parameter_stds(_SEG_NAMES, conv @ cov_a @ conv.T, conv @ cov_t @ conv.T)
+    return {
+        "k1": 1 / coef[2], "k2": 1 / coef[3], "k3": 1 / coef[4], "t1": t1, "t2": t2,
+        "std_angle": s_a, "std_torque": s_t, "residual_rms_rad": float(np.sqrt(np.mean(r * r))),
+    }

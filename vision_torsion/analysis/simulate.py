@@ -1,0 +1,124 @@
+"""Synthetic ``measurements.csv`` tables from the bilinear model with known truth.
+
+The torque schedule follows the paper's protocol: per orientation a reference image
+at zero torque, then cycles of positive unloading (+Tmax → 0), negative loading
+(0 → −Tmax), negative unloading (−Tmax → 0) and positive loading (0 → +Tmax) in
+weight steps. Each phase includes both its end points, so the zero and ±Tmax states
+are imaged twice per cycle (as when a phase is photographed from start to end).
+
+Noise model (matches the assumptions of :mod:`.uncertainty`): every image gets an
+independent angle error of ``angle_std_deg``; each weight piece has an independent
+mass error of ``mass_std_kg``, and a torque level made of ``n`` pieces on each of the
+two pans has the torque error ``g·r·Σδm`` (σ = ``g·r·mass_std_kg·sqrt(2n)``), the same
+every time that level recurs in the session. The table holds the *nominal* torque
+and its σ; the angles come from the *true* torque.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from ..errors import AnalysisError
+from .loops import LOOP_PHASES
+from .models import bilinear_response
+
+__all__ = ["torque_levels", "cycle_schedule", "simulate_measurements"]
+
+
+def torque_levels(max_torque_nm: float, step_nm: float) -> np.ndarray:
+    """Torque levels 0, step, 2·step, …, ending exactly at ``max_torque_nm``.
+
+    A last partial step is added when ``max_torque_nm`` is not a multiple of the step.
+
+    Examples
+    --------
+    >>> torque_levels(0.05, 0.02).round(3).tolist()
+    [0.0, 0.02, 0.04, 0.05]
+    """
+    if not (max_torque_nm > 0 and step_nm > 0):
+        raise AnalysisError(f"max torque and step must be positive, got {max_torque_nm!r}, {step_nm!r}")
+    n = int(math.floor(max_torque_nm / step_nm + 1e-9))
+    lv = np.arange(n + 1) * step_nm
+    if max_torque_nm - lv[-1] > 1e-9 * max_torque_nm:
+        lv = np.append(lv, max_torque_nm)
+    return lv
+
+
+def cycle_schedule(levels: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """The four phases of one cycle as ``(phase, torques)`` for given levels ``0..Tmax``."""
+    lv = np.asarray(levels, float)
+    return [(LOOP_PHASES[0], lv[::-1]), (LOOP_PHASES[1], -lv), (LOOP_PHASES[2], -lv[::-1]), (LOOP_PHASES[3], lv)]
+
+
+def simulate_measurements(*, k_u, k_l, tau_c, max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
+                          g_m_per_s2=9.81, orientations_deg=(0, 60, 120, 180, 240, 300), n_cycles=1,
+                          angle_std_deg=0.001, mass_std_kg=1e-4, rng=None, orientation_k_u=None) -> pd.DataFrame:
+    """A noisy measurements table of a session of the bilinear model.
+
+    Parameters
+    ----------
+    k_u, k_l, tau_c : float
+        True model parameters (N·m/rad, N·m/rad, N·m).
+    max_torque_nm : float
+        Cycle amplitude, N·m.
+    step_mass_kg, arm_radius_m, g_m_per_s2 : float
+        Weight step per pan, arm radius and gravity; the torque step is
+        ``2·m·g·r`` (force couple, paper).
+    orientations_deg : sequence of float
+    n_cycles : int
+    angle_std_deg : float
+        1σ angle noise per image (0 for exact data).
+    mass_std_kg : float
+        1σ mass error of each weight piece (0 for exact torques).
+    rng : numpy.random.Generator, optional
+        Needed when any noise is non-zero.
+    orientation_k_u : dict, optional
+        ``{orientation: k_u}`` overriding ``k_u`` (an orientation effect for tests).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns of ``measurements.csv``; all rows ``status == "ok"``.
+    """
+    if (angle_std_deg > 0 or mass_std_kg > 0) and rng is None:
+        raise AnalysisError("simulate_measurements needs rng=numpy.random.default_rng(seed) when noise is on")
+    step = 2.0 * step_mass_kg * g_m_per_s2 * arm_radius_m
+    levels = torque_levels(max_torque_nm, step)
+    pieces = np.ceil(levels / step - 1e-9)  # pieces per pan at each level
+    # one torque error per signed level (the same weights each time the level recurs)
+    tau_std = g_m_per_s2 * arm_radius_m * mass_std_kg * np.sqrt(2.0 * pieces)
+    err_pos = rng.standard_normal(levels.size) * tau_std if mass_std_kg > 0 else np.zeros(levels.size)
+    err_neg = rng.standard_normal(levels.size) * tau_std if mass_std_kg > 0 else np.zeros(levels.size)
+    err_neg[0] = err_pos[0] = 0.0  # no weights at zero torque
+    sched = cycle_schedule(levels)
+    rows = []
+    for orient in orientations_deg:
+        ku = (orientation_k_u or {}).get(orient, k_u)
+        phases, steps, nominal, true, std = ["reference"], [0], [0.0], [0.0], [0.0]
+        for cycle in range(1, n_cycles + 1):
+            for phase, torques in sched:
+                idx = np.rint(np.abs(torques) / step).astype(int).clip(max=levels.size - 1)
+                idx = np.where(np.isclose(np.abs(torques), levels[-1]), levels.size - 1, idx)
+                err = np.where(torques < 0, err_neg[idx], err_pos[idx])
+                for s, (t, e, sd) in enumerate(zip(torques, err, tau_std[idx])):
+                    phases.append(phase)
+                    steps.append(s)
+                    nominal.append(float(t))
+                    true.append(float(t + e))
+                    std.append(float(sd))
+        # reference: zero torque reached by loading upward, i.e. on the ascending branch
+        theta = bilinear_response(np.asarray(true), k_u=ku, k_l=k_l, tau_c=tau_c)
+        noise = rng.standard_normal(theta.size) * angle_std_deg if angle_std_deg > 0 else np.zeros(theta.size)
+        angle = np.degrees(theta - theta[0]) + noise - noise[0]
+        cycle_of = [0] + [c for c in range(1, n_cycles + 1) for _ in range(4 * levels.size)]
+        for i, (ph, st_, tn, sd, an) in enumerate(zip(phases, steps, nominal, std, angle)):
+            rows.append({
+                "image": f"o{int(orient):03d}_{i:04d}.png", "orientation_deg": float(orient), "cycle": cycle_of[i],
+                "phase": ph, "step": st_, "mass_kg": abs(tn) / (2 * g_m_per_s2 * arm_radius_m),
+                "torque_nm": tn, "torque_std_nm": sd, "angle_deg": float(an),
+                "angle_std_deg": float(angle_std_deg), "status": "ok", "message": "",
+            })
+    return pd.DataFrame(rows)
