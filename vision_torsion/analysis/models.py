@@ -187,8 +187,8 @@ def bilinear_response(torque_nm, *, k_u, k_l, tau_c, theta_start="centred") -> n
     >>> th = bilinear_response(tau, k_u=4.4, k_l=0.3, tau_c=0.15)
     >>> bool(np.isclose(th[0], th[-1])), bool(np.isclose(th[0], -th[2]))
     (True, True)
-    >>> float(np.degrees(th[1] - th[3]).round(2))  # loop width at zero torque
-    26.7
+    >>> float(np.degrees(th[1] - th[3]).round(2))  # loop width at zero torque: τ_c·(1/k_l − 1/k_u)
+    26.69
     """
     tau = _as_torque(torque_nm)
     _check_stiffness(k_u=k_u, k_l=k_l)
