@@ -1,0 +1,119 @@
+"""The test report: summary.json, stiffness_table.csv, PNG figures and one
+self-contained report.html (issue 5).
+
+:func:`write_report` is the one entry point; the ``report`` and ``demo`` commands
+call it after :func:`vision_torsion.analysis.analyze_session`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from ..errors import AnalysisError
+from ..fileio import atomic_write_bytes, atomic_write_text, write_csv, write_json
+from . import figures as _fig
+from .html import render_html
+from .tables import STIFFNESS_TABLE_COLUMNS, metrics_table, stiffness_table
+
+__all__ = ["ReportFiles", "write_report", "stiffness_table", "STIFFNESS_TABLE_COLUMNS"]
+
+_FAILED_COLUMNS = ["image", "orientation_deg", "cycle", "phase", "step", "message"]
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """Paths written by :func:`write_report`."""
+
+    out_dir: Path
+    summary_json: Path
+    stiffness_table_csv: Path
+    report_html: Path
+    figures: tuple
+
+
+def _failures(analysis, failures) -> pd.DataFrame:
+    frames = [analysis.failed_images.reindex(columns=_FAILED_COLUMNS)]
+    if failures is not None:
+        extra = pd.DataFrame(failures)
+        if "image" not in extra.columns or "message" not in extra.columns:
+            raise AnalysisError("failures must have 'image' and 'message' for every failed image")
+        frames.append(extra.reindex(columns=_FAILED_COLUMNS))
+    frames = [f for f in frames if len(f)]
+    if not frames:
+        return pd.DataFrame(columns=_FAILED_COLUMNS)
+    return pd.concat(frames, ignore_index=True).drop_duplicates(subset=["image"], keep="first")
+
+
+def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failures=None, extra_sections=None,
+                 title="Torsional stiffness and hysteresis report") -> ReportFiles:
+    """Write summary.json, stiffness_table.csv, figures/*.png and report.html.
+
+    Parameters
+    ----------
+    measurements_df : pandas.DataFrame
+        The measurements table the analysis came from (its row count is reported).
+    analysis : vision_torsion.analysis.SessionAnalysis
+        Result of :func:`vision_torsion.analysis.analyze_session`.
+    conditions : dict
+        Test conditions shown first in the report and stored under ``conditions`` in
+        summary.json, e.g. ``{"rig": ..., "masses_kg": ..., "arm_radius_m": 0.05,
+        "g_m_per_s2": 9.81}``; values must be JSON-serialisable.
+    out_dir : path-like
+        Output folder (created). Every file is written atomically.
+    failures : pandas.DataFrame or list of dict, optional
+        Further failed images (``image``, ``message``, optionally ``orientation_deg``,
+        ``cycle``, ``phase``, ``step``), e.g. images that never reached the table.
+    extra_sections : sequence of (title, html), optional
+        Extra HTML sections appended to the page (trusted HTML).
+    title : str
+        Page title.
+
+    Returns
+    -------
+    ReportFiles
+
+    Raises
+    ------
+    AnalysisError
+        ``conditions`` not a dict, or failures without ``image``/``message``.
+    """
+    if not isinstance(conditions, dict):
+        raise AnalysisError(f"conditions must be a dict of test conditions, got {type(conditions).__name__}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    failed = _failures(analysis, failures)
+    stiff = stiffness_table(analysis)
+    metrics = metrics_table(analysis)
+
+    orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
+    pngs = {
+        "loops_overlay.png": _fig.png_bytes(_fig.loops_overlay(analysis)),
+        "phase_stiffness.png": _fig.png_bytes(_fig.phase_stiffness_chart(analysis)),
+        "orientation_effect.png": _fig.png_bytes(_fig.orientation_chart(analysis)),
+    }
+    loop_pngs = [(o, _fig.png_bytes(_fig.loop_detail(analysis, o))) for o in orients]
+    for o, png in loop_pngs:
+        pngs[f"loop_{o:g}deg.png"] = png
+    fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in pngs.items())
+
+    summary = analysis.to_dict()
+    summary["conditions"] = dict(conditions)
+    summary["counts"]["images"] = int(len(measurements_df))
+    summary["counts"]["images_failed"] = int(len(failed))
+    summary["failed_images"] = failed.to_dict(orient="records")
+    summary["files"] = {"stiffness_table": "stiffness_table.csv", "report": "report.html",
+                        "figures": [f"figures/{p.name}" for p in fig_paths]}
+    summary_path = write_json(out / "summary.json", summary)
+    table_path = write_csv(out / "stiffness_table.csv", stiff)
+    page = render_html(
+        title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
+        figures={"overlay": pngs["loops_overlay.png"], "stiffness": pngs["phase_stiffness.png"],
+                 "orientation": pngs["orientation_effect.png"], "loops": loop_pngs},
+        failed=failed, extra_sections=extra_sections or (),
+    )
+    html_path = atomic_write_text(out / "report.html", page)
+    return ReportFiles(out_dir=out, summary_json=summary_path, stiffness_table_csv=table_path,
+                       report_html=html_path, figures=fig_paths)

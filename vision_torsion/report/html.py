@@ -1,0 +1,160 @@
+"""One self-contained HTML page: inline CSS, images as base64 data URIs, no scripts,
+no network access."""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["render_html", "fmt_value"]
+
+_CSS = """
+body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;background:#f6f7f9}
+main{max-width:1180px;margin:0 auto;padding:24px 28px 60px;background:#fff}
+h1{font-size:26px;margin:0 0 4px}h2{font-size:19px;margin:34px 0 10px;border-bottom:2px solid #d8dde6;padding-bottom:4px}
+h3{font-size:15px;margin:18px 0 6px}p,li{line-height:1.45;font-size:14px}.muted{color:#5b6575;font-size:13px}
+table{border-collapse:collapse;font-size:12.5px;margin:8px 0 14px}th,td{border:1px solid #d8dde6;padding:4px 7px;text-align:right}
+th{background:#eef1f6;text-align:center}td.l,th.l{text-align:left}tr:nth-child(even) td{background:#fafbfc}
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(360px,1fr));gap:12px}
+figure{margin:6px 0}figure img{max-width:100%;border:1px solid #e3e6eb}figcaption{font-size:12.5px;color:#5b6575}
+.ok{color:#1a7f37;font-weight:600}.bad{color:#b42318;font-weight:600}.note{background:#fff8e6;border-left:4px solid #f0b429;padding:8px 12px;font-size:13px}
+.scroll{max-height:420px;overflow:auto;border:1px solid #e3e6eb}
+"""
+
+
+def fmt_value(value, std=None, digits=2) -> str:
+    """``value ± std`` with the value rounded to the std's precision (2 significant digits)."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    if std is None or not math.isfinite(std) or std <= 0:
+        return f"{value:.4g}"
+    decimals = max(0, digits - 1 - int(math.floor(math.log10(std))))
+    if decimals > 10:
+        return f"{value:.6g} ± {std:.{digits}g}"
+    return f"{value:.{decimals}f} ± {std:.{decimals}f}"
+
+
+def _img(png: bytes, alt: str) -> str:
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+
+
+def _table(frame: pd.DataFrame, left=()) -> str:
+    if frame is None or len(frame) == 0:
+        return '<p class="muted">None.</p>'
+    head = "".join(f'<th class="{"l" if c in left else ""}">{html.escape(str(c))}</th>' for c in frame.columns)
+    body = []
+    for row in frame.itertuples(index=False):
+        cells = []
+        for c, v in zip(frame.columns, row):
+            text = v if isinstance(v, str) else ("—" if v is None or (isinstance(v, float) and not math.isfinite(v))
+                                                 else f"{v:.4g}" if isinstance(v, float) else str(v))
+            cells.append(f'<td class="{"l" if c in left else ""}">{html.escape(str(text))}</td>')
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+
+
+def _conditions(conditions: dict, analysis, n_failed: int) -> str:
+    rows = [(str(k), ", ".join(map(str, v)) if isinstance(v, (list, tuple)) else str(v)) for k, v in conditions.items()]
+    rows += [
+        ("images in table", str(analysis.n_images)),
+        ("failed images", str(n_failed)),
+        ("loops (orientation × cycle)", str(len(analysis.loops))),
+        ("max torque used for lost motion/secant", f"{analysis.settings['max_torque_nm']:.4g} N·m"),
+    ]
+    return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
+
+
+def _table1(stiff: pd.DataFrame) -> str:
+    if stiff.empty:
+        return '<p class="muted">No stiffness could be computed.</p>'
+    out = pd.DataFrame({
+        "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
+        "phase": stiff["phase"].str.replace("_", " "),
+        "torque range (N·m)": [f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
+                               for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])],
+        "stiffness k (N·m/rad)": [fmt_value(v, s) for v, s in zip(stiff["stiffness_nm_per_rad"],
+                                                                   stiff["stiffness_std_nm_per_rad"])],
+        "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
+        "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
+        "cycles": stiff["n_cycles"].astype(str),
+    })
+    return _table(out, left=("orientation", "phase"))
+
+
+def _metrics(mt: pd.DataFrame, orients) -> str:
+    if mt.empty:
+        return '<p class="muted">No loop figure could be computed.</p>'
+    cols = {"figure": mt["label"], "unit": mt["unit"]}
+    for o in orients:
+        cols[f"{o:g}°"] = [fmt_value(m, s) for m, s in mt[o]]
+    cols["session mean ± std"] = [fmt_value(m, s) for m, s in zip(mt["mean"], mt["mean_std"])]
+    cols["sd between loops"] = [f"{v:.3g}" if np.isfinite(v) else "—" for v in mt["sd"]]
+    cols["orientation test p"] = ["—" if p is None else f"{p:.3g}" for p in mt["p_value"]]
+    return _table(pd.DataFrame(cols), left=("figure", "unit"))
+
+
+def render_html(*, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=()) -> str:
+    """Assemble the report page.
+
+    Parameters
+    ----------
+    figures : dict
+        ``{"overlay": png, "stiffness": png, "orientation": png, "loops": [(orientation, png), ...]}``.
+    failed : pandas.DataFrame
+        ``image, orientation_deg, cycle, phase, step, message`` of failed images.
+    extra_sections : sequence of (title, html)
+        Extra sections appended as they are (trusted HTML from other modules).
+    """
+    orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
+    issues = pd.DataFrame(
+        [("session" if i.orientation_deg is None else f"{i.orientation_deg:g}°", "" if i.cycle is None else str(i.cycle),
+          i.figure, i.reason) for i in analysis.issues if i.figure != "*"],
+        columns=["orientation", "cycle", "figure", "why"])
+    s = analysis.settings
+    loops_html = "".join(
+        f"<figure>{_img(png, f'loop {o:g} deg')}<figcaption>Orientation {o:g}°: data (±1σ), bilinear fit (red), "
+        f"Bouc–Wen fit (blue dashed).</figcaption></figure>" for o, png in figures["loops"])
+    failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
+    parts = [
+        f"<h1>{html.escape(title)}</h1>",
+        '<p class="muted">Torsional stiffness and hysteresis report generated by vision-torsion. '
+        "Uncertainties are 1σ standard uncertainties (±) unless marked u95 (expanded, k = 2).</p>",
+        "<h2>Test conditions</h2>", _conditions(conditions, analysis, len(failed)),
+        "<h2>Hysteresis loops</h2>",
+        f"<figure>{_img(figures['overlay'], 'all loops')}<figcaption>All orientations and cycles overlaid."
+        "</figcaption></figure>",
+        "<h3>One orientation at a time, with the model fits</h3>", f'<div class="grid">{loops_html}</div>',
+        "<h2>Stiffness per phase and orientation (paper, Table 1)</h2>", _table1(stiffness),
+        f"<figure>{_img(figures['stiffness'], 'phase stiffness')}</figure>",
+        "<h2>Catalogue metrics and model fits per orientation</h2>",
+        '<p class="muted">Mean over cycles ± standard uncertainty of that mean. The orientation test is a '
+        "chi-square test of equal orientation means against their independent (angle) uncertainty; "
+        "p &lt; 0.05 means the orientation effect is larger than the measurement uncertainty.</p>",
+        _metrics(metrics, orients),
+        f"<figure>{_img(figures['orientation'], 'orientation effect')}</figure>",
+        "<h2>Uncertainty</h2>",
+        "<ul><li>Angles: independent per image (given <code>angle_std_deg</code>); the common reference-image "
+        "error cancels in every figure.</li>"
+        f"<li>Torques: <code>{html.escape(str(s['torque_correlation']))}</code> model — images at the same nominal "
+        "torque share one error (the same weights); this part is common to all orientations and does not average "
+        "down over cycles.</li>"
+        "<li>Slopes and model fits: first-order propagation through the least-squares estimate. Hysteresis, "
+        f"lost motion, secant stiffness, loop energy, loss factor: Monte Carlo, {s['n_draws']} draws per error "
+        f"source, seed {s['seed']}.</li>"
+        "<li>Fit uncertainties reflect measurement noise only; compare the residual RMS of a model with the "
+        "angle uncertainty to judge whether the model describes the data.</li></ul>",
+        "<h2>Failed images</h2>",
+        _table(failed_view, left=("image", "phase", "message")) if len(failed) else '<p class="ok">None: every image was measured.</p>',
+        "<h2>Figures that could not be computed</h2>",
+        (f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "why"))}</div>' if len(issues)
+         else '<p class="ok">None: every figure was computed.</p>'),
+    ]
+    for sec_title, sec_html in extra_sections or ():
+        parts += [f"<h2>{html.escape(sec_title)}</h2>", sec_html]
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body><main>"
+            + "\n".join(parts) + "</main></body></html>\n")

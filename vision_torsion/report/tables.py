@@ -1,0 +1,108 @@
+"""Report tables: the paper's Table 1 layout and the catalogue metrics per orientation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from ..analysis.loops import LOOP_PHASES
+
+__all__ = ["STIFFNESS_TABLE_COLUMNS", "stiffness_table", "metrics_table"]
+
+#: Columns of stiffness_table.csv (paper, Table 1, with uncertainties and catalogue units).
+STIFFNESS_TABLE_COLUMNS = [
+    "orientation_deg", "phase", "torque_from_nm", "torque_to_nm", "n_cycles",
+    "stiffness_nm_per_rad", "stiffness_std_nm_per_rad", "stiffness_nm_per_arcmin", "stiffness_std_nm_per_arcmin",
+    "hysteresis_deg", "hysteresis_std_deg",
+]
+_ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
+
+
+def _lookup(po: pd.DataFrame, orient: float, figure: str) -> tuple[float, float, int]:
+    row = po[(po["orientation_deg"] == orient) & (po["figure"] == figure)]
+    if row.empty:
+        return np.nan, np.nan, 0
+    r = row.iloc[0]
+    return float(r["mean"]), float(r["std"]), int(r["n_cycles"])
+
+
+def stiffness_table(analysis) -> pd.DataFrame:
+    """Table 1 of the paper: per orientation and phase, torque range, stiffness, hysteresis.
+
+    Stiffness is the mean over cycles of the phase slope, with the standard
+    uncertainty of that mean; the hysteresis (per loop, not per phase) is repeated on
+    the four rows of its orientation. Missing figures are NaN.
+    """
+    ph = analysis.phases
+    po = analysis.per_orientation
+    rows = []
+    for orient in sorted(ph["orientation_deg"].unique()) if len(ph) else []:
+        h, h_std, _ = _lookup(po, orient, "hysteresis")
+        for phase in LOOP_PHASES:
+            sub = ph[(ph["orientation_deg"] == orient) & (ph["phase"] == phase)]
+            k, k_std, n = _lookup(po, orient, f"k_{phase}")
+            rows.append({
+                "orientation_deg": orient, "phase": phase,
+                "torque_from_nm": float(sub["torque_from_nm"].median()) if len(sub) else np.nan,
+                "torque_to_nm": float(sub["torque_to_nm"].median()) if len(sub) else np.nan,
+                "n_cycles": n, "stiffness_nm_per_rad": k, "stiffness_std_nm_per_rad": k_std,
+                "stiffness_nm_per_arcmin": k / _ARCMIN_PER_RAD, "stiffness_std_nm_per_arcmin": k_std / _ARCMIN_PER_RAD,
+                "hysteresis_deg": h, "hysteresis_std_deg": h_std,
+            })
+    return pd.DataFrame(rows, columns=STIFFNESS_TABLE_COLUMNS)
+
+
+#: (figure, label, unit shown, scale from the analysis unit)
+CATALOGUE_FIGURES = [
+    ("hysteresis", "Hysteresis (paper: max width)", "deg", 1.0),
+    ("hysteresis_loss", "Hysteresis loss (width at 0 N·m)", "arcmin", 60.0),
+    ("lost_motion_3pct", "Lost motion ±3 %", "arcmin", 60.0),
+    ("lost_motion_4pct", "Lost motion ±4 %", "arcmin", 60.0),
+    ("k1", "K1", "N·m/rad", 1.0),
+    ("k2", "K2", "N·m/rad", 1.0),
+    ("k3", "K3", "N·m/rad", 1.0),
+    ("t1", "T1", "N·m", 1.0),
+    ("t2", "T2", "N·m", 1.0),
+    ("secant_stiffness", "Secant stiffness", "N·m/rad", 1.0),
+    ("loop_energy", "Loop energy ∮τ dθ", "J", 1.0),
+    ("loss_factor", "Loss factor η", "–", 1.0),
+    ("bilinear_k_u", "Bilinear k_u", "N·m/rad", 1.0),
+    ("bilinear_k_l", "Bilinear k_l", "N·m/rad", 1.0),
+    ("bilinear_tau_c", "Bilinear τ_c", "N·m", 1.0),
+    ("bilinear_residual_rms", "Bilinear residual RMS", "deg", 1.0),
+    ("bouc_wen_k_e", "Bouc–Wen k_e", "N·m/rad", 1.0),
+    ("bouc_wen_z_s", "Bouc–Wen z_s", "deg", 1.0),
+    ("bouc_wen_a", "Bouc–Wen a", "1/(N·m)", 1.0),
+    ("bouc_wen_rho", "Bouc–Wen ρ", "–", 1.0),
+    ("bouc_wen_n", "Bouc–Wen n", "–", 1.0),
+    ("bouc_wen_residual_rms", "Bouc–Wen residual RMS", "deg", 1.0),
+]
+
+
+def metrics_table(analysis) -> pd.DataFrame:
+    """Wide table of the catalogue metrics: one row per figure, one column per orientation.
+
+    Cells are ``(mean, std)`` tuples of the orientation mean (NaN when missing); the
+    last columns hold the session mean, its standard uncertainty, the sd between
+    loops and the orientation test p-value.
+    """
+    po = analysis.per_orientation
+    orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
+    rows = []
+    for fig, label, unit, scale in CATALOGUE_FIGURES:
+        s = analysis.summary.get(fig)
+        if s is None:
+            continue
+        row = {"figure": fig, "label": label, "unit": unit}
+        for o in orients:
+            m, sd, _ = _lookup(po, o, fig)
+            row[o] = (m * scale, sd * scale)
+        scale_or_nan = (lambda v: np.nan if v is None else v * scale)
+        row["mean"] = scale_or_nan(s["mean"])
+        row["mean_std"] = scale_or_nan(s["mean_std"])
+        row["sd"] = scale_or_nan(s["sd"])
+        row["p_value"] = s["orientation_test"].get("p_value")
+        rows.append(row)
+    return pd.DataFrame(rows)
