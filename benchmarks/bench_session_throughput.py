@@ -1,0 +1,282 @@
+"""Session throughput: is ``process`` bound by reading the images, and is it resumable?
+
+Run (one command; about 3-4 minutes on 2 cores for the default 1000 images)::
+
+    python benchmarks/bench_session_throughput.py            # N = 1000
+    python benchmarks/bench_session_throughput.py --n 100    # quick
+
+It renders an N-image session (1400x1000 8-bit PNGs of the default synthetic scene:
+two dark markers, 2 DN read noise, every image a distinct noise realisation, so no
+two files are identical and the content-hash cache cannot share results), then
+measures, each ``process`` run in a fresh child process with an empty cache:
+
+- decode-only time: reading and decoding every file (``cv2.imdecode``), one core;
+- ``process`` wall time with 1 and 2 worker processes, and the ratio
+  ``process / (decode / workers)`` (issue 4 asks for <= 1.3);
+- peak resident memory of the main process and of the largest worker, at N and at
+  N/4 (streaming means it should not grow with N);
+- kill-and-resume: a run SIGKILLed (whole process group) after about a third of the
+  images, then resumed; the resumed measurements.csv must equal an uninterrupted
+  run's byte for byte, and the resumed run must measure only the images not cached.
+
+Results are printed as a table and written to
+``benchmarks/results/session_throughput.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results" / "session_throughput.json"
+ANGLE_GRID_DEG = 0.25  # ideal renders are shared between images on this grid
+
+
+def _truth_angle(orientation: float, torque_nm: float, phase: str) -> float:
+    """A plausible hysteretic response: ~25°/N·m, unloading lagging by 0.5°."""
+    lag = 0.5 if phase.endswith("unloading") else 0.0
+    return round((0.2 * orientation / 60.0 + 25.0 * torque_nm + lag) / ANGLE_GRID_DEG) \
+        * ANGLE_GRID_DEG
+
+
+def _render_group(args):
+    """Render all images sharing one angle: one ideal render, per-image noise."""
+    angle, items = args
+    import cv2
+
+    from vision_torsion.synthetic import Scene, render_ideal
+
+    scene = Scene()
+    ideal = render_ideal(scene, angle).astype(np.float32)
+    sigma = scene.noise.read_noise_dn
+    for path, seed in items:
+        rng = np.random.default_rng(seed)
+        noisy = ideal + sigma * rng.standard_normal(ideal.shape, dtype=np.float32)
+        img = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        ok, enc = cv2.imencode(".png", img)
+        Path(path).write_bytes(enc.tobytes())
+    return len(items)
+
+
+def make_session(folder: Path, n: int, jobs: int) -> dict[str, float]:
+    """Plan a 6-orientation session, keep its first `n` rows, render them."""
+    from vision_torsion.session.manifest import REQUIRED_COLUMNS, manifest_text
+    from vision_torsion.session.plan import plan_session
+
+    per_cycle = 6 * 4 * 18
+    cycles = max(1, -(-n // per_cycle))
+    plan = plan_session(folder, max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
+                        cycles=cycles, radius_range=(20, 60), overwrite=True)
+    rows = plan.rows[:n]
+    (folder / "manifest.csv").write_text(manifest_text(REQUIRED_COLUMNS, rows))
+    groups: dict[float, list] = {}
+    truth = {}
+    for index, row in enumerate(rows):
+        sign = {"pos": 1, "neg": -1, "ref": 0}[row["phase"][:3]]
+        torque = sign * 2 * float(row["mass_kg"]) * 9.81 * 0.05
+        angle = _truth_angle(float(row["orientation_deg"]), torque, row["phase"])
+        groups.setdefault(angle, []).append((str(folder / row["image"]), index))
+        truth[row["image"]] = angle
+    with ProcessPoolExecutor(jobs) as pool:
+        assert sum(pool.map(_render_group, groups.items())) == n
+    return truth
+
+
+def subset_session(source: Path, folder: Path, n: int) -> None:
+    """A session of the first `n` rows of `source`, images hard-linked (no copies)."""
+    lines = (source / "manifest.csv").read_text().splitlines()[: n + 1]
+    (folder / "images").mkdir(parents=True, exist_ok=True)
+    shutil.copy(source / "session.toml", folder / "session.toml")
+    (folder / "manifest.csv").write_text("\n".join(lines) + "\n")
+    for line in lines[1:]:
+        image = line.split(",")[0]
+        os.link(source / image, folder / image)
+
+
+def decode_only(folder: Path) -> float:
+    """Seconds to read and decode every image of the manifest, on one core."""
+    import cv2
+
+    images = [line.split(",")[0] for line in
+              (folder / "manifest.csv").read_text().splitlines()[1:]]
+    start = time.perf_counter()
+    for image in images:
+        data = np.frombuffer((folder / image).read_bytes(), np.uint8)
+        assert cv2.imdecode(data, cv2.IMREAD_UNCHANGED) is not None
+    return time.perf_counter() - start
+
+
+def child(session: str, out: str, jobs: int) -> None:
+    """Run process_session here and print wall time and counts as JSON."""
+    from vision_torsion.session import process_session
+
+    start = time.perf_counter()
+    result = process_session(session, out_dir=out, jobs=jobs)
+    wall = time.perf_counter() - start
+    print(json.dumps({"wall_s": wall, "n_ok": result.n_ok, "n_failed": result.n_failed,
+                      "n_measured": result.n_measured, "n_cached": result.n_cached}))
+
+
+def _peak_rss_mib(session_id: int) -> dict[int, float]:
+    """Peak resident memory (VmHWM) of every live process of a session (Linux /proc)."""
+    peaks = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+            if int(stat.rsplit(")", 1)[1].split()[3]) != session_id:
+                continue
+            for line in Path(f"/proc/{entry}/status").read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    peaks[int(entry)] = int(line.split()[1]) / 1024
+        except (OSError, IndexError, ValueError):
+            continue  # the process ended meanwhile
+    return peaks
+
+
+def run_child(session: Path, out: Path, jobs: int, *, kill_at: int | None = None) -> dict:
+    """Run `process` in a child process group, sampling the peak memory of the main
+    process and of its workers; with `kill_at`, SIGKILL the whole group once that
+    many results are cached."""
+    cmd = [sys.executable, __file__, "--child", str(session), str(out), str(jobs)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
+    peaks: dict[int, float] = {}
+    cache = out / ".cache"
+    while proc.poll() is None:
+        for pid, mib in _peak_rss_mib(proc.pid).items():
+            peaks[pid] = max(mib, peaks.get(pid, 0.0))
+        if kill_at is not None and cache.is_dir() and \
+                sum(1 for _ in cache.rglob("*.json")) >= kill_at:
+            os.killpg(proc.pid, signal.SIGKILL)  # the main process and its workers
+            proc.wait()
+            return {"killed": True}
+        time.sleep(0.1)
+    stdout = proc.stdout.read()
+    if proc.returncode != 0:
+        raise RuntimeError(f"process run failed with status {proc.returncode}")
+    others = [mib for pid, mib in peaks.items() if pid != proc.pid]
+    return {**json.loads(stdout.strip().splitlines()[-1]),
+            "main_peak_rss_mib": peaks.get(proc.pid, float("nan")),
+            "worker_peak_rss_mib": max(others, default=float("nan"))}
+
+
+def kill_and_resume(session: Path, out: Path, jobs: int, n: int) -> dict:
+    """SIGKILL a run after ~n/3 cached results, then resume it."""
+    killed = run_child(session, out, jobs, kill_at=n // 3).get("killed", False)
+    killed_mid_run = killed and not (out / "measurements.csv").exists()
+    cached = sum(1 for _ in (out / ".cache").rglob("*.json"))
+    resumed = run_child(session, out, jobs)
+    return {"killed_mid_run": killed_mid_run, "cached_at_kill": cached, "resumed": resumed}
+
+
+def angle_errors(csv: Path, truth: dict[str, float]) -> float:
+    import pandas as pd
+
+    table = pd.read_csv(csv)
+    worst = 0.0
+    for _, group in table.groupby("orientation_deg"):
+        ref = truth[group["image"].iloc[0]]
+        err = group["angle_deg"] - np.array([truth[i] - ref for i in group["image"]])
+        worst = max(worst, float(np.nanmax(np.abs(err))))
+    return worst
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, default=1000, help="images in the session")
+    parser.add_argument("--workdir", type=Path, help="where to build the sessions "
+                        "(default: a temporary folder, removed afterwards)")
+    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        child(args.child[0], args.child[1], int(args.child[2]))
+        return
+    n, quarter = args.n, max(1, args.n // 4)
+    work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_session_"))
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        t0 = time.perf_counter()
+        truth = make_session(work / "full", n, cores)
+        subset_session(work / "full", work / "quarter", quarter)
+        render_s = time.perf_counter() - t0
+        print(f"rendered {n} images in {render_s:.0f} s", file=sys.stderr)
+        decode_s = decode_only(work / "full")
+        runs = {}
+        for jobs in (1, 2):
+            runs[jobs] = run_child(work / "full", work / f"out_j{jobs}", jobs)
+            print(f"process --jobs {jobs}: {runs[jobs]['wall_s']:.1f} s", file=sys.stderr)
+        small = run_child(work / "quarter", work / "out_quarter", 2)
+        resume = kill_and_resume(work / "full", work / "out_killed", 2, n)
+        reference = (work / "out_j2" / "measurements.csv").read_bytes()
+        identical = (work / "out_killed" / "measurements.csv").read_bytes() == reference
+        only_rest = (resume["resumed"]["n_measured"] == n - resume["cached_at_kill"]
+                     and resume["resumed"]["n_cached"] == resume["cached_at_kill"])
+        same_j1_j2 = (work / "out_j1" / "measurements.csv").read_bytes() == reference
+        worst = angle_errors(work / "out_j2" / "measurements.csv", truth)
+    finally:
+        if args.workdir is None:
+            shutil.rmtree(work, ignore_errors=True)
+
+    rows = []
+    for jobs in (1, 2):
+        r = runs[jobs]
+        rows.append({
+            "workers": jobs, "process_s": r["wall_s"],
+            "per_image_ms": 1000 * r["wall_s"] / n,
+            "ratio_to_decode_per_worker": r["wall_s"] / (decode_s / jobs),
+            "main_peak_rss_mib": r["main_peak_rss_mib"],
+            "worker_peak_rss_mib": r["worker_peak_rss_mib"],
+            "n_ok": r["n_ok"], "n_failed": r["n_failed"]})
+    report = {
+        "n_images": n, "image": "1400x1000 8-bit PNG, synthetic default scene",
+        "cores": cores, "load_average_at_end": os.getloadavg(),
+        "python": platform.python_version(), "render_s": render_s,
+        "decode_only_s": decode_s, "decode_ms_per_image": 1000 * decode_s / n,
+        "runs": rows,
+        "quarter": {"n_images": quarter, **small},
+        "kill_and_resume": {**resume, "identical_to_uninterrupted": identical,
+                            "measured_only_the_rest": only_rest},
+        "jobs1_equals_jobs2": same_j1_j2, "max_angle_error_deg": worst,
+        "target_ratio": 1.3,
+    }
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(report, indent=2) + "\n")
+
+    print(f"\nsession of {n} images (1400x1000 8-bit PNG), {cores} cores, "
+          f"load average {os.getloadavg()[0]:.1f}")
+    print(f"decode only, 1 core: {decode_s:.1f} s ({1000 * decode_s / n:.1f} ms/image)\n")
+    print("| workers | process (s) | ms/image | process / (decode / workers) | "
+          "main peak RSS (MiB) | worker peak RSS (MiB) | ok | failed |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['workers']} | {r['process_s']:.1f} | {r['per_image_ms']:.1f} | "
+              f"{r['ratio_to_decode_per_worker']:.2f} | {r['main_peak_rss_mib']:.0f} | "
+              f"{r['worker_peak_rss_mib']:.0f} | {r['n_ok']} | {r['n_failed']} |")
+    print(f"\nmemory vs size (2 workers, peak RSS sampled every 0.1 s): main {small['main_peak_rss_mib']:.0f} MiB at "
+          f"N/4 = {quarter}, {rows[1]['main_peak_rss_mib']:.0f} MiB at N = {n}; largest "
+          f"worker {small['worker_peak_rss_mib']:.0f} vs "
+          f"{rows[1]['worker_peak_rss_mib']:.0f} MiB")
+    print(f"kill and resume: killed with {resume['cached_at_kill']} of {n} cached; resumed "
+          f"run measured {resume['resumed']['n_measured']}, took "
+          f"{resume['resumed']['n_cached']} from the cache; measurements.csv identical to "
+          f"the uninterrupted run: {identical}; measured only the rest: {only_rest}")
+    print(f"jobs 1 and jobs 2 give the same file: {same_j1_j2}; largest angle error vs "
+          f"the rendered truth: {worst:.4f}°")
+    print(f"written {RESULTS}")
+
+
+if __name__ == "__main__":
+    main()
