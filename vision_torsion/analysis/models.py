@@ -553,6 +553,8 @@ def _bw_starts(tau, th, sa, amp):
         k_e, tc = bil.k_u_nm_per_rad, bil.tau_c_nm
         z_s = 0.5 * bilinear_loop_width(k_u=k_e, k_l=bil.k_l_nm_per_rad, tau_c=tc, max_torque_nm=amp)
         theta0 = float(np.mean(th))
+        if not z_s > 0:
+            raise AnalysisError("bilinear start has no hysteresis")
     except AnalysisError:
         k_e, tc = 4.0 * amp / max(float(np.ptp(th)), 1e-12), amp / 2.0
         z_s, theta0 = float(np.ptp(th)) / 4.0, float(np.mean(th))
