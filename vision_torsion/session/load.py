@@ -54,10 +54,6 @@ class Session:
         return couple_torque(row.mass_kg, row.phase, self.config.rig,
                              step_mass_kg=self.config.protocol.step_mass_kg)
 
-    def image_path(self, row: ManifestRow) -> Path:
-        """Absolute path of `row`'s image."""
-        return self.manifest.image_path(row)
-
 
 def load_session(session_dir, *, check_files: bool = True) -> Session:
     """Read and validate a session folder.

@@ -89,15 +89,16 @@ class ProcessResult:
         return self.n_failed == 0
 
 
-def _file_hash(path: Path) -> str:
-    return hashlib.blake2b(path.read_bytes(), digest_size=20).hexdigest()
+def _digest(data: bytes) -> str:
+    """BLAKE2b (160-bit) of `data`, hex: file contents and cache keys."""
+    return hashlib.blake2b(data, digest_size=20).hexdigest()
 
 
 def _settings_key(settings: MeasureSettings) -> str:
     """JSON identifying how images are measured: settings, correction content, versions."""
     d = settings.to_dict()
     if d.get("correction"):
-        d["correction"] = _file_hash(Path(d["correction"]))
+        d["correction"] = _digest(Path(d["correction"]).read_bytes())
     try:
         from .. import __version__ as version
     except ImportError:  # the package metadata is not there (source checkout)
@@ -124,9 +125,9 @@ def _measure_task(task: tuple[str, str, str, str]) -> tuple[str, str]:
     except OSError as exc:
         return json.dumps({"status": "failed",
                            "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"
-    image_hash = hashlib.blake2b(data, digest_size=20).hexdigest()
+    image_hash = _digest(data)
     del data
-    key = hashlib.blake2b(f"{image_hash}\n{settings_key}".encode(), digest_size=20).hexdigest()
+    key = _digest(f"{image_hash}\n{settings_key}".encode())
     cache_file = Path(cache_dir) / key[:2] / f"{key}.json"
     try:
         text = cache_file.read_text(encoding="utf-8")
