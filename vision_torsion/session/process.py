@@ -244,8 +244,7 @@ def _table(session: Session, entries: list[dict]) -> pd.DataFrame:
     manifest = session.manifest
     keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
     records = []
-    for row, entry, (angle, angle_std, why) in zip(manifest.rows, entries,
-                                                    _angles(session, entries)):
+    for row, (angle, angle_std, why) in zip(manifest.rows, _angles(session, entries)):
         torque = session.torque(row)
         rec = {c: v for c, v in row.fields if c in keep}
         rec.update(torque_nm=torque.torque_nm, torque_std_nm=torque.torque_std_nm,
