@@ -16,7 +16,8 @@ each a plane across the marker so that illumination gradients do not pull the ed
 
 1. B and F (six plane coefficients) are solved by linear least squares, with a
    second pass that drops outlying pixels (a wire or a speck crossing the ring).
-2. The ring is cut into angular sectors about 1 px of arc wide. In sector k the
+2. The ring is cut into angular sectors about 1 px of arc wide; sectors where the
+   outlier cut removed pixels (and two neighbours each side) are dropped. In sector k the
    edge's radial offset δₖ is the one-step Gauss-Newton (maximum-likelihood)
    estimate ``δₖ = Σ gᵢ eᵢ / Σ gᵢ²`` with eᵢ the model residual and gᵢ = ∂I/∂R
    = (F - B)·φ(uᵢ)/s; its variance is σ²/Σ gᵢ² with σ² the residual variance. The
@@ -163,21 +164,34 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None) -> 
         gs = -g * u
         den_s = float(np.sum(gs[band] ** 2))
         if den_s > 0:
-            s = float(np.clip(s + float(np.sum(gs[band] * resid[band])) / den_s, 0.5 * s, 2.0 * s))
+            # an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))
+            s = float(np.clip(s + float(np.sum(gs[band] * resid[band])) / den_s, max(0.5 * s, 0.3), 2.0 * s))
     contrast = coef[3] - coef[0]
     dof = max(int(keep.sum()) - 7, 1)
     sigma2 = float(np.sum(resid[keep] ** 2) / dof)
     if not abs(contrast) > 3.0 * np.sqrt(sigma2):
         raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)")
     n_sec = max(24, int(round(2 * np.pi * radius)))
-    k = ((psi[band] + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec
+    sector = ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec
+    # A sector that lost pixels to the outlier cut (a wire or speck on the edge) is
+    # biased by what remains of the occluder's blurred flank: drop it and its two
+    # neighbours on each side rather than let it pull the circle.
+    lost = np.bincount(sector[~keep & (np.abs(u) < 3.0)], minlength=n_sec) > 0
+    if lost.mean() > 0.25:
+        # that many is the model not fitting the edge yet (a first iteration, a
+        # sharp or odd edge profile), not occlusion: keep the sectors, the circle
+        # fit's own outlier rejection still applies
+        lost[:] = False
+    elif lost.any():
+        lost = np.convolve(np.concatenate([lost[-2:], lost, lost[:2]]).astype(int), np.ones(5, int), "valid") > 0
+    k = sector[band]
     gb, eb, pb = g[band], resid[band], psi[band]
     g2 = gb * gb
     den = np.bincount(k, g2, minlength=n_sec)
     num = np.bincount(k, gb * eb, minlength=n_sec)
     cs = np.bincount(k, g2 * np.cos(pb), minlength=n_sec)
     sn = np.bincount(k, g2 * np.sin(pb), minlength=n_sec)
-    good = den > 0.1 * np.median(den[den > 0]) if np.any(den > 0) else den > 0
+    good = (den > 0.1 * np.median(den[den > 0]) if np.any(den > 0) else den > 0) & ~lost
     if good.sum() < 12:
         raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
     delta = num[good] / den[good]

@@ -47,12 +47,15 @@ class Rendered:
         ellipse).
     centres_disk : numpy.ndarray
         (n, 2) marker centres on the disk plane (px).
+    jpeg_bytes : bytes or None
+        The JPEG file the image was decoded from, for JPEG scenes.
     """
 
     image: np.ndarray
     angle_deg: float
     centres: np.ndarray
     centres_disk: np.ndarray
+    jpeg_bytes: bytes | None = None
 
 
 def bolt_hole_centres_disk(scene: Scene, angle_deg: float) -> np.ndarray:
@@ -224,12 +227,15 @@ def render(scene: Scene, angle_deg: float = 0.0, *, seed=None) -> Rendered:
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     ideal = render_ideal(scene, angle_deg)
     image = _quantise(_add_noise(ideal, scene, rng), scene.image.bit_depth)
+    jpeg_bytes = None
     if scene.noise.jpeg_quality:
-        ok, enc = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(scene.noise.jpeg_quality)])
+        _, enc = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(scene.noise.jpeg_quality)])
+        jpeg_bytes = enc.tobytes()
         image = cv2.imdecode(enc, cv2.IMREAD_UNCHANGED)
     return Rendered(
         image=image,
         angle_deg=float(angle_deg),
         centres=marker_centres_image(scene, angle_deg),
         centres_disk=marker_centres_disk(scene, angle_deg),
+        jpeg_bytes=jpeg_bytes,
     )

@@ -1,0 +1,142 @@
+"""find_markers on rendered images of known truth."""
+
+import numpy as np
+import pytest
+
+from vision_torsion.errors import MarkerError
+from vision_torsion.markers import MARKER_COLUMNS, find_markers
+from vision_torsion.pair import measure_pair, select_pair
+from vision_torsion.settings import MeasureSettings
+from vision_torsion.synthetic import load_scene, render
+
+
+def _match(table, truth):
+    ok = table[table["status"] == "ok"]
+    errs = []
+    for x, y in truth:
+        d = np.hypot(ok["x_px"] - x, ok["y_px"] - y)
+        i = int(np.argmin(d))
+        errs.append((ok["x_px"].iloc[i] - x, ok["y_px"].iloc[i] - y))
+    return np.array(errs)
+
+
+def test_table_columns_and_sub_pixel_accuracy(standard_scene):
+    """Centres within 0.015 px (6x the ~0.0024 px std) at non-integer positions."""
+    for seed, angle in enumerate((-63.3, 0.0, 41.7)):
+        r = render(standard_scene, angle, seed=seed)
+        table = find_markers(r.image)
+        assert list(table.columns) == MARKER_COLUMNS
+        assert list(table["status"]) == ["ok", "ok"]
+        assert np.abs(_match(table, r.centres)).max() < 0.015
+        assert (table["n_edge_points"] > 150).all()
+        assert ((table["circularity"] > 0.99) & (table["circularity"] <= 1.0)).all()
+        assert np.allclose(table["contrast_dn"], -160, atol=2)
+
+
+@pytest.mark.parametrize("fit", ["geometric", "algebraic", "ellipse"])
+def test_every_fit_method_is_accurate(small_scene, fit):
+    r = render(small_scene, 17.0, seed=3)
+    table = find_markers(r.image, fit=fit)
+    assert np.abs(_match(table, r.centres)).max() < 0.03
+
+
+def test_bright_markers_on_dark_disk(small_scene):
+    scene = small_scene.replace(disk={"background_level": 50.0}, markers={"polarity": "bright", "level": 210.0})
+    r = render(scene, 5.0, seed=1)
+    assert (find_markers(r.image, polarity="dark")["status"] != "ok").all() or len(find_markers(r.image, polarity="dark")) == 0
+    table = find_markers(r.image, polarity="bright")
+    assert np.abs(_match(table, r.centres)).max() < 0.03
+
+
+def test_uneven_lighting(small_scene):
+    scene = small_scene.replace(lighting={"gradient_x": 0.4, "gradient_y": -0.3, "vignetting": 0.4})
+    r = render(scene, -20.0, seed=2)
+    assert np.abs(_match(find_markers(r.image), r.centres)).max() < 0.03
+
+
+def test_marker_cut_by_border_is_reported_not_fitted(small_scene):
+    img = render(small_scene, 0.0, seed=1).image[:, 90:]  # cuts the left marker in half
+    table = find_markers(img, radius_range=(10, 40))
+    cut = table[table["status"] == "border"]
+    assert len(cut) == 1 and cut["message"].iloc[0] == "cut by the image border"
+    assert np.isnan(cut["x_std_px"].iloc[0])
+    assert (table["status"] == "ok").sum() == 1
+
+
+def test_too_small_and_not_round_are_reported():
+    img = np.full((200, 300), 200.0, np.float32)
+    yy, xx = np.mgrid[0:200, 0:300]
+    img[(xx - 80) ** 2 + (yy - 100) ** 2 < 22**2] = 40  # a round marker, r = 22
+    img[(xx - 180) ** 2 + (yy - 100) ** 2 < 11**2] = 40  # a small one, r = 11
+    img[60:140, 230:245] = 40  # a bar, not round
+    table = find_markers(img, radius_range=(15, 40))
+    by = dict(zip(table["status"], table["message"]))
+    assert "too_small" in by and "below the smallest 15 px" in by["too_small"]
+    assert "not_round" in by and "not round" in by["not_round"]
+    assert (table["status"] == "ok").sum() == 1
+
+
+def test_distractors_never_give_a_wrong_pair(scene_file):
+    """Bolt holes, a wire crossing the markers' path and dust: the right pair or a clear error."""
+    scene = load_scene(scene_file("distractors"))
+    for seed, angle in enumerate((-70.0, -35.0, 0.0, 35.0, 68.0, 72.0)):
+        r = render(scene, angle, seed=seed)
+        try:
+            pair = measure_pair(r.image)
+        except MarkerError:
+            continue
+        found = np.array([[m.x_px, m.y_px] for m in pair.markers])
+        for x, y in r.centres:
+            assert np.hypot(found[:, 0] - x, found[:, 1] - y).min() < 0.05
+
+
+def test_missing_marker_is_a_clear_error(small_scene):
+    img = render(small_scene, 0.0, seed=1).image.copy()
+    img[120:185, 265:335] = 200  # paint over one marker
+    with pytest.raises(MarkerError, match=r"img: found 1 usable marker\(s\), need 2"):
+        measure_pair(img, name="img")
+
+
+def test_ambiguous_target_is_an_error(small_scene):
+    scene = small_scene.replace(markers={"positions_deg": [0.0, 120.0, 240.0]})
+    img = render(scene, 0.0, seed=1).image
+    with pytest.raises(MarkerError, match="ambiguous target: 3 markers of radius"):
+        measure_pair(img)
+
+
+def test_no_matching_radii_is_an_error():
+    img = np.full((200, 300), 200.0, np.float32)
+    yy, xx = np.mgrid[0:200, 0:300]
+    img[(xx - 80) ** 2 + (yy - 100) ** 2 < 30**2] = 40
+    img[(xx - 220) ** 2 + (yy - 100) ** 2 < 18**2] = 40
+    with pytest.raises(MarkerError, match="no two markers of matching radius"):
+        select_pair(find_markers(img, radius_range=(12, 40)), name="x")
+
+
+def test_low_contrast_marker_is_reported():
+    rng = np.random.default_rng(0)
+    img = 200 + 8 * rng.standard_normal((200, 200)).astype(np.float32)
+    yy, xx = np.mgrid[0:200, 0:200]
+    img[(xx - 100) ** 2 + (yy - 100) ** 2 < 25**2] -= 12  # 12 DN against 8 DN noise
+    table = find_markers(img, radius_range=(15, 40))
+    assert (table["status"] != "ok").all() or table.empty or (table["status"].isin(["low_contrast", "not_round", "fit_failed"])).any()
+
+
+def test_settings_validation():
+    from vision_torsion.errors import VisionTorsionError
+
+    with pytest.raises(VisionTorsionError, match="polarity must be one of"):
+        MeasureSettings(polarity="grey")
+    with pytest.raises(VisionTorsionError, match="fit must be one of"):
+        MeasureSettings(fit="hough")
+    with pytest.raises(VisionTorsionError, match="radius_range must be"):
+        MeasureSettings(radius_range=(30, 10))
+    with pytest.raises(VisionTorsionError, match="unknown measurement setting"):
+        MeasureSettings.from_dict({"colour": 1})
+
+
+def test_input_array_not_modified(small_scene):
+    img = render(small_scene, 0.0, seed=1).image
+    before = img.copy()
+    find_markers(img)
+    assert np.array_equal(img, before)

@@ -1,0 +1,26 @@
+"""Command-line options shared by the commands that measure images."""
+
+from __future__ import annotations
+
+from ..settings import FIT_METHODS, POLARITIES, MeasureSettings
+
+__all__ = ["add_marker_options", "settings_from_args"]
+
+
+def add_marker_options(parser) -> None:
+    """--polarity, --radius-range, --fit and --correction."""
+    g = parser.add_argument_group("markers")
+    g.add_argument("--polarity", choices=POLARITIES, default="dark", help="dark markers on a bright disk (default) or bright on dark")
+    g.add_argument(
+        "--radius-range", nargs=2, type=float, metavar=("MIN", "MAX"), help="marker radius range in pixels"
+    )
+    g.add_argument("--fit", choices=FIT_METHODS, default="geometric", help="circle fit: geometric (default), algebraic (the paper's), ellipse")
+
+
+def settings_from_args(args) -> MeasureSettings:
+    """MeasureSettings from parsed marker options."""
+    return MeasureSettings(
+        polarity=args.polarity,
+        radius_range=tuple(args.radius_range) if args.radius_range else None,
+        fit=args.fit,
+    )
