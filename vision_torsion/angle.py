@@ -115,7 +115,9 @@ def _distinct_radii(p: PairMeasurement) -> float:
     return dr if abs(dr) > max(0.5, 10 * sd) else 0.0
 
 
-def pair_angle(reference: PairMeasurement, current: PairMeasurement, *, near_deg: float = 0.0) -> AngleResult:
+def pair_angle(
+    reference: PairMeasurement, current: PairMeasurement, *, near_deg: float = 0.0, correction=None
+) -> AngleResult:
     """Rotation of `current` against `reference`, the candidate nearest `near_deg`.
 
     Parameters
@@ -124,11 +126,17 @@ def pair_angle(reference: PairMeasurement, current: PairMeasurement, *, near_deg
         The target found in the reference and in the current image.
     near_deg : float
         Predicted angle (deg): the previous angle of a sequence, 0 for one image.
+    correction : PlaneCorrection, optional
+        Plane/lens correction (:mod:`vision_torsion.calibration`) applied to both
+        pairs first, so the angle is the disk's rotation rather than the image's;
+        the centre covariances are propagated through it.
 
     Returns
     -------
     AngleResult
     """
+    if correction is not None:
+        reference, current = correction.apply_pair(reference), correction.apply_pair(current)
     phi_ref, var_ref = _direction_and_var(reference.first, reference.second)
     dr_ref, dr_cur = _distinct_radii(reference), _distinct_radii(current)
     phi_cur, var_cur = _direction_and_var(current.first, current.second)
@@ -148,7 +156,7 @@ def pair_angle(reference: PairMeasurement, current: PairMeasurement, *, near_deg
     )
 
 
-def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0) -> list:
+def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0, correction=None) -> list:
     """Angles of a sequence of images against a reference, identity tracked and unwrapped.
 
     Parameters
@@ -159,6 +167,8 @@ def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0
         The images in order; None marks an image that failed (skipped, gives None).
     start_deg : float
         Predicted angle of the first image.
+    correction : PlaneCorrection, optional
+        Plane/lens correction applied to every pair (see :func:`pair_angle`).
 
     Returns
     -------
@@ -171,7 +181,7 @@ def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0
         if p is None:
             out.append(None)
             continue
-        res = pair_angle(reference, p, near_deg=near)
+        res = pair_angle(reference, p, near_deg=near, correction=correction)
         near = res.angle_deg
         out.append(res)
     return out
@@ -190,7 +200,9 @@ def _as_pair(obj, settings, name) -> PairMeasurement:
     return measure_pair(obj, settings=settings, name=name)
 
 
-def rotation_angle(reference, current, *, settings: MeasureSettings | None = None, near_deg: float = 0.0) -> AngleResult:
+def rotation_angle(
+    reference, current, *, settings: MeasureSettings | None = None, near_deg: float = 0.0, correction=None
+) -> AngleResult:
     """Rotation of the torque disk between a reference and a current image.
 
     Parameters
@@ -203,6 +215,8 @@ def rotation_angle(reference, current, *, settings: MeasureSettings | None = Non
     near_deg : float
         Predicted angle (deg); with two equal markers the answer is the candidate
         within ±90° of it.
+    correction : PlaneCorrection, optional
+        Plane/lens correction applied to both pairs (see :func:`pair_angle`).
 
     Returns
     -------
@@ -226,4 +240,4 @@ def rotation_angle(reference, current, *, settings: MeasureSettings | None = Non
     settings = settings or MeasureSettings()
     ref = _as_pair(reference, settings, "reference")
     cur = _as_pair(current, settings, "current")
-    return pair_angle(ref, cur, near_deg=near_deg)
+    return pair_angle(ref, cur, near_deg=near_deg, correction=correction)

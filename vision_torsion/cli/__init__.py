@@ -24,6 +24,8 @@ _COMMAND_MODULES = [
     "synth",
     "plan",
     "process",
+    "check_accuracy",
+    "calibrate",
 ]
 
 
