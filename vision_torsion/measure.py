@@ -95,7 +95,8 @@ def measure_folder(
     out_dir : str or os.PathLike, optional
         Where ``angles.csv`` goes; ``IMAGE_DIR/results`` by default.
     settings : MeasureSettings, optional
-        Marker polarity, radius range, fit method, pair choice.
+        Marker polarity, radius range, fit method, pair choice, and the path of a
+        saved plane/lens correction (``settings.correction``) applied to the centres.
     progress : bool
         Show a progress bar.
 
@@ -110,8 +111,13 @@ def measure_folder(
     ------
     ImageReadError, MarkerError
         The folder has no images, or the reference image is unusable.
+    CalibrationError
+        ``settings.correction`` cannot be loaded.
     """
+    from .calibration.correction import load_correction
+
     settings = settings or MeasureSettings()
+    correction = load_correction(settings.correction)
     files = list_images(image_dir)
     out = Path(out_dir) if out_dir is not None else Path(image_dir) / "results"
     ref_pair = measure_pair(reference, settings=settings, name=f"reference {reference}")
@@ -124,7 +130,7 @@ def measure_folder(
             logger.warning("%s", exc)
             pairs.append(None)
             messages.append(str(exc))
-    angles = sequence_angles(ref_pair, pairs)
+    angles = sequence_angles(ref_pair, pairs, correction=correction)
     rows = []
     for f, pair, ang, msg in zip(files, pairs, angles, messages):
         row = {"image": f.name, "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}

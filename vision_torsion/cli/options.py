@@ -15,6 +15,9 @@ def add_marker_options(parser) -> None:
         "--radius-range", nargs=2, type=float, metavar=("MIN", "MAX"), help="marker radius range in pixels"
     )
     g.add_argument("--fit", choices=FIT_METHODS, default="geometric", help="circle fit: geometric (default), algebraic (the paper's), ellipse")
+    g.add_argument(
+        "--correction", metavar="FILE", help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres"
+    )
 
 
 def settings_from_args(args) -> MeasureSettings:
@@ -23,4 +26,5 @@ def settings_from_args(args) -> MeasureSettings:
         polarity=args.polarity,
         radius_range=tuple(args.radius_range) if args.radius_range else None,
         fit=args.fit,
+        correction=getattr(args, "correction", None),
     )
