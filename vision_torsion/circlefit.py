@@ -233,7 +233,7 @@ def fit_circle_geometric(
             except np.linalg.LinAlgError as exc:
                 raise FitError("geometric circle fit is singular (points on a line?)") from exc
             p = p + step
-            if np.max(np.abs(step)) < 1e-12:
+            if np.max(np.abs(step)) < 1e-10:  # normalised units: ~1e-8 px
                 break
         else:
             raise FitError("geometric circle fit did not converge")

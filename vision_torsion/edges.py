@@ -23,7 +23,7 @@ each a plane across the marker so that illumination gradients do not pull the ed
    = (F - B)·φ(uᵢ)/s; its variance is σ²/Σ gᵢ² with σ² the residual variance. The
    edge point lies at R + δₖ along the sector's (g²-weighted) mean direction.
 3. Before the sectors, s is updated by a Gauss-Newton step on the same model and
-   the levels solved again with it.
+   the levels solved again with it (and without the outliers).
 
 Fitting a circle to these points with weights 1/var (see :mod:`.circlefit`) and
 repeating until the centre stops moving is a Gauss-Newton solution of the full
@@ -43,7 +43,7 @@ from scipy.special import ndtr
 
 from .errors import FitError
 
-__all__ = ["EdgePoints", "marker_roi", "edge_points"]
+__all__ = ["EdgePoints", "MarkerPatch", "marker_roi", "marker_patch", "edge_points"]
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
@@ -88,13 +88,62 @@ def marker_roi(shape, cx, cy, extent):
     return x0, y0, x1, y1
 
 
-def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None) -> EdgePoints:
+@dataclass(frozen=True)
+class MarkerPatch:
+    """The pixels around a marker, flattened once for repeated edge extraction.
+
+    Attributes
+    ----------
+    xs, ys : numpy.ndarray
+        Pixel-centre coordinates (px), float64.
+    values : numpy.ndarray
+        Grey levels (DN), float64.
+    """
+
+    xs: np.ndarray
+    ys: np.ndarray
+    values: np.ndarray
+
+
+def marker_patch(image, cx, cy, extent) -> MarkerPatch:
+    """Pixels within the square of half-size `extent` (px) around (cx, cy).
+
+    Raises
+    ------
+    FitError
+        The square leaves the image.
+    """
+    roi = marker_roi(image.shape, cx, cy, extent)
+    if roi is None:
+        raise FitError("the marker's edge ring leaves the image")
+    x0, y0, x1, y1 = roi
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    return MarkerPatch(
+        xs=xs.ravel().astype(np.float64),
+        ys=ys.ravel().astype(np.float64),
+        values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
+    )
+
+
+def _solve_levels(Phi, nx, ny, vals, weight):
+    """Plane coefficients of B (outside) and F (inside) by weighted least squares."""
+    one_m = 1.0 - Phi
+    design = np.stack([one_m, one_m * nx, one_m * ny, Phi, Phi * nx, Phi * ny], axis=1)
+    wd = design * weight[:, None]
+    try:
+        coef = np.linalg.solve(wd.T @ design, wd.T @ vals)
+    except np.linalg.LinAlgError as exc:
+        raise FitError("the marker's grey levels cannot be separated (no edge in the ring)") from exc
+    return coef, vals - design @ coef
+
+
+def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, patch: MarkerPatch | None = None) -> EdgePoints:
     """Sub-pixel edge points around a circle estimate.
 
     Parameters
     ----------
     image : numpy.ndarray
-        2-D grey image indexed ``[y, x]`` (DN).
+        2-D grey image indexed ``[y, x]`` (DN); unused when `patch` is given.
     cx, cy : float
         Current centre estimate (px).
     radius : float
@@ -105,6 +154,9 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None) -> 
         ``radial_shape(psi) -> R(psi)``: the edge's distance from the centre in
         direction psi (rad, image axes), for elliptical markers; a circle of
         `radius` when None.
+    patch : MarkerPatch, optional
+        Pixels around the marker from :func:`marker_patch`, reused between
+        iterations; taken from `image` when None.
 
     Returns
     -------
@@ -117,55 +169,42 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None) -> 
         carry information.
     """
     s = float(edge_width)
-    reach = 3.0 * s + 4.0
-    roi = marker_roi(image.shape, cx, cy, radius + reach + 1)
-    if roi is None:
-        raise FitError("the marker's edge ring leaves the image")
-    x0, y0, x1, y1 = roi
-    patch = image[y0:y1, x0:x1]
-    gx = np.arange(x0, x1, dtype=np.float64) - cx
-    gy = np.arange(y0, y1, dtype=np.float64) - cy
-    d_all = np.sqrt(gx[None, :] ** 2 + gy[:, None] ** 2)
+    reach = 3.0 * s + 2.5
+    if patch is None:
+        patch = marker_patch(image, cx, cy, radius + reach + 1)
+    dx_all, dy_all = patch.xs - cx, patch.ys - cy
+    d_all = np.sqrt(dx_all * dx_all + dy_all * dy_all)
     if radial_shape is None:
         ring = np.abs(d_all - radius) < reach
     else:
         r_dir = radial_shape(np.linspace(0.0, np.pi, 32))
         ring = (d_all > r_dir.min() - reach) & (d_all < r_dir.max() + reach)
-    iy, ix = np.nonzero(ring)
-    dx, dy, d = gx[ix], gy[iy], d_all[iy, ix]
-    vals = patch[iy, ix].astype(np.float64)
+    if ring.sum() < 30:
+        raise FitError("too few pixels around the marker's edge")
+    dx, dy, d, vals = dx_all[ring], dy_all[ring], d_all[ring], patch.values[ring]
     psi = np.arctan2(dy, dx)
     R = radius if radial_shape is None else radial_shape(psi)
     nx, ny = dx / radius, dy / radius
-    keep = np.ones(vals.size, dtype=bool)
-    for step in range(3):
-        u = (R - d) / s
-        Phi = ndtr(u)
-        design = np.stack([1 - Phi, (1 - Phi) * nx, (1 - Phi) * ny, Phi, Phi * nx, Phi * ny], axis=1)
-        dk = design[keep]
-        try:
-            coef = np.linalg.solve(dk.T @ dk, dk.T @ vals[keep])
-        except np.linalg.LinAlgError as exc:
-            raise FitError("the marker's grey levels cannot be separated (no edge in the ring)") from exc
-        resid = vals - design @ coef
-        sig = float(np.sqrt(np.mean(resid[keep] ** 2))) or 1e-6
-        if step == 0:
-            # drop pixels beyond 4.5 sigma (a wire or a speck in the ring)
-            keep = np.abs(resid) < 4.5 * sig
-            continue
-        B = coef[0] + coef[1] * nx + coef[2] * ny
-        F = coef[3] + coef[4] * nx + coef[5] * ny
-        pdf = np.exp(-0.5 * u * u) * _INV_SQRT_2PI
-        g = (F - B) * pdf / s  # dI/dR
-        band = keep & (np.abs(u) < 3.0)
-        if step == 2:
-            break
-        # one Gauss-Newton step for the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
-        gs = -g * u
-        den_s = float(np.sum(gs[band] ** 2))
-        if den_s > 0:
-            # an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))
-            s = float(np.clip(s + float(np.sum(gs[band] * resid[band])) / den_s, max(0.5 * s, 0.3), 2.0 * s))
+    # pass 1: levels from every pixel, the outlier cut, and a Gauss-Newton step for
+    # the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
+    u = (R - d) / s
+    coef, resid = _solve_levels(ndtr(u), nx, ny, vals, np.ones_like(vals))
+    sig = float(np.sqrt(np.mean(resid**2))) or 1e-6
+    keep = np.abs(resid) < 4.5 * sig  # a wire or a speck in the ring
+    pdf = np.exp(-0.5 * u * u) * _INV_SQRT_2PI
+    FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
+    band = keep & (np.abs(u) < 3.0)
+    gs = -(FB * pdf / s) * u
+    den_s = float(np.sum(gs[band] ** 2))
+    if den_s > 0:
+        # an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))
+        s = float(np.clip(s + float(np.sum(gs[band] * resid[band])) / den_s, max(0.5 * s, 0.3), 2.0 * s))
+    # pass 2: levels with the new width, without the outliers
+    u = (R - d) / s
+    coef, resid = _solve_levels(ndtr(u), nx, ny, vals, keep.astype(np.float64))
+    FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
+    g = FB * (np.exp(-0.5 * u * u) * _INV_SQRT_2PI) / s  # dI/dR
+    band = keep & (np.abs(u) < 3.0)
     contrast = coef[3] - coef[0]
     dof = max(int(keep.sum()) - 7, 1)
     sigma2 = float(np.sum(resid[keep] ** 2) / dof)

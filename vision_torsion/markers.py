@@ -30,12 +30,12 @@ import pandas as pd
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from .edges import edge_points, marker_roi
+from .edges import edge_points, marker_patch, marker_roi
 from .errors import FitError
 from .images import as_grey_array
 from .settings import MeasureSettings
 
-__all__ = ["Marker", "find_markers", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
+__all__ = ["Marker", "find_markers", "find_marker_list", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
 
 logger = logging.getLogger(__name__)
 
@@ -172,7 +172,9 @@ def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
     return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
 
 
-def fit_marker(image, blob: Blob, *, polarity: str = "dark", fit: str = "geometric", max_iter: int = 10) -> Marker:
+def fit_marker(
+    image, blob: Blob, *, polarity: str = "dark", fit: str = "geometric", max_iter: int = 10, edge_width: float = 1.2
+) -> Marker:
     """Fit one marker candidate to sub-pixel accuracy.
 
     Parameters
@@ -187,6 +189,9 @@ def fit_marker(image, blob: Blob, *, polarity: str = "dark", fit: str = "geometr
         Circle-fit method.
     max_iter : int
         Edge/fit alternations at most.
+    edge_width : float
+        Starting edge width s (px); a neighbouring marker's fitted width saves
+        iterations.
 
     Returns
     -------
@@ -196,10 +201,12 @@ def fit_marker(image, blob: Blob, *, polarity: str = "dark", fit: str = "geometr
     """
     try:
         cx, cy, r, _ = _start(image, blob, polarity)
-        s = 1.2
+        s = float(edge_width)
         shape = None
+        # one patch for all iterations: wide enough for the ring at the widest edge
+        patch = marker_patch(image, cx, cy, 1.15 * r + 3.0 * max(s, 1.5) + 6.0)
         for _ in range(max_iter):
-            ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape)
+            ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape, patch=patch)
             w = 1.0 / ep.std**2
             if fit == "algebraic":
                 cf = fit_circle_algebraic(ep.x, ep.y)
@@ -302,14 +309,22 @@ def find_markers(
     >>> bool(abs(table["x_px"].max() - r.centres[:, 0].max()) < 0.02)
     True
     """
-    if settings is not None:
-        polarity, radius_range, fit = settings.polarity, settings.radius_range, settings.fit
-    else:
-        MeasureSettings(polarity=polarity, radius_range=radius_range, fit=fit)  # validates
-    img = as_grey_array(image)
+    if settings is None:
+        settings = MeasureSettings(polarity=polarity, radius_range=radius_range, fit=fit)  # validates
+    return markers_to_frame(find_marker_list(as_grey_array(image), settings))
+
+
+def find_marker_list(img: np.ndarray, settings: MeasureSettings) -> list[Marker]:
+    """The work of :func:`find_markers` on a validated float32 image, as a list of :class:`Marker`."""
+    polarity, radius_range, fit = settings.polarity, settings.radius_range, settings.fit
     r_min, r_max = radius_range if radius_range is not None else default_radius_range(img.shape)
     markers = []
+    width = 1.2  # the optics are the same for every marker: pass the fitted width on
     for blob in detect_blobs(img, polarity=polarity, radius_range=(r_min, r_max)):
-        rejected = _judge(blob, img.shape, r_min, r_max, fit)
-        markers.append(rejected if rejected is not None else fit_marker(img, blob, polarity=polarity, fit=fit))
-    return markers_to_frame(markers)
+        marker = _judge(blob, img.shape, r_min, r_max, fit)
+        if marker is None:
+            marker = fit_marker(img, blob, polarity=polarity, fit=fit, edge_width=width)
+            if marker.ok:
+                width = marker.edge_width_px
+        markers.append(marker)
+    return markers

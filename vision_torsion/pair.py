@@ -17,7 +17,8 @@ import numpy as np
 import pandas as pd
 
 from .errors import MarkerError
-from .markers import Marker, find_markers
+from .images import as_grey_array
+from .markers import Marker, find_marker_list
 from .settings import MeasureSettings
 
 __all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance"]
@@ -167,5 +168,5 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     settings = settings or MeasureSettings()
     if name is None:
         name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
-    table = find_markers(image, settings=settings)
-    return select_pair(table, pair=settings.pair, name=name)
+    markers = find_marker_list(as_grey_array(image, name=name), settings)
+    return select_pair(markers, pair=settings.pair, name=name)
