@@ -1,0 +1,62 @@
+"""Helpers shared by the peer and stage benchmarks: one core per process, the machine."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+
+#: Thread-pool variables of the numerical libraries; set before NumPy is imported so
+#: that every process uses exactly one core and "ms per image on one core" means that.
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS")
+
+
+def one_core() -> None:
+    """Restrict this process's numerical libraries (BLAS, OpenCV) to one thread each."""
+    for var in THREAD_VARS:
+        os.environ.setdefault(var, "1")
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
+def cpu_model() -> str:
+    """CPU model name from /proc/cpuinfo (platform.processor() elsewhere)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def machine_info() -> dict:
+    """Date, CPU, core count, load and library versions, for comparing runs over time."""
+    import cv2
+    import numpy
+    import scipy
+    import skimage
+
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except OSError:  # pragma: no cover - not on Linux
+        load = None
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        usable = os.cpu_count()
+    return {
+        "date": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "cpu_model": cpu_model(),
+        "cores": os.cpu_count(),
+        "cores_usable": usable,
+        "load_average_1_5_15min": load,
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "numpy": numpy.__version__,
+        "scipy": scipy.__version__,
+        "opencv": cv2.__version__,
+        "scikit_image": skimage.__version__,
+    }
