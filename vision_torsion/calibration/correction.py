@@ -58,7 +58,7 @@ FORMAT_VERSION = 1
 _UNDISTORT_ITERATIONS = 30
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PlaneCorrection:
     """Image → disk-plane mapping: radial undistortion, then a homography.
 
@@ -118,6 +118,18 @@ class PlaneCorrection:
             object.__setattr__(self, "centre", (float(self.centre[0]), float(self.centre[1])))
         if self.focal_length_px is not None:
             object.__setattr__(self, "focal_length_px", float(self.focal_length_px))
+
+    def __eq__(self, other):
+        """Same mapping: homography, distortion and method equal (``info`` is ignored)."""
+        if not isinstance(other, PlaneCorrection):
+            return NotImplemented
+        return (
+            np.array_equal(self.homography, other.homography)
+            and (self.k1, self.centre, self.focal_length_px, self.method)
+            == (other.k1, other.centre, other.focal_length_px, other.method)
+        )
+
+    __hash__ = None
 
     # -- mapping -----------------------------------------------------------------------
     def undistort(self, x, y):
