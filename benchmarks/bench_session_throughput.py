@@ -207,6 +207,9 @@ def main() -> None:
     n, quarter = args.n, max(1, args.n // 4)
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_session_"))
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    from vision_torsion.session.process import _code_fingerprint
+
+    code_at_start = _code_fingerprint()
     try:
         t0 = time.perf_counter()
         truth = make_session(work / "full", n, cores)
@@ -251,6 +254,7 @@ def main() -> None:
                             "measured_only_the_rest": only_rest},
         "jobs1_equals_jobs2": same_j1_j2, "max_angle_error_deg": worst,
         "target_ratio": 1.3,
+        "measuring_code_changed_during_run": _code_fingerprint() != code_at_start,
     }
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(report, indent=2) + "\n")
@@ -275,6 +279,9 @@ def main() -> None:
           f"the uninterrupted run: {identical}; measured only the rest: {only_rest}")
     print(f"jobs 1 and jobs 2 give the same file: {same_j1_j2}; largest angle error vs "
           f"the rendered truth: {worst:.4f}°")
+    if report["measuring_code_changed_during_run"]:
+        print("WARNING: the measuring code changed during the run; the runs are not "
+              "comparable (the cache keys differ, equality checks may fail)")
     print(f"written {RESULTS}")
 
 

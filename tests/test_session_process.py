@@ -195,6 +195,16 @@ def test_changed_settings_measure_everything_again(session, core):
     assert process_session(folder, jobs=1).n_measured == 20
 
 
+def test_changed_measuring_code_measures_everything_again(session, core, monkeypatch):
+    from vision_torsion.session import process as process_module
+
+    folder, _, _ = session
+    process_session(folder, jobs=1)
+    monkeypatch.setattr(process_module, "_code_fingerprint", lambda: "another core")
+    assert process_session(folder, jobs=1).n_measured == 20
+    assert process_session(folder, jobs=1).n_measured == 0
+
+
 def test_results_are_written_atomically(session, core, monkeypatch):
     folder, plan, _ = session
     first = process_session(folder, jobs=1).measurements_path

@@ -94,16 +94,34 @@ def _digest(data: bytes) -> str:
     return hashlib.blake2b(data, digest_size=20).hexdigest()
 
 
+#: Subpackages that only use measurements; everything else in vision_torsion may
+#: change what an image measures, so its source is part of the cache key.
+_DOWNSTREAM = ("session", "cli", "analysis", "stiffness", "report", "synthetic")
+
+
+def _code_fingerprint() -> str:
+    """Digest of the measuring code's source (every module outside `_DOWNSTREAM`).
+
+    A version number is not bumped for every change to the measuring code, so the
+    source itself keys the cache: after an upgrade or an edit, images are measured
+    again instead of mixing results of two versions in one table. Unknown new
+    subpackages are included, which can only cause needless re-measuring.
+    """
+    root = Path(__file__).resolve().parents[1]
+    parts = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root)
+        if rel.parts[0] not in _DOWNSTREAM:
+            parts.append(rel.as_posix().encode() + b"\0" + path.read_bytes())
+    return _digest(b"\0".join(parts))
+
+
 def _settings_key(settings: MeasureSettings) -> str:
-    """JSON identifying how images are measured: settings, correction content, versions."""
+    """JSON identifying how images are measured: settings, correction content, code."""
     d = settings.to_dict()
     if d.get("correction"):
         d["correction"] = _digest(Path(d["correction"]).read_bytes())
-    try:
-        from .. import __version__ as version
-    except ImportError:  # the package metadata is not there (source checkout)
-        version = "unknown"
-    return json.dumps({"settings": d, "vision_torsion": version, "cache": _CACHE_FORMAT},
+    return json.dumps({"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT},
                       sort_keys=True)
 
 
