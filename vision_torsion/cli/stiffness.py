@@ -1,0 +1,89 @@
+"""``vision-torsion stiffness``: stiffness curve, dead zone and meshing pairs of a record.
+
+A thin layer over :func:`vision_torsion.stiffness.analyze_stiffness_curve`.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from ..fileio import write_csv, write_json
+from ..stiffness.analysis import analyze_stiffness_curve
+from ..stiffness.plots import plot_meshing, plot_stiffness, plot_torque_angle, save_figure
+from ..stiffness.rig import load_rig
+from . import add_common_options
+
+__all__ = ["register", "run", "default_output_dir"]
+
+log = logging.getLogger(__name__)
+
+
+def default_output_dir(data) -> Path:
+    """``<DATA stem>_stiffness/`` beside DATA (the only thing created next to the input)."""
+    p = Path(data)
+    return p.with_name(f"{p.stem}_stiffness")
+
+
+def register(subparsers) -> None:
+    """Add the ``stiffness`` subcommand."""
+    parser = subparsers.add_parser(
+        "stiffness",
+        help="stiffness curve K(T), backlash dead zone and meshing tooth pairs of a record",
+        description=(
+            "Analyse a torque-angle record: an encoder/torque-sensor CSV (time_s, torque_nm, "
+            "input_pulses or input_angle_deg; needs --rig) or a camera-rig measurements.csv. "
+            "Writes stiffness_curve.csv, stiffness_summary.json and three PNG plots."
+        ),
+    )
+    parser.add_argument("data", metavar="DATA", help="record CSV or measurements.csv")
+    parser.add_argument("--rig", metavar="FILE",
+                        help="rig constants TOML ([rig] and [meshing] tables)")
+    parser.add_argument("-o", "--output", metavar="OUT_DIR",
+                        help="output folder (default: <DATA stem>_stiffness/ beside DATA)")
+    parser.add_argument("--method", choices=("polynomial", "spline"), default="polynomial",
+                        help="loading-branch fit (default: polynomial)")
+    parser.add_argument("--order", type=int, default=7, help="polynomial order (default: 7)")
+    parser.add_argument("--cutoff-hz", type=float, default=None,
+                        help="low-pass cut-off in Hz (default: 5%% of the sampling rate)")
+    parser.add_argument("--filter-order", type=int, default=4,
+                        help="Butterworth order (default: 4)")
+    parser.add_argument("--threshold-nm", type=float, default=None,
+                        help="half-width of the zero-torque band in N·m (default: 5 noise stds)")
+    add_common_options(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run the analysis and write the results; returns the exit status."""
+    rig = load_rig(args.rig) if args.rig else None
+    result = analyze_stiffness_curve(
+        args.data, rig=rig, method=args.method, order=args.order, cutoff_hz=args.cutoff_hz,
+        filter_order=args.filter_order, threshold_nm=args.threshold_nm,
+    )
+    out = Path(args.output) if args.output else default_output_dir(args.data)
+    written = [
+        write_csv(out / "stiffness_curve.csv", result.to_frame()),
+        write_json(out / "stiffness_summary.json", result.to_dict()),
+        save_figure(plot_torque_angle(result), out / "torque_angle.png"),
+        save_figure(plot_stiffness(result), out / "stiffness_torque.png"),
+    ]
+    if result.meshing is not None:
+        written.append(save_figure(plot_meshing(result), out / "meshing_pairs.png"))
+    if not args.quiet:
+        for c in result.curves:
+            print(f"{c.kind}: K {c.stiffness_nm_per_rad.min():.4g} .. "
+                  f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad over "
+                  f"{c.torque_nm[0]:.3g} .. {c.torque_nm[-1]:.3g} N·m")
+        if result.backlash is not None:
+            b = result.backlash
+            print(f"dead zone: {b.width_deg:.4g} ± {b.width_std_deg:.2g} deg "
+                  f"({b.width_arcmin:.3g} arcmin), centre {b.centre_deg:.4g} deg")
+        if result.meshing is not None:
+            m = result.meshing
+            wrap = "" if m.max_wrap_angle_rad is None else f", wrap angle {m.max_wrap_angle_rad / 3.141592653589793:.4f}π rad"
+            print(f"meshing pairs: max {m.max_pairs:.1f} at {m.torque_at_max_nm:.3g} N·m{wrap}")
+        for note in result.notes:
+            print(f"note: {note}")
+        print(f"wrote {len(written)} files to {out}")
+    return 0
