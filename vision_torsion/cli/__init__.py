@@ -26,6 +26,7 @@ _COMMAND_MODULES = [
     "process",
     "check_accuracy",
     "calibrate",
+    "stiffness",
 ]
 
 
