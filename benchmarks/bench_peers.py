@@ -79,6 +79,20 @@ SCENES = (
     ("twelve_bit", "12-bit", True),
     ("tilted", "Tilted 3° + barrel distortion (uncorrected)", False),
 )
+#: One line per method for the markdown file.
+PEER_NOTES = {
+    "hough_alt": "`cv2.HoughCircles(HOUGH_GRADIENT_ALT)` after a σ = 1.5 px blur, dp 1.5, "
+                 "centres as returned (on the accumulator grid)",
+    "otsu_ellipse": "blur σ = 1 px, global Otsu, 5 px opening, `findContours`, `fitEllipse`",
+    "moments": "background plane subtracted, negative weights clipped, intensity centroid within r + 3 px",
+    "canny_circle": "`skimage.feature.canny` (σ = 2) edge pixels near each blob, "
+                    "`CircleModel.from_estimate`, one 3σ outlier pass",
+    "ml_disc": "least-squares (Gaussian ML) fit of an exact Gaussian-blurred disc with lighting plane, "
+               "8 parameters, `scipy.optimize.least_squares`",
+    "ours_algebraic": "`measure_pair(..., MeasureSettings(fit=\"algebraic\"))`: the paper's Kasa fit on our "
+                      "sub-pixel edge points",
+    "ours_default": "`measure_pair(image)` with default settings",
+}
 WRONG_PX = 3.0  # a returned centre farther than this from every true centre is a wrong object
 BASE_SEED = 20240808
 
@@ -388,7 +402,16 @@ def main(argv=None) -> int:
             "decoding excluded, one thread per worker process, two workers sharing the machine.",
             "",
         ]
-        atomic_write_text(RESULTS / "peers.md", "\n".join(header) + "\n\n".join(tables) + "\n")
+        methods = [
+            "Methods (all get the same prior knowledge: dark markers, radius 10 px to a fifth of the "
+            "shorter image side; every peer picks the two largest round objects itself, none is told "
+            "where the true markers are; details in `benchmarks/peers.py`):",
+            "",
+        ] + [f"- {p.label}: {PEER_NOTES[p.name]}" for p in PEERS] + [""]
+        targets = ["", "Targets (issues 2 and 8):", ""] + [
+            f"- [{'x' if c['met'] else ' '}] {c['target']}: {c['detail']}" for c in checks]
+        text = "\n".join(header + methods) + "\n" + "\n\n".join(tables) + "\n" + "\n".join(targets) + "\n"
+        atomic_write_text(RESULTS / "peers.md", text)
         print(f"wrote {RESULTS / 'peers.json'} and {RESULTS / 'peers.md'}")
     return 0
 
