@@ -87,7 +87,7 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
         if neg.any():
             i = int(np.flatnonzero(neg.to_numpy())[0])
             raise AnalysisError(f"measurements table row {i}: {col} is negative ({df[col].iloc[i]})")
-    df["message"] = df["message"].fillna("").astype(str)
+    df["message"] = df["message"].astype(object).where(df["message"].notna(), "").astype(str)  # an all-empty column reads as float NaN
     df["status"] = df["status"].astype(str)
 
     reason = pd.Series("", index=df.index)

@@ -24,6 +24,8 @@ _COMMAND_MODULES = [
     "synth",
     "plan",
     "process",
+    "report",
+    "demo",
     "check_accuracy",
     "calibrate",
     "stiffness",

@@ -189,7 +189,9 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
     return frame, {"cycles": params, "spec": dataclasses.asdict(spec)}
 
 
-def write_session_folder(scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False) -> Path:
+def write_session_folder(
+    scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False, overwrite: bool = False
+) -> Path:
     """Plan and render a complete synthetic test session.
 
     Parameters
@@ -204,6 +206,8 @@ def write_session_folder(scene: Scene, spec: SessionSpec, out_dir, *, seed: int 
         Seed of the piece masses, parameter variations and image noise.
     progress : bool
         Show a progress bar.
+    overwrite : bool
+        Replace a session already in the folder.
 
     Returns
     -------
@@ -249,7 +253,7 @@ def write_session_folder(scene: Scene, spec: SessionSpec, out_dir, *, seed: int 
     disk_angles = spec.angle_sign * truth["true_angle_deg"].to_numpy()
     for a in (disk_angles.min(), disk_angles.max()):
         check_markers_in_frame(scene, float(a), where=scene.name)
-    plan = plan_session(out, image_suffix=suffix, **plan_args)
+    plan = plan_session(out, image_suffix=suffix, overwrite=overwrite, **plan_args)
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
     rows = []

@@ -1,0 +1,181 @@
+"""From a session folder to a report: ``vision-torsion report`` and ``vision-torsion demo``.
+
+``report_session`` processes the session first (only what is new or changed: the
+session cache makes a re-run cheap), analyses ``measurements.csv`` and writes the
+report next to it. ``run_demo`` renders the paper-like synthetic session (the scene
+of ``synthetic/paper_session.toml``), then does the same.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from . import ReportFiles, write_report
+
+__all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SessionReport:
+    """Where the report went and how processing went.
+
+    Attributes
+    ----------
+    files : ReportFiles
+        Paths of report.html, summary.json, stiffness_table.csv and the figures.
+    measurements_path : pathlib.Path
+        The measurements.csv the report was made from.
+    n_images, n_failed : int
+        Images in the manifest, and images that could not be measured.
+    n_issues : int
+        Figures the analysis could not compute (each with its reason in the report).
+    """
+
+    files: ReportFiles
+    measurements_path: Path
+    n_images: int
+    n_failed: int
+    n_issues: int
+
+
+def _conditions(session, n_images: int, n_failed: int) -> dict:
+    rig, proto = session.config.rig, session.config.protocol
+    return {
+        "session folder": str(session.folder),
+        "arm radius r (m)": rig.arm_radius_m,
+        "gravity g (m/s²)": rig.gravity_m_per_s2,
+        "mass per weight piece (kg)": proto.step_mass_kg,
+        "mass standard uncertainty per piece (kg)": rig.mass_std_kg,
+        "pulley friction torque std (N·m)": rig.friction_torque_std_nm,
+        "torque per step, 2·m·g·r (N·m)": 2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m,
+        "maximum torque (N·m)": proto.max_torque_nm,
+        "flexspline orientations (deg)": list(proto.orientations_deg),
+        "cycles per orientation": proto.cycles,
+        "angle sign": session.config.angle_sign,
+        "marker polarity": session.config.markers.polarity,
+        "circle fit": session.config.markers.fit,
+        "images": n_images,
+        "images failed": n_failed,
+    }
+
+
+def _stiffness_section(measurements: pd.DataFrame):
+    """The stiffness-curve section (issue 7) when the stiffness module can give one."""
+    try:
+        from ..stiffness.analysis import stiffness_section
+    except ImportError:  # the module is optional for the report
+        return None
+    try:
+        return stiffness_section(measurements)
+    except Exception as exc:  # noqa: BLE001 - the section says why instead of failing the report
+        from html import escape
+
+        from ..errors import VisionTorsionError
+
+        if not isinstance(exc, VisionTorsionError):
+            raise
+        return ("Stiffness curve and meshing teeth", f"<p>Not computed: {escape(str(exc))}</p>")
+
+
+def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progress: bool = False) -> SessionReport:
+    """Process a session (if needed), analyse it and write the report.
+
+    Parameters
+    ----------
+    session_dir : str or os.PathLike
+        The session folder (session.toml, manifest.csv, images).
+    out_dir : str or os.PathLike, optional
+        Output folder; ``SESSION_DIR/results`` by default. It receives
+        measurements.csv, summary.json, stiffness_table.csv, figures/ and report.html.
+    jobs : int, optional
+        Worker processes for measuring (all cores by default).
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    SessionReport
+
+    Raises
+    ------
+    SessionError, ManifestError
+        The session folder is invalid (every problem listed).
+    """
+    from ..analysis import analyze_session
+    from ..session import load_session, process_session
+
+    session = load_session(session_dir)
+    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
+    measurements = pd.read_csv(result.measurements_path, keep_default_na=False, na_values=[""])
+    logger.info("analysing %d measurements", len(measurements))
+    analysis = analyze_session(measurements, max_torque_nm=session.config.protocol.max_torque_nm)
+    extra = [s for s in (_stiffness_section(measurements),) if s is not None]
+    files = write_report(
+        measurements,
+        analysis,
+        conditions=_conditions(session, result.n_images, result.n_failed),
+        out_dir=out,
+        extra_sections=extra,
+    )
+    return SessionReport(
+        files=files,
+        measurements_path=result.measurements_path,
+        n_images=result.n_images,
+        n_failed=result.n_failed,
+        n_issues=len(analysis.issues),
+    )
+
+
+def demo_scene():
+    """The demo's scene and session: the paper-like session of ``synthetic/paper_session.toml``.
+
+    Built in code so the demo needs no file from the source tree; a test checks it
+    equals the TOML file.
+    """
+    from ..synthetic import Scene
+    from ..synthetic.scene import DiskSpec, MarkerSpec
+    from ..synthetic.session import SessionSpec
+
+    scene = Scene(
+        disk=DiskSpec(center_x=700.37, center_y=500.61, background_level=200.0),
+        markers=MarkerSpec(polarity="dark", level=40.0, radius_px=35.0, distance_px=300.0, positions_deg=(10.0, 190.0)),
+        name="paper_session",
+    )
+    return scene, SessionSpec(orientation_variation=0.03, angle_sign=-1)
+
+
+def run_demo(out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False) -> SessionReport:
+    """Render the paper-like synthetic session, process it and write its report.
+
+    Parameters
+    ----------
+    out_dir : str or os.PathLike
+        Folder for the demo: the session goes to ``OUT_DIR/session``, the results
+        and report to ``OUT_DIR/session/results``. A session already there is
+        reused (and only re-measured where needed).
+    seed : int
+        Seed of the synthetic session.
+    jobs : int, optional
+        Worker processes for measuring.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    SessionReport
+    """
+    from ..synthetic.session import write_session_folder
+
+    session_dir = Path(out_dir) / "session"
+    if not (session_dir / "truth.csv").is_file():
+        # truth.csv is written last: without it an earlier demo was interrupted
+        scene, spec = demo_scene()
+        write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True)
+    return report_session(session_dir, jobs=jobs, progress=progress)
