@@ -140,3 +140,15 @@ def test_input_array_not_modified(small_scene):
     before = img.copy()
     find_markers(img)
     assert np.array_equal(img, before)
+
+
+def test_circularity_of_a_circle_with_missing_sectors_is_one():
+    """Edge points on 300° of a circle (sectors dropped for an occluder) are still round.
+
+    Regression: the radius itself leaked into the second harmonic when the points
+    were unevenly spread, and a round marker was rejected as not round (0.90).
+    """
+    from vision_torsion.markers import _harmonic_circularity
+
+    t = np.linspace(0.3, 0.3 + np.deg2rad(300), 200)
+    assert _harmonic_circularity(812.0 + 35 * np.cos(t), 455.0 + 35 * np.sin(t), 812.0, 455.0, 35.0) > 0.999

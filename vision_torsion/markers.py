@@ -166,9 +166,11 @@ def _start(image, blob: Blob, polarity: str):
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
     """1 - 2·|second radial harmonic|/R: the minor/major axis ratio of a near-circle."""
     psi = np.arctan2(ey - cy, ex - cx)
-    rho = np.hypot(ex - cx, ey - cy)
-    a2 = 2 * np.mean(rho * np.cos(2 * psi))
-    b2 = 2 * np.mean(rho * np.sin(2 * psi))
+    # radial deviations, not radii: with sectors missing (an occluder) the radius
+    # itself would leak into the harmonic and fake an ellipse
+    dev = np.hypot(ex - cx, ey - cy) - radius
+    a2 = 2 * np.mean(dev * np.cos(2 * psi))
+    b2 = 2 * np.mean(dev * np.sin(2 * psi))
     return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
 
 
