@@ -218,6 +218,20 @@ def summarise(rows, times, crb_rms) -> dict:
     return out
 
 
+def _columns(rows) -> dict:
+    """Per-method measurement columns (compact JSON): true angle, error, reported std, status."""
+    out = {}
+    for peer in PEERS:
+        mine = [r for r in rows if r["method"] == peer.name]
+        out[peer.name] = {
+            "angle_true_deg": [r["angle_true_deg"] for r in mine],
+            "error_deg": [None if r["error_deg"] is None else round(r["error_deg"], 8) for r in mine],
+            "angle_std_deg": [None if r["angle_std_deg"] is None else round(r["angle_std_deg"], 8) for r in mine],
+            "status": [r["status"] for r in mine],
+        }
+    return out
+
+
 def _fmt(x, spec):
     return "—" if x is None or not np.isfinite(x) else format(x, spec)
 
@@ -356,7 +370,7 @@ def main(argv=None) -> int:
         n_images = 2 * repeats * len(angles[stem])
         results[stem] = {"label": label, "crb_rms_deg": crb, "crb_by_angle_deg": bounds[stem]["bounds_deg"],
                          "angles_deg": angles[stem], "repeats": repeats, "n_images": n_images,
-                         "methods": summary, "measurements": rows}
+                         "methods": summary, "measurements": _columns(rows)}
         table = scene_table(label, summary, crb, n_images)
         tables.append(table)
         print("\n" + table, flush=True)
@@ -393,7 +407,7 @@ def main(argv=None) -> int:
             f"{m['load_average_1_5_15min'][0] if m['load_average_1_5_15min'] else '?'} at the start), "
             f"Python {m['python']}, NumPy {m['numpy']}, OpenCV {m['opencv']}, scikit-image "
             f"{m['scikit_image']}; `python benchmarks/bench_peers.py` "
-            f"({repeats} repeats × sweep angles, each angle with its own 0° reference image, {args.jobs} workers, "
+            f"({repeats} repeat(s) × sweep angles, each angle with its own 0° reference image, {args.jobs} workers, "
             f"{wall:.0f} s wall).",
             "",
             "Errors are angle errors against the scene's reference image at 0°, so they include both "
