@@ -17,7 +17,8 @@ each a plane across the marker so that illumination gradients do not pull the ed
 1. B and F (six plane coefficients) are solved by linear least squares, with a
    second pass that drops outlying pixels (a wire or a speck crossing the ring).
 2. The ring is cut into angular sectors about 1 px of arc wide; sectors where the
-   outlier cut removed pixels (and two neighbours each side) are dropped. In sector k the
+   outlier cut (grown by 2 px, for the occluder's blurred flanks) removed pixels,
+   and two neighbours each side, are dropped. In sector k the
    edge's radial offset δₖ is the one-step Gauss-Newton (maximum-likelihood)
    estimate ``δₖ = Σ gᵢ eᵢ / Σ gᵢ²`` with eᵢ the model residual and gᵢ = ∂I/∂R
    = (F - B)·φ(uᵢ)/s; its variance is σ²/Σ gᵢ² with σ² the residual variance. The
@@ -38,6 +39,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from scipy.special import ndtr
 
@@ -98,11 +100,14 @@ class MarkerPatch:
         Pixel-centre coordinates (px), float64.
     values : numpy.ndarray
         Grey levels (DN), float64.
+    shape : tuple of int
+        (rows, columns) of the square the flat arrays came from.
     """
 
     xs: np.ndarray
     ys: np.ndarray
     values: np.ndarray
+    shape: tuple = ()
 
 
 def marker_patch(image, cx, cy, extent) -> MarkerPatch:
@@ -122,6 +127,7 @@ def marker_patch(image, cx, cy, extent) -> MarkerPatch:
         xs=xs.ravel().astype(np.float64),
         ys=ys.ravel().astype(np.float64),
         values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
+        shape=(y1 - y0, x1 - x0),
     )
 
 
@@ -135,6 +141,15 @@ def _solve_levels(Phi, nx, ny, vals, weight):
     except np.linalg.LinAlgError as exc:
         raise FitError("the marker's grey levels cannot be separated (no edge in the ring)") from exc
     return coef, vals - design @ coef
+
+
+def _grow_cut(keep, ring_idx, shape):
+    """Widen the outlier cut by 2 px: an occluder's blurred flanks stay below the
+    threshold but still pull the grey levels and the edge next to it."""
+    cut = np.zeros(shape, np.uint8)
+    cut.flat[ring_idx[~keep]] = 1
+    cut = cv2.dilate(cut, np.ones((5, 5), np.uint8))
+    return keep & (cut.flat[ring_idx] == 0)
 
 
 def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, patch: MarkerPatch | None = None) -> EdgePoints:
@@ -181,7 +196,8 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
         ring = (d_all > r_dir.min() - reach) & (d_all < r_dir.max() + reach)
     if ring.sum() < 30:
         raise FitError("too few pixels around the marker's edge")
-    dx, dy, d, vals = dx_all[ring], dy_all[ring], d_all[ring], patch.values[ring]
+    ring_idx = np.flatnonzero(ring)
+    dx, dy, d, vals = dx_all[ring_idx], dy_all[ring_idx], d_all[ring_idx], patch.values[ring_idx]
     psi = np.arctan2(dy, dx)
     R = radius if radial_shape is None else radial_shape(psi)
     nx, ny = dx / radius, dy / radius
@@ -189,8 +205,11 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     # the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
     u = (R - d) / s
     coef, resid = _solve_levels(ndtr(u), nx, ny, vals, np.ones_like(vals))
-    sig = float(np.sqrt(np.mean(resid**2))) or 1e-6
+    # robust scale: an occluder's own pixels must not widen the cut that finds them
+    sig = 1.4826 * float(np.median(np.abs(resid))) or 1e-6
     keep = np.abs(resid) < 4.5 * sig  # a wire or a speck in the ring
+    if not keep.all():
+        keep = _grow_cut(keep, ring_idx, patch.shape)
     pdf = np.exp(-0.5 * u * u) * _INV_SQRT_2PI
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
     band = keep & (np.abs(u) < 3.0)
