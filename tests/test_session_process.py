@@ -235,3 +235,33 @@ def test_measured_torque_overrides_the_weights(tmp_path, core):
     assert list(table.columns).count("torque_nm") == 1
     assert (table["torque_nm"][1], table["torque_std_nm"][1]) == (0.0801, 0.0004)
     assert table["torque_source"][1] == "measured" and table["torque_source"][2] == "weights"
+
+
+def _set_correction(folder, name):
+    """Point the session's [markers] correction at `name` (relative to the folder)."""
+    toml = folder / "session.toml"
+    text = toml.read_text()
+    assert "[markers]" in text
+    toml.write_text(text.replace("[markers]", f'[markers]\ncorrection = "{name}"', 1))
+
+
+def test_plane_correction_is_applied_to_the_angles(session, core):
+    from vision_torsion.calibration.correction import PlaneCorrection
+
+    folder, _, _ = session
+    PlaneCorrection(homography=np.eye(3)).save(folder / "plane.toml")
+    _set_correction(folder, "plane.toml")
+    process_session(folder, jobs=1)
+    used = [c for c in core.corrections if c is not None]
+    assert used and all(isinstance(c, PlaneCorrection) for c in used)
+
+
+def test_bad_correction_file_fails_before_measuring(session, core):
+    from vision_torsion.errors import CalibrationError
+
+    folder, _, _ = session
+    (folder / "plane.toml").write_text("not a correction")
+    _set_correction(folder, "plane.toml")
+    with pytest.raises(CalibrationError, match="plane.toml"):
+        process_session(folder, jobs=1)
+    assert core.measured == []

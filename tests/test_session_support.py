@@ -122,6 +122,7 @@ class FakeCore:
 
     def __init__(self, *, interrupt_after: int | None = None):
         self.measured: list[str] = []
+        self.corrections: list = []
         self.interrupt_after = interrupt_after
 
     def measure_pair(self, image, *, settings):
@@ -146,7 +147,8 @@ class FakeCore:
     def _direction(p):
         return math.degrees(math.atan2(-(p.y2 - p.y1), p.x2 - p.x1))
 
-    def sequence_angles(self, reference, pairs):
+    def sequence_angles(self, reference, pairs, *, correction=None):
+        self.corrections.append(correction)
         ref = self._direction(reference)
         return [None if p is None else FakeAngle(self._direction(p) - ref, 0.01)
                 for p in pairs]

@@ -222,8 +222,12 @@ def _relative_message(message: str, absolute: Path, relative: str) -> str:
     return message.replace(str(absolute), relative)
 
 
-def _angles(session: Session, entries: list[dict]) -> list[tuple[float, float, str]]:
-    """Per row: (angle_deg, angle_std_deg, failure message or "")."""
+def _angles(session: Session, entries: list[dict], correction=None) -> list[tuple[float, float, str]]:
+    """Per row: (angle_deg, angle_std_deg, failure message or "").
+
+    The cache holds image-space marker pairs; the plane correction (if any) is
+    applied here, so changing it re-measures nothing.
+    """
     from ..angle import sequence_angles
     from ..pair import PairMeasurement
 
@@ -244,7 +248,7 @@ def _angles(session: Session, entries: list[dict]) -> list[tuple[float, float, s
                 out[i] = (math.nan, math.nan, entries[i].get("message") or why)
             continue
         try:
-            angles = sequence_angles(pairs[idx.index(ref)], pairs)
+            angles = sequence_angles(pairs[idx.index(ref)], pairs, correction=correction)
         except VisionTorsionError as exc:
             angles = [None] * len(idx)
             reason = f"angles of orientation {orientation:g} failed: {exc}"
@@ -258,11 +262,11 @@ def _angles(session: Session, entries: list[dict]) -> list[tuple[float, float, s
     return out
 
 
-def _table(session: Session, entries: list[dict]) -> pd.DataFrame:
+def _table(session: Session, entries: list[dict], correction=None) -> pd.DataFrame:
     manifest = session.manifest
     keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
     records = []
-    for row, (angle, angle_std, why) in zip(manifest.rows, _angles(session, entries)):
+    for row, (angle, angle_std, why) in zip(manifest.rows, _angles(session, entries, correction)):
         torque = session.torque(row)
         rec = {c: v for c, v in row.fields if c in keep}
         rec.update(torque_nm=torque.torque_nm, torque_std_nm=torque.torque_std_nm,
@@ -313,6 +317,10 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs is not None and jobs < 1:
         raise SessionError(f"jobs must be >= 1, got {jobs}")
     settings = session.settings
+    # a bad correction file is unusable input: say so before measuring anything
+    from ..calibration.correction import load_correction
+
+    correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
     key = _settings_key(settings)
     cache_dir = str(out / ".cache")
@@ -323,7 +331,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     for text, source in _run_tasks(tasks, jobs=jobs, progress=progress):
         entries.append(json.loads(text))
         sources.append(source)
-    table = _table(session, entries)
+    table = _table(session, entries, correction)
     path = write_csv(out / MEASUREMENTS_NAME, table)
     failed = table[table["status"] == "failed"]
     failures = tuple(zip(failed["image"], failed["message"]))
