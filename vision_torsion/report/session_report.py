@@ -44,6 +44,11 @@ class SessionReport:
     n_issues: int
 
 
+def _g6(x: float) -> float:
+    """Six significant digits: 0.019620000000000002 is 0.01962 in a report."""
+    return float(f"{x:.6g}")
+
+
 def _conditions(session, n_images: int, n_failed: int) -> dict:
     rig, proto = session.config.rig, session.config.protocol
     return {
@@ -51,10 +56,10 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
         "arm radius r (m)": rig.arm_radius_m,
         "gravity g (m/s²)": rig.gravity_m_per_s2,
         "mass per weight piece (kg)": proto.step_mass_kg,
-        "mass standard uncertainty per piece (kg)": rig.mass_std_kg,
+        "mass standard uncertainty per piece (kg)": _g6(rig.mass_std_kg),
         "pulley friction torque std (N·m)": rig.friction_torque_std_nm,
-        "torque per step, 2·m·g·r (N·m)": 2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m,
-        "maximum torque (N·m)": proto.max_torque_nm,
+        "torque per step, 2·m·g·r (N·m)": _g6(2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m),
+        "maximum torque (N·m)": _g6(proto.max_torque_nm),
         "flexspline orientations (deg)": list(proto.orientations_deg),
         "cycles per orientation": proto.cycles,
         "angle sign": session.config.angle_sign,
@@ -65,22 +70,34 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
     }
 
 
+_STIFFNESS_TITLE = "Stiffness curve (loading branches)"
+
+
 def _stiffness_section(measurements: pd.DataFrame):
-    """The stiffness-curve section (issue 7) when the stiffness module can give one."""
-    try:
-        from ..stiffness.analysis import stiffness_section
-    except ImportError:  # the module is optional for the report
-        return None
-    try:
-        return stiffness_section(measurements)
-    except Exception as exc:  # noqa: BLE001 - the section says why instead of failing the report
-        from html import escape
+    """The stiffness-curve section (K(T) = dT/dθ of the loading branches) as (title, html).
 
-        from ..errors import VisionTorsionError
+    When the session cannot give it (too few steps per loading phase), the section
+    says why instead of failing the report.
+    """
+    import html
+    import io
 
-        if not isinstance(exc, VisionTorsionError):
-            raise
-        return ("Stiffness curve and meshing teeth", f"<p>Not computed: {escape(str(exc))}</p>")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from ..errors import VisionTorsionError
+    from ..stiffness.report import stiffness_section
+    from .html import _img
+
+    try:
+        section = stiffness_section(measurements)
+    except VisionTorsionError as exc:
+        return _STIFFNESS_TITLE, f"<p>Not computed: {html.escape(str(exc))}</p>"
+    parts = [f"<p>{html.escape(p)}</p>" for p in section.markdown.split("\n\n") if p.strip()]
+    for name, fig in section.figures.items():
+        buf = io.BytesIO()
+        FigureCanvasAgg(fig).print_png(buf)
+        parts.append(_img(buf.getvalue(), name.replace("_", " ")))
+    return _STIFFNESS_TITLE, "\n".join(parts)
 
 
 def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progress: bool = False) -> SessionReport:
@@ -115,8 +132,15 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
     measurements = pd.read_csv(result.measurements_path, keep_default_na=False, na_values=[""])
     logger.info("analysing %d measurements", len(measurements))
-    analysis = analyze_session(measurements, max_torque_nm=session.config.protocol.max_torque_nm)
-    extra = [s for s in (_stiffness_section(measurements),) if s is not None]
+    rig, proto = session.config.rig, session.config.protocol
+    analysis = analyze_session(
+        measurements,
+        max_torque_nm=proto.max_torque_nm,
+        rig=dict(step_mass_kg=proto.step_mass_kg, mass_std_kg=rig.mass_std_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
+                 arm_radius_m=rig.arm_radius_m, friction_torque_std_nm=rig.friction_torque_std_nm,
+                 arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
+    )
+    extra = [_stiffness_section(measurements)]
     files = write_report(
         measurements,
         analysis,
