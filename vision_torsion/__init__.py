@@ -1,10 +1,99 @@
-"""vision-torsion: torsional stiffness and hysteresis of precision gears from camera images."""
+"""vision-torsion: torsional stiffness and hysteresis of precision gears from camera images.
 
-__version__ = "0.1.0"
+The public API is listed in ``__all__``. Names are imported on first use (PEP 562),
+so ``import vision_torsion`` stays light and worker processes that only measure
+never load the plotting and analysis stack.
+
+Examples
+--------
+>>> import vision_torsion as vt
+>>> from vision_torsion.synthetic import Scene, render
+>>> scene = Scene()
+>>> res = vt.rotation_angle(render(scene, 0.0, seed=1).image, render(scene, 30.0, seed=2).image)
+>>> bool(abs(res.angle_deg - 30.0) < 0.005)
+True
+"""
+
+from importlib import import_module
 
 from .errors import *  # noqa: F401,F403
 from .errors import __all__ as _errors_all
-from .images import GreyImage, load_image
-from .settings import MeasureSettings
 
-__all__ = [*_errors_all, "GreyImage", "load_image", "MeasureSettings"]
+__version__ = "0.1.0"
+
+# public name -> module that defines it
+_LAZY = {
+    # images and settings
+    "GreyImage": "images",
+    "load_image": "images",
+    "MeasureSettings": "settings",
+    # the measurement core
+    "find_markers": "markers",
+    "Marker": "markers",
+    "fit_circle": "circlefit",
+    "fit_ellipse": "circlefit",
+    "CircleFit": "circlefit",
+    "EllipseFit": "circlefit",
+    "edge_points": "edges",
+    "measure_pair": "pair",
+    "select_pair": "pair",
+    "PairMeasurement": "pair",
+    "rotation_angle": "angle",
+    "pair_angle": "angle",
+    "sequence_angles": "angle",
+    "AngleResult": "angle",
+    "line_direction_deg": "angle",
+    "paper_angle_deg": "angle",
+    "measure_folder": "measure",
+    # sessions
+    "plan_session": "session",
+    "load_session": "session",
+    "process_session": "session",
+    "ProcessResult": "session",
+    "SessionPlan": "session",
+    "Session": "session",
+    "SessionConfig": "session",
+    "couple_torque": "session",
+    "TorqueValue": "session",
+    "PHASES": "session",
+    # hysteresis analysis and the report
+    "analyze_session": "analysis",
+    "SessionAnalysis": "analysis",
+    "bilinear_response": "analysis",
+    "fit_bilinear": "analysis",
+    "fit_bouc_wen": "analysis",
+    "simulate_measurements": "analysis",
+    "write_report": "report",
+    "report_session": "report.session_report",
+    "run_demo": "report.session_report",
+    # calibration
+    "check_accuracy": "calibration",
+    "AccuracyResult": "calibration",
+    "calibrate_plane": "calibration",
+    "calibrate_from_target": "calibration",
+    "PlaneCorrection": "calibration",
+    "load_correction": "calibration",
+    # stiffness curve and meshing teeth
+    "analyze_stiffness_curve": "stiffness",
+    "StiffnessResult": "stiffness",
+    "RigConstants": "stiffness",
+    "load_rig": "stiffness",
+    "meshing_pairs": "stiffness",
+    "wrap_angle_rad": "stiffness",
+    "synthetic_encoder_record": "stiffness",
+}
+
+__all__ = [*_errors_all, *_LAZY]
+
+
+def __getattr__(name):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'vision_torsion' has no attribute {name!r}")
+    value = getattr(import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
