@@ -207,3 +207,37 @@ def test_render_refuses_a_rotation_that_leaves_the_frame():
     scene = Scene().replace(markers={"distance_px": 480.0})
     with pytest.raises(SceneError, match="marker 1 at rotation 90° lies outside the 1400x1000 frame"):
         render(scene, 90.0)
+
+
+def test_session_table_errors(tmp_path, scene_file):
+    from vision_torsion.synthetic.session import load_session_scene
+
+    text = scene_file("paper_session").read_text()
+    cases = {
+        "k_u_nm_per_rad = 4.4": ('k_u_nm_per_rad = "stiff"', r"\[session\] k_u_nm_per_rad must be a number"),
+        "cycles = 1": ("cycles = 1.5", r"\[session\] cycles must be an integer"),
+        "angle_sign = -1": ("angle_sign = 2", r"\[session\] angle_sign must be 1 or -1"),
+        "tau_c_nm = 0.15": ("tau_c_nm = 0.15\ncolour = 1", r"\[session\] unknown field\(s\) \['colour'\]"),
+        "step_mass_kg = 0.02": ("step_mass_kg = 0.0", r"\[session\] step_mass_kg must be positive"),
+    }
+    for old, (new, message) in cases.items():
+        path = tmp_path / "s.toml"
+        path.write_text(text.replace(old, new))
+        with pytest.raises(SceneError, match=message):
+            load_session_scene(path)
+
+
+def test_session_truth_follows_the_bilinear_model():
+    """True angles of a planned session are the model's, relative to the reference."""
+    from vision_torsion.analysis.models import bilinear_response
+    from vision_torsion.synthetic.session import SessionSpec, session_truth
+
+    spec = SessionSpec(mass_tolerance_kg=0.0, orientations_deg=(0.0,))
+    rows = [{"image": f"i{k}.png", "orientation_deg": "0", "cycle": "1", "phase": ph, "step": "0", "mass_kg": m}
+            for k, (ph, m) in enumerate([("reference", "0"), ("positive_unloading", "0.36"), ("positive_unloading", "0"),
+                                         ("negative_loading", "0.36"), ("negative_unloading", "0"), ("positive_loading", "0.36")])]
+    truth, _ = session_truth(spec, rows, seed=0)
+    tau = 2 * truth["true_torque_nm"].to_numpy() / 2
+    expect = np.degrees(bilinear_response(tau, k_u=4.4, k_l=0.3, tau_c=0.15))
+    np.testing.assert_allclose(truth["true_angle_deg"], expect - expect[0], atol=1e-9)
+    assert truth["true_torque_nm"].iloc[1] == pytest.approx(2 * 0.36 * 9.81 * 0.05)

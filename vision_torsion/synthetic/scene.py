@@ -219,6 +219,21 @@ def _coerce(section: str, name: str, value, default, where: str):
     return value
 
 
+def table_to_dataclass(cls, table: dict, *, section: str, prefix: str = ""):
+    """Build the dataclass `cls` from a TOML table, each field typed like its default.
+
+    Raises
+    ------
+    SceneError
+        An unknown field or a wrong-typed value, naming ``[section] field``.
+    """
+    defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+    extra = set(table) - set(defaults)
+    if extra:
+        raise SceneError(f"{prefix}[{section}] unknown field(s) {sorted(extra)}; known: {sorted(defaults)}")
+    return cls(**{k: _coerce(section, k, v, defaults[k], prefix) for k, v in table.items()})
+
+
 def scene_from_dict(data: dict, *, where: str = "", name: str = "scene") -> Scene:
     """Build and validate a :class:`Scene` from a nested dict (as read from TOML).
 
@@ -249,14 +264,7 @@ def scene_from_dict(data: dict, *, where: str = "", name: str = "scene") -> Scen
         for req in _REQUIRED.get(section, ()):
             if req not in table:
                 raise SceneError(f"{prefix}[{section}] {req} is missing (required)")
-        defaults = {f.name: f.default for f in dataclasses.fields(cls)}
-        extra = set(table) - set(defaults)
-        if extra:
-            raise SceneError(
-                f"{prefix}[{section}] unknown field(s) {sorted(extra)}; known: {sorted(defaults)}"
-            )
-        values = {k: _coerce(section, k, v, defaults[k], prefix) for k, v in table.items()}
-        parts[section] = cls(**values)
+        parts[section] = table_to_dataclass(cls, table, section=section, prefix=prefix)
     scene = Scene(**parts, name=str(data.get("name", name)))
     validate_scene(scene, where=where)
     return scene

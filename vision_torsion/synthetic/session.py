@@ -37,7 +37,7 @@ from ..errors import SceneError
 from ..fileio import write_csv, write_json
 from .folders import truth_row, write_rendered
 from .render import render
-from .scene import Scene, check_markers_in_frame, scene_from_dict
+from .scene import Scene, check_markers_in_frame, scene_from_dict, table_to_dataclass
 
 __all__ = ["SessionSpec", "load_session_scene", "write_session_folder", "session_truth"]
 
@@ -67,26 +67,7 @@ class SessionSpec:
 
 
 def _spec_from_dict(table: dict, where: str) -> SessionSpec:
-    defaults = {f.name: f.default for f in dataclasses.fields(SessionSpec)}
-    extra = set(table) - set(defaults)
-    if extra:
-        raise SceneError(f"{where}: [session] unknown field(s) {sorted(extra)}; known: {sorted(defaults)}")
-    values = {}
-    for k, v in table.items():
-        d = defaults[k]
-        if isinstance(d, tuple):
-            if not isinstance(v, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                raise SceneError(f"{where}: [session] {k} must be a list of numbers, got {v!r}")
-            values[k] = tuple(float(x) for x in v)
-        elif isinstance(d, int):
-            if isinstance(v, bool) or not isinstance(v, int):
-                raise SceneError(f"{where}: [session] {k} must be an integer, got {v!r}")
-            values[k] = v
-        else:
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise SceneError(f"{where}: [session] {k} must be a number, got {v!r}")
-            values[k] = float(v)
-    spec = SessionSpec(**values)
+    spec = table_to_dataclass(SessionSpec, table, section="session", prefix=f"{where}: ")
     for k in ("k_u_nm_per_rad", "k_l_nm_per_rad", "max_torque_nm", "step_mass_kg", "arm_radius_m", "gravity_m_per_s2"):
         if not getattr(spec, k) > 0:
             raise SceneError(f"{where}: [session] {k} must be positive, got {getattr(spec, k)}")
