@@ -268,14 +268,20 @@ def check_targets(results: dict, scene_meta) -> list[dict]:
             continue
         s = results[stem]["methods"]
         ours = s["ours_default"]
-        others = {k: v for k, v in s.items() if k != "ours_default" and np.isfinite(v["rms_deg"])}
-        best = min(others.items(), key=lambda kv: kv[1]["rms_deg"]) if others else None
-        checks.append({
-            "target": f"{stem}: our default the most accurate method",
-            "met": bool(best is None or ours["rms_deg"] <= best[1]["rms_deg"]),
-            "detail": f"ours {ours['rms_deg']:.5f}° ({ours['n_failed']} failed, {ours['n_wrong']} wrong); "
-                      f"best other {best[0]} {best[1]['rms_deg']:.5f}°" if best else "no other method measured",
-        })
+        note = (" (uncorrected tilt: every method carries the same bias, so the order is not about noise)"
+                if stem == "tilted" else "")
+        for scope, keep in (("method", lambda k: True), ("method but the ML reference", lambda k: k != "ml_disc")):
+            others = {k: v for k, v in s.items()
+                      if k != "ours_default" and keep(k) and np.isfinite(v["rms_deg"])}
+            best = min(others.items(), key=lambda kv: kv[1]["rms_deg"]) if others else None
+            checks.append({
+                "target": f"{stem}: our default more accurate than every other {scope}",
+                "met": bool(best is None or (ours["rms_deg"] <= best[1]["rms_deg"] and not ours["n_failed"])),
+                "detail": (f"ours {ours['rms_deg']:.5f}° ({ours['n_failed']} failed, {ours['n_wrong']} wrong); "
+                           f"best other {best[0]} {best[1]['rms_deg']:.5f}° "
+                           f"(ours / best = {ours['rms_deg'] / best[1]['rms_deg']:.2f})" + note)
+                if best else "no other method measured",
+            })
         if crb_target:
             checks.append({
                 "target": f"{stem}: our default within 1.5x the Cramér-Rao bound",

@@ -17,7 +17,8 @@ reference into a temporary folder, then measures
    and ``pair_angle``). The stages are timed by wrapping the functions
    ``vision_torsion.markers`` calls, in this process only; the uninstrumented
    per-image processing time (everything but decoding) is measured separately and
-   is the number the ≤ 10 ms target is about.
+   is the number the ≤ 10 ms target is about (wall and CPU time: on a shared
+   machine the CPU time is the better estimate of the time on an idle core).
 2. whole-folder throughput with ``ProcessPoolExecutor`` on 1 and 2 worker processes:
    decode only, and decode + measure + angle against the reference; the ratio
    tells how close the folder run is to being bound by decoding.
@@ -126,7 +127,7 @@ def stage_times(ref: Path, paths, repeats: int = 1) -> dict:
 
     ref_pair = measure_pair(load_image(ref))
     per = {k: [] for k in ("decode", "detection", "start", "edges", "fit", "rest", "angle", "sum_of_stages")}
-    process = []
+    process, process_cpu = [], []
     for p in paths:  # warm-up of caches and lazy imports
         measure_pair(load_image(p))
         break
@@ -134,9 +135,10 @@ def stage_times(ref: Path, paths, repeats: int = 1) -> dict:
         for p in paths:
             t0 = time.perf_counter()
             img = load_image(p)
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), time.process_time()
             pair_angle(ref_pair, measure_pair(img))
             process.append(time.perf_counter() - t1)
+            process_cpu.append(time.process_time() - c1)
 
             timers = _Timers()
             try:
@@ -158,6 +160,7 @@ def stage_times(ref: Path, paths, repeats: int = 1) -> dict:
     out["processing_excl_decode_median"] = 1e3 * float(np.median(process))
     out["processing_excl_decode_mean"] = 1e3 * float(np.mean(process))
     out["processing_excl_decode_p90"] = 1e3 * float(np.percentile(process, 90))
+    out["processing_excl_decode_cpu_median"] = 1e3 * float(np.median(process_cpu))
     out["n_images"] = len(process)
     return out
 
@@ -229,10 +232,13 @@ def main(argv=None) -> int:
                      ("edges", "edges"), ("fit", "circle fit"), ("rest", "rest (judging, table)"),
                      ("angle", "pair selection + angle")):
         print(f"| {label} | {stages[k]:.2f} |")
-    print(f"| **processing excluding decoding** (uninstrumented) | **{stages['processing_excl_decode_median']:.2f}** "
+    print(f"| **processing excluding decoding** (uninstrumented, wall) | **{stages['processing_excl_decode_median']:.2f}** "
           f"(mean {stages['processing_excl_decode_mean']:.2f}, p90 {stages['processing_excl_decode_p90']:.2f}) |")
-    verdict = "met" if stages["processing_excl_decode_median"] <= 10 else "MISSED"
-    print(f"\n[{verdict}] processing excluding decoding <= 10 ms per image on one core (median)")
+    print(f"| processing excluding decoding, CPU time | {stages['processing_excl_decode_cpu_median']:.2f} |")
+    for key, what in (("processing_excl_decode_median", "wall"), ("processing_excl_decode_cpu_median", "CPU")):
+        verdict = "met" if stages[key] <= 10 else "MISSED"
+        print(f"[{verdict}] processing excluding decoding <= 10 ms per image on one core ({what} time, median): "
+              f"{stages[key]:.2f} ms")
     print("\nFolder throughput (ProcessPoolExecutor):")
     print("| workers | decode only (ms/img) | decode + measure + angle (ms/img) | images/s | measure ÷ decode |")
     print("|---:|---:|---:|---:|---:|")
@@ -251,7 +257,8 @@ def main(argv=None) -> int:
             "scene": "synthetic/standard.toml",
             "stages_ms_median": stages,
             "target_processing_ms": 10.0,
-            "target_met": stages["processing_excl_decode_median"] <= 10,
+            "target_met_wall": stages["processing_excl_decode_median"] <= 10,
+            "target_met_cpu": stages["processing_excl_decode_cpu_median"] <= 10,
             "throughput": runs,
         })
         print(f"wrote {RESULTS / 'stages.json'}")

@@ -40,8 +40,8 @@ Peers
     is the paper's chain (pixel-level edges, least-squares circle) with library parts.
 ``ml_disc``
     Maximum-likelihood (least-squares, i.e. ML under Gaussian pixel noise) fit of a
-    blurred-disc model to every pixel of a window of half-size r + 4σ + 5 px around
-    each blob: ``L(p)·(B + (F − B)·P(p))`` with ``P`` the exact convolution of a disc
+    blurred-disc model to every pixel of a square window of half-size r + 11 px
+    around each blob (started from the Otsu blob, as the moments peer): ``L(p)·(B + (F − B)·P(p))`` with ``P`` the exact convolution of a disc
     (centre, radius r) with an isotropic Gaussian of width σ — the non-central χ²
     distribution function, ``scipy.special.chndtr`` — and ``L = 1 + gx·x + gy·y`` a
     lighting plane. Eight parameters (cx, cy, r, σ, B, F, gx, gy), analytic
