@@ -48,8 +48,9 @@ def square_halfplane_fraction(t, nx, ny, side=1.0):
     --------
     >>> float(square_halfplane_fraction(0.0, 1.0, 0.0))
     0.5
+    >>> # at 45° the density is a triangle: 1 - (sqrt(0.5) - 0.25)**2 = 0.791053
     >>> round(float(square_halfplane_fraction(0.25, np.sqrt(0.5), np.sqrt(0.5))), 6)
-    0.75
+    0.791053
     """
     t = np.asarray(t, dtype=np.float64)
     ax, ay = np.abs(nx), np.abs(ny)
