@@ -21,7 +21,9 @@ reference into a temporary folder, then measures
    machine the CPU time is the better estimate of the time on an idle core).
 2. whole-folder throughput with ``ProcessPoolExecutor`` on 1 and 2 worker processes:
    decode only, and decode + measure + angle against the reference; the ratio
-   tells how close the folder run is to being bound by decoding.
+   tells how close the folder run is to being bound by decoding;
+3. a CPU scaling check (pure CPU work on 1 and 2 processes) that says whether two
+   cores were really free during the run.
 
 Results are printed and written to ``benchmarks/results/stages.json`` with the date
 and the machine.
@@ -192,6 +194,28 @@ def _measure(path):
     return pair_angle(_REF, measure_pair(load_image(path))).angle_deg
 
 
+def _spin(n):
+    """Pure CPU work (no I/O, no shared memory) for the scaling check."""
+    x = np.random.default_rng(n).standard_normal(200_000)
+    for _ in range(40):
+        x = np.sin(x) + 0.5 * x
+    return float(x.sum())
+
+
+def cpu_scaling() -> float:
+    """Wall-time speed-up of 2 processes over 1 on pure CPU work: ~2 on two free
+    cores, ~1 when other work holds one of them. Tells how far the 2-worker
+    throughput below can be trusted."""
+    walls = {}
+    for jobs in (1, 2):
+        with ProcessPoolExecutor(jobs, initializer=one_core) as pool:
+            list(pool.map(_spin, range(jobs)))
+            t0 = time.perf_counter()
+            list(pool.map(_spin, range(8)))
+            walls[jobs] = time.perf_counter() - t0
+    return walls[1] / walls[2]
+
+
 def throughput(ref: Path, paths, jobs: int) -> dict:
     """Wall seconds for the folder with `jobs` worker processes: decode only, and measure."""
     out = {"jobs": jobs, "n_images": len(paths)}
@@ -225,6 +249,7 @@ def main(argv=None) -> int:
         ref, paths = make_folder(Path(tmp), n, jobs=2)
         stages = stage_times(ref, paths)
         runs = [throughput(ref, paths, jobs) for jobs in (1, 2)]
+        scaling = cpu_scaling()
 
     print("\nPer image, one core (median ms):")
     print("| Stage | ms |\n|---|---:|")
@@ -245,8 +270,10 @@ def main(argv=None) -> int:
     for r in runs:
         print(f"| {r['jobs']} | {r['decode_only_ms_per_image']:.2f} | {r['measure_ms_per_image']:.2f} | "
               f"{r['measure_images_per_s']:.0f} | {r['measure_over_decode']:.1f} |")
+    print(f"\nCPU scaling check: 2 processes do pure CPU work {scaling:.2f}x as fast as 1 "
+          f"(2.0 = two free cores; lower = the machine is shared)")
     load_end = [round(x, 2) for x in os.getloadavg()]
-    print(f"\nload average at the end {load_end}")
+    print(f"load average at the end {load_end}")
     if write:
         RESULTS.mkdir(parents=True, exist_ok=True)
         write_json(RESULTS / "stages.json", {
@@ -260,6 +287,7 @@ def main(argv=None) -> int:
             "target_met_wall": stages["processing_excl_decode_median"] <= 10,
             "target_met_cpu": stages["processing_excl_decode_cpu_median"] <= 10,
             "throughput": runs,
+            "cpu_scaling_2_over_1": scaling,
         })
         print(f"wrote {RESULTS / 'stages.json'}")
     return 0
