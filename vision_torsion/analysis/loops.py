@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import AnalysisError
-from .uncertainty import torque_groups
+from .uncertainty import compact_sources, torque_sources
 
 __all__ = ["PHASES", "LOOP_PHASES", "REQUIRED_COLUMNS", "validate_measurements", "Loop", "build_loops"]
 
@@ -111,8 +111,10 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
 class Loop:
     """Samples of one orientation and cycle, in acquisition order.
 
-    Arrays are in N·m and **radians**. ``groups`` indexes the shared torque error of
-    each sample (see :mod:`.uncertainty`), ``group_std`` its 1σ.
+    Arrays are in N·m and **radians**. ``groups`` indexes the samples of the same
+    nominal torque (session-wide), ``torque_sources`` is the loading matrix ``L`` of
+    the torque errors of these samples (``δτ = L·ξ``, N·m per unit source; see
+    :mod:`.uncertainty`), restricted to the sources that touch this loop.
     """
 
     orientation_deg: float
@@ -124,42 +126,58 @@ class Loop:
     angle_std_rad: np.ndarray
     groups: np.ndarray
     images: np.ndarray
+    torque_sources: np.ndarray | None = None
+
+    def sources(self) -> np.ndarray:
+        """``torque_sources``, or the ``"level"`` matrix from ``groups`` and ``torque_std_nm``."""
+        if self.torque_sources is not None:
+            return self.torque_sources
+        from .uncertainty import group_sources
+
+        return compact_sources(group_sources(self.groups, self.torque_std_nm))
 
     def phase_counts(self) -> dict:
         """Number of usable samples in each of the four phases."""
         return {p: int(np.sum(self.phase == p)) for p in LOOP_PHASES}
 
     def runs(self):
-        """Merged descending and ascending runs: ``(tau, theta, theta_std, tau_std, groups, is_desc)``.
+        """Merged descending and ascending runs: ``(tau, theta, theta_std, tau_std, groups, is_desc, sources)``.
 
         The descending run comes first, sorted by decreasing torque; the ascending run
         follows, sorted by increasing torque. Samples of the same torque group inside a
-        run are averaged (angle std divided by sqrt(count)).
+        run are averaged (angle std divided by sqrt(count)); ``sources`` (merged
+        samples × torque sources) is the same average of the rows of
+        :meth:`sources`, so merged samples keep their torque correlations.
         """
+        src = self.sources()
         out = []
         for phases, descending in ((LOOP_PHASES[:2], True), (LOOP_PHASES[2:], False)):
             m = np.isin(self.phase, phases)
             g = self.groups[m]
             uniq, inv = np.unique(g, return_inverse=True)
-            cnt = np.bincount(inv).astype(float)
+            cnt = np.bincount(inv, minlength=uniq.size).astype(float)
             tau = np.bincount(inv, self.torque_nm[m]) / cnt
             th = np.bincount(inv, self.angle_rad[m]) / cnt
             var = np.bincount(inv, self.angle_std_rad[m] ** 2) / cnt**2
             tstd = np.zeros(uniq.size)
             np.maximum.at(tstd, inv, self.torque_std_nm[m])
+            avg = np.zeros((uniq.size, int(m.sum())))
+            avg[inv, np.arange(inv.size)] = 1.0 / cnt[inv]
+            srcs = avg @ src[m]
             order = np.argsort(-tau if descending else tau, kind="stable")
             out.append((tau[order], th[order], np.sqrt(var[order]), tstd[order], uniq[order],
-                        np.full(order.size, descending)))
+                        np.full(order.size, descending), srcs[order]))
         return tuple(np.concatenate(parts) for parts in zip(*out))
 
 
-def build_loops(usable: pd.DataFrame, *, torque_correlation="level") -> list[Loop]:
+def build_loops(usable: pd.DataFrame, *, torque_correlation="level", rig=None) -> list[Loop]:
     """Group usable rows into :class:`Loop` objects, one per (orientation, cycle).
 
-    Torque groups are formed over the whole session, so a level shares its error
-    across orientations and cycles (see :mod:`.uncertainty`).
+    Torque groups and sources are formed over the whole session, so a level (or a
+    weight piece) shares its error across orientations and cycles (see
+    :mod:`.uncertainty`, :func:`.uncertainty.torque_sources`).
     """
-    groups = torque_groups(usable["torque_nm"].to_numpy(), correlation=torque_correlation)
+    sources, groups = torque_sources(usable, correlation=torque_correlation, rig=rig)
     loops = []
     for (orient, cycle), idx in usable.groupby(["orientation_deg", "cycle"], sort=True).indices.items():
         sub = usable.iloc[idx]
@@ -172,5 +190,6 @@ def build_loops(usable: pd.DataFrame, *, torque_correlation="level") -> list[Loo
             angle_std_rad=np.radians(sub["angle_std_deg"].to_numpy(float)),
             groups=groups[idx],
             images=sub["image"].astype(str).to_numpy(dtype=object),
+            torque_sources=compact_sources(sources[idx]),
         ))
     return loops

@@ -46,6 +46,7 @@ from .uncertainty import (
     numeric_jacobian,
     parameter_stds,
     torque_jacobian,
+    torque_source_jacobian,
 )
 
 __all__ = [
@@ -181,7 +182,7 @@ def loss_factor(energy_j, torque_top_nm, angle_top_rad, torque_bottom_nm, angle_
         return np.where(u > 0, np.asarray(energy_j) / (2 * np.pi * u), np.nan)
 
 
-def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_points=3):
+def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, torque_sources=None, min_points=3):
     """Least-squares stiffness dτ/dθ of one phase, N·m/rad, with its uncertainty.
 
     Parameters
@@ -189,8 +190,11 @@ def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_p
     torque_nm, angle_rad : array_like (n,)
         Samples of the phase (N·m, rad).
     angle_std_rad, torque_std_nm : array_like (n,)
-        1σ per sample; torque errors are taken independent inside one phase (each
-        torque level occurs once in a phase).
+        1σ per sample; without ``torque_sources`` torque errors are taken independent
+        inside one phase (each torque level occurs once in a phase).
+    torque_sources : array_like (n, m), optional
+        Loading matrix ``L`` of correlated torque errors (``δτ = L·ξ``, N·m per unit
+        source, :func:`.uncertainty.torque_sources`); used for the torque part.
     min_points : int
         Fewest samples accepted (3: two for a line, one to check it).
 
@@ -224,8 +228,13 @@ def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_p
     if not b > 0:
         raise AnalysisError(f"angle does not increase with torque within the phase (slope {b:.3g} rad/(N·m))")
     resid = th - x @ coef
-    # torque errors enter as −b·δτ in the residual: Jacobian d(model)/d(τ_i) = b
-    cov_a, cov_t = linearised_covariance(x, w, sa**2, np.diag(np.full(tau.size, b)), st**2)
+    # torque errors enter as −b·δτ in the residual: Jacobian d(model)/d(τ_i) = b, so
+    # with δτ = L·ξ the Jacobian per unit source is b·L (cov_t = G·b²·L·Lᵀ·Gᵀ)
+    if torque_sources is None:
+        cov_a, cov_t = linearised_covariance(x, w, sa**2, np.diag(np.full(tau.size, b)), st**2)
+    else:
+        src = np.asarray(torque_sources, float).reshape(tau.size, -1)
+        cov_a, cov_t = linearised_covariance(x, w, sa**2, b * src, np.ones(src.shape[1]))
     k = 1.0 / b
     return {
         "value": k,
@@ -244,7 +253,8 @@ def _hinge_columns(x, t1, t2):
     return np.column_stack([np.minimum(x, t1), np.clip(x - t1, 0.0, t2 - t1), np.maximum(x - t2, 0.0)])
 
 
-def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm=None, groups=None):
+def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm=None, groups=None,
+                      torque_sources=None):
     """Three-segment stiffness K1, K2, K3 and break torques T1 < T2 of the loading branches.
 
     Parameters
@@ -260,6 +270,9 @@ def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std
         1σ per sample.
     groups : array_like of int, optional
         Shared torque error index per sample.
+    torque_sources : array_like (n, m), optional
+        Loading matrix of correlated torque errors (N·m per unit source); replaces
+        ``torque_std_nm``/``groups`` for the torque part when given.
 
     Returns
     -------
@@ -337,9 +350,14 @@ def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std
     p = np.concatenate([coef, [t1, t2]])
     r = y - model(p)
     jac = numeric_jacobian(model, p, np.concatenate([[1e-7, 1e-7], np.abs(coef[2:]) * 1e-6, [levels[-1] * 1e-7] * 2]))
-    g_var = np.zeros(int(g_all.max()) + 1)
-    np.maximum.at(g_var, g_all, st**2)
-    jac_tau = torque_jacobian(lambda t: model(p, t), tau, g_all)
+    if torque_sources is None:
+        g_var = np.zeros(int(g_all.max()) + 1)
+        np.maximum.at(g_var, g_all, st**2)
+        jac_tau = torque_jacobian(lambda t: model(p, t), tau, g_all)
+    else:
+        src = np.asarray(torque_sources, float).reshape(tau.size, -1)
+        jac_tau = torque_source_jacobian(lambda t: model(p, t), tau, src)
+        g_var = np.ones(src.shape[1])
     try:
         cov_a, cov_t = linearised_covariance(jac, w, s_all**2, jac_tau, g_var)
     except np.linalg.LinAlgError:

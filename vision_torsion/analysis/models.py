@@ -76,7 +76,7 @@ from .uncertainty import (
     linearised_covariance,
     numeric_jacobian,
     parameter_stds,
-    torque_jacobian,
+    torque_source_jacobian,
 )
 
 __all__ = [
@@ -236,7 +236,7 @@ def _reduced_chi2(resid: np.ndarray, angle_std: np.ndarray, n_params: int) -> fl
     return float(np.sum((resid / angle_std) ** 2) / dof)
 
 
-def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups):
+def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups, torque_sources=None):
     tau = _as_torque(torque_nm)
     th = np.array(angle_rad, dtype=float, copy=True).reshape(-1)
     if th.shape != tau.shape:
@@ -244,15 +244,28 @@ def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_group
     if not np.all(np.isfinite(th)):
         raise AnalysisError("angle sequence contains a non-finite value (NaN or inf)")
     sa = np.zeros_like(tau) if angle_std_rad is None else np.broadcast_to(np.asarray(angle_std_rad, float), tau.shape).copy()
+    if torque_sources is not None:
+        src = np.asarray(torque_sources, dtype=float)
+        if src.ndim != 2 or src.shape[0] != tau.size or not np.all(np.isfinite(src)):
+            raise AnalysisError(f"torque_sources must be a finite (n_samples, n_sources) array with n_samples = {tau.size}")
+        return tau, th, sa, src
     st = np.zeros_like(tau) if torque_std_nm is None else np.broadcast_to(np.asarray(torque_std_nm, float), tau.shape).copy()
     groups = np.arange(tau.size) if torque_groups is None else np.asarray(torque_groups, dtype=int).reshape(-1)
     if groups.shape != tau.shape:
         raise AnalysisError("torque_groups must give one group index per sample")
-    # one standard deviation per group (the largest, if rows disagree)
+    # one standard deviation per group (the largest, if rows disagree), as a loading matrix
     n_groups = int(groups.max()) + 1
-    group_var = np.zeros(n_groups)
-    np.maximum.at(group_var, groups, st**2)
-    return tau, th, sa, groups, group_var
+    group_std = np.zeros(n_groups)
+    np.maximum.at(group_std, groups, st)
+    src = np.zeros((tau.size, n_groups))
+    src[np.arange(tau.size), groups] = group_std[groups]
+    return tau, th, sa, src
+
+
+def _torque_covariance(model, jac, w, sa, tau, sources):
+    """First-order angle and torque covariance of a fit (module :mod:`.uncertainty`)."""
+    jac_src = torque_source_jacobian(model, tau, sources)
+    return linearised_covariance(jac, w, sa**2, jac_src, np.ones(jac_src.shape[1]))
 
 
 # ---------------------------------------------------------------------------------
@@ -307,7 +320,7 @@ def _bilinear_linear_solve(un, lo, th, w):
 
 
 def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None,
-                 torque_groups=None, n_grid=400) -> BilinearFit:
+                 torque_groups=None, torque_sources=None, n_grid=400) -> BilinearFit:
     """Fit the bilinear stiffness-switching model to a torque–angle sequence.
 
     Parameters
@@ -319,6 +332,11 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     torque_groups : array_like of int, optional
         Samples sharing a group index share one torque error (the same weights on the
         pans); default: independent torque errors.
+    torque_sources : array_like, shape (n, m), optional
+        Loading matrix ``L`` of correlated torque errors, ``δτ = L·ξ`` with
+        independent unit sources (N·m per source; e.g. the weight pieces, see
+        :func:`.uncertainty.torque_sources`). Replaces ``torque_std_nm`` and
+        ``torque_groups`` when given.
     n_grid : int, optional
         Number of τ_c candidates for the profile search before refinement.
 
@@ -338,9 +356,12 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     found by profiling the weighted sum of squares over a grid and refining with a
     bounded scalar minimisation; the linear parameters are then exact. Uncertainties
     are first-order (Jacobian) propagation of the angle and torque uncertainties
-    through this weighted least-squares estimate.
+    through this weighted least-squares estimate: with ``G = (JᵀWJ)⁻¹JᵀW``,
+    ``cov = G·diag(σθ²)·Gᵀ + (G·J_τ·L)(G·J_τ·L)ᵀ``, so correlated torque errors
+    (``cov(δτ) = L·Lᵀ``) are propagated with all their correlations.
     """
-    tau, th, sa, groups, group_var = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups)
+    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
+                                       torque_sources)
     if tau.size < 6:
         raise AnalysisError(f"bilinear fit needs at least 6 samples, got {tau.size}")
     if not (tau.max() > 0 and tau.min() < 0):
@@ -380,9 +401,8 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     p = np.array([theta0, c_u, c_l, tc])
     r = th - model(p)
     jac = numeric_jacobian(model, p, np.array([1e-6, c_u * 1e-6, c_l * 1e-6, amp * 1e-7]))
-    jac_tau = torque_jacobian(lambda t: model(p, t), tau, groups)
     try:
-        cov_a, cov_t = linearised_covariance(jac, w, sa**2, jac_tau, group_var)
+        cov_a, cov_t = _torque_covariance(lambda t: model(p, t), jac, w, sa, tau, sources)
     except np.linalg.LinAlgError:
         raise AnalysisError("bilinear fit: the parameters are not identified (singular normal matrix)") from None
     # compliance -> stiffness: k = 1/c, dk = dc/c²
@@ -572,14 +592,14 @@ def _bw_unpack(q):
 
 
 def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None, torque_groups=None,
-                 initial=None) -> BoucWenFit:
+                 torque_sources=None, initial=None) -> BoucWenFit:
     """Fit the torque-driven Bouc–Wen model to a loop (periodic start).
 
     Parameters
     ----------
     torque_nm, angle_rad : array_like
         Samples in acquisition order (N·m, rad).
-    angle_std_rad, torque_std_nm, torque_groups : optional
+    angle_std_rad, torque_std_nm, torque_groups, torque_sources : optional
         As in :func:`fit_bilinear`.
     initial : dict, optional
         Starting values ``k_e``, ``z_s``, ``a``, ``rho``, ``n``, ``theta0``. By default
@@ -602,7 +622,8 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     positive parameters, started from a small set of sharpness/exponent guesses; the
     best is kept. Uncertainties: first-order propagation as in :func:`fit_bilinear`.
     """
-    tau, th, sa, groups, group_var = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups)
+    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
+                                       torque_sources)
     if tau.size < 8:
         raise AnalysisError(f"Bouc–Wen fit needs at least 8 samples, got {tau.size}")
     if not (tau.max() > 0 and tau.min() < 0):
@@ -641,9 +662,8 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     r = th - model(q)
     steps = np.array([1e-7, 1e-6, 1e-6, 1e-6, 1e-5, 1e-5])
     jac_q = numeric_jacobian(model, q, steps)
-    jac_tau = torque_jacobian(lambda t: model(q, t), tau, groups)
     try:
-        cov_a, cov_t = linearised_covariance(jac_q, w, sa**2, jac_tau, group_var)
+        cov_a, cov_t = _torque_covariance(lambda t: model(q, t), jac_q, w, sa, tau, sources)
     except np.linalg.LinAlgError:
         raise AnalysisError("Bouc–Wen fit: the parameters are not identified (singular normal matrix)") from None
     vals = _bw_unpack(q)

@@ -20,6 +20,10 @@ bilinear_residual_rms               deg           (none: a fit statistic)
 bouc_wen_k_e, bouc_wen_z_s, ...     various       first order (fit)
 ==================================  ============  ====================================
 
+Torque errors follow the weight pieces when the rig is known (``rig=...``,
+``torque_correlation="pieces"``), else one shared error per torque level
+(``"level"``); see :mod:`.uncertainty` for both models and the propagation formulas.
+
 A figure that cannot be computed is NaN in the tables and None in JSON, and an
 :class:`Issue` says which orientation/cycle and why; it is never replaced by 0.
 """
@@ -37,7 +41,7 @@ from . import metrics
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
 from .summary import summarise_figures
-from .uncertainty import COVERAGE_FACTOR, monte_carlo_std
+from .uncertainty import COVERAGE_FACTOR, check_rig, compact_sources, monte_carlo_std, torque_sources
 
 __all__ = ["Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA"]
 
@@ -137,6 +141,7 @@ class SessionAnalysis:
                 "std": "1-sigma standard uncertainty (angle and torque parts in quadrature)",
                 "u95": "expanded uncertainty = coverage_factor * std",
                 "torque_correlation": self.settings.get("torque_correlation"),
+                "rig": self.settings.get("rig"),
                 "monte_carlo_draws": self.settings.get("n_draws"),
                 "seed": self.settings.get("seed"),
             },
@@ -194,7 +199,8 @@ def _phase_figures(col: _Collector, phase_rows: list):
         else:
             try:
                 res = metrics.phase_stiffness(tau, loop.angle_rad[m], angle_std_rad=loop.angle_std_rad[m],
-                                              torque_std_nm=loop.torque_std_nm[m])
+                                              torque_std_nm=loop.torque_std_nm[m],
+                                              torque_sources=loop.sources()[m])
             except AnalysisError as exc:
                 col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
                 res = None
@@ -250,13 +256,13 @@ def _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol):
 
 def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed: int):
     loop = col.loop
-    tau, th, th_std, tau_std, groups, is_desc = loop.runs()
+    tau, th, th_std, tau_std, groups, is_desc, sources = loop.runs()
     top = groups == groups[np.argmax(tau)]
     bottom = groups == groups[np.argmin(tau)]
     tol = _tolerance(tau)
     evaluate = _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol)
     nominal = evaluate(tau[None, :], th[None, :])
-    std_a, std_t = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_std_nm=tau_std, groups=groups,
+    std_a, std_t = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources,
                                    n_draws=settings["n_draws"], seed=seed)
     for name, unit in _MC_FIGURES.items():
         v = float(nominal[name][0])
@@ -268,7 +274,7 @@ def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed
     try:
         seg = metrics.fit_three_segment(tau[seg_mask], th[seg_mask], branch=np.where(is_desc[seg_mask], -1, 1),
                                         angle_std_rad=th_std[seg_mask],
-                                        torque_std_nm=tau_std[seg_mask], groups=groups[seg_mask])
+                                        torque_sources=compact_sources(sources[seg_mask]))
     except AnalysisError as exc:
         for name, unit in (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"), ("t1", "nm"), ("t2", "nm")):
             col.fail(name, unit, str(exc))
@@ -303,7 +309,7 @@ _BW_UNITS = {"k_e": ("nm_per_rad", 1.0), "z_s": ("deg", 180 / math.pi), "a": ("p
 
 def _model_fits(col: _Collector, settings: dict) -> dict:
     loop = col.loop
-    kw = dict(angle_std_rad=loop.angle_std_rad, torque_std_nm=loop.torque_std_nm, torque_groups=_local(loop.groups))
+    kw = dict(angle_std_rad=loop.angle_std_rad, torque_sources=loop.sources())
     out = {"bilinear": None, "bouc_wen": None}
     try:
         bil: BilinearFit = fit_bilinear(loop.torque_nm, loop.angle_rad, **kw)
@@ -334,10 +340,6 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     return out
 
 
-def _local(groups: np.ndarray) -> np.ndarray:
-    return np.unique(groups, return_inverse=True)[1].reshape(-1)
-
-
 def _wide(figures: pd.DataFrame) -> pd.DataFrame:
     if figures.empty:
         return pd.DataFrame(columns=["orientation_deg", "cycle"])
@@ -353,7 +355,38 @@ def _wide(figures: pd.DataFrame) -> pd.DataFrame:
     return wide.reset_index()
 
 
-def analyze_session(measurements, *, max_torque_nm=None, torque_correlation="level",
+def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
+    """Where ``measurements.csv`` disagrees with the rig of the ``"pieces"`` model.
+
+    Checks that each pan load is a whole number of pieces (to 1 %) and that the
+    table's ``torque_std_nm`` is the marginal 1σ of the model (to 5 %; the tables of
+    :func:`vision_torsion.session.torque.couple_torque` agree exactly).
+    """
+    out = []
+    mass = pd.to_numeric(usable["mass_kg"], errors="coerce").to_numpy(float)
+    frac = mass / rig["step_mass_kg"]
+    off = np.abs(frac - np.rint(frac)) > 0.01
+    if off.any():
+        i = int(np.flatnonzero(off)[0])
+        out.append(Issue(None, None, "torque uncertainty",
+                         f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
+                         f"{rig['step_mass_kg']:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
+                         "the 'pieces' torque model counts round(mass_kg / step_mass_kg) pieces"))
+    sources, _ = torque_sources(usable, correlation="pieces", rig=rig)
+    model_std = np.sqrt(np.sum(sources**2, axis=1))
+    table_std = usable["torque_std_nm"].to_numpy(float)
+    scale = max(float(np.max(model_std)), float(np.max(table_std)), 1e-300)
+    bad = np.abs(table_std - model_std) > 0.05 * np.maximum(model_std, table_std) + 1e-9 * scale
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        out.append(Issue(None, None, "torque uncertainty",
+                         f"torque_std_nm of {int(bad.sum())} image(s) differs from the rig's weight-piece model "
+                         f"(first: {usable['image'].iloc[i]}, table {table_std[i]:.3g} N·m, model "
+                         f"{model_std[i]:.3g} N·m); the uncertainties use the rig"))
+    return out
+
+
+def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None, rig=None,
                     lost_motion_fractions=(0.03, 0.04), secant_interval=(0.5, 1.0),
                     n_draws=400, seed=0, fit_bouc_wen=True) -> SessionAnalysis:
     """Analyse the torque–angle table of a session: every figure of every loop.
@@ -366,8 +399,16 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation="lev
     max_torque_nm : float, optional
         Rated/maximum torque for lost motion and the secant interval, N·m. Default:
         the largest ``|torque_nm|`` of the usable loop images.
-    torque_correlation : {"level", "independent"}
-        Error model of the torques (see :mod:`.uncertainty`).
+    torque_correlation : {"pieces", "level", "independent"}, optional
+        Error model of the torques (see :mod:`.uncertainty`). Default: ``"pieces"``
+        when ``rig`` is given, else ``"level"``.
+    rig : mapping, optional
+        Rig constants for the ``"pieces"`` model: ``step_mass_kg`` (one weight piece,
+        kg), ``mass_std_kg`` (1σ of one piece, kg), ``gravity_m_per_s2``,
+        ``arm_radius_m`` (m) and optionally ``friction_torque_std_nm`` (1σ per image,
+        N·m), ``arm_radius_std_m``, ``gravity_std_m_per_s2`` (see
+        :func:`.uncertainty.check_rig`). The pieces per pan of an image are
+        ``round(mass_kg / step_mass_kg)``, the sign that of its phase.
     lost_motion_fractions : (float, float)
         Fractions of ``max_torque_nm`` for the two lost-motion figures (3 % and 4 %).
     secant_interval : (float, float)
@@ -386,8 +427,28 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation="lev
     Raises
     ------
     AnalysisError
-        Invalid table (see :func:`.loops.validate_measurements`) or invalid options.
-        Problems of single loops are not raised but listed in ``issues``.
+        Invalid table (see :func:`.loops.validate_measurements`) or invalid options
+        (``"pieces"`` without a rig, an invalid rig, a non-numeric ``mass_kg``).
+        Problems of single loops are not raised but listed in ``issues``; so is a
+        table whose ``torque_std_nm`` or ``mass_kg`` disagrees with the rig.
+
+    Notes
+    -----
+    Torque errors are propagated with all their correlations: the loading matrix
+    ``L`` of :func:`.uncertainty.torque_sources` (``δτ = L·ξ``) goes into the Monte
+    Carlo draws and into the first-order covariance of every slope and fit
+    (``cov_τ = (G·J_τ·L)(G·J_τ·L)ᵀ``, :mod:`.uncertainty`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vision_torsion.analysis import simulate_measurements
+    >>> df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), torque_model="pieces",
+    ...                            rng=np.random.default_rng(1))
+    >>> rig = dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)
+    >>> a = analyze_session(df, rig=rig, n_draws=50, fit_bouc_wen=False)
+    >>> a.settings["torque_correlation"], abs(a.summary["bilinear_k_u"]["mean"] / 4.4 - 1) < 0.01
+    ('pieces', True)
     """
     if n_draws < 10:
         raise AnalysisError(f"n_draws must be at least 10, got {n_draws}")
@@ -395,8 +456,12 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation="lev
         raise AnalysisError(f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}")
     if len(lost_motion_fractions) != 2 or not all(0 < f < 1 for f in lost_motion_fractions):
         raise AnalysisError(f"lost_motion_fractions must be two fractions in (0, 1), got {lost_motion_fractions}")
+    if torque_correlation is None:
+        torque_correlation = "level" if rig is None else "pieces"
+    if rig is not None:
+        rig = check_rig(rig)
     usable, failed = validate_measurements(measurements)
-    loops = build_loops(usable, torque_correlation=torque_correlation)
+    loops = build_loops(usable, torque_correlation=torque_correlation, rig=rig)
     data_max = float(np.max(np.abs(usable["torque_nm"])))
     if max_torque_nm is None:
         max_torque_nm = data_max
@@ -407,8 +472,11 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation="lev
         "lost_motion_fractions": [float(f) for f in lost_motion_fractions],
         "secant_interval": [float(f) for f in secant_interval], "n_draws": int(n_draws), "seed": int(seed),
         "fit_bouc_wen": bool(fit_bouc_wen), "coverage_factor": COVERAGE_FACTOR,
+        "rig": None if rig is None else dict(rig),
     }
     issues: list[Issue] = []
+    if torque_correlation == "pieces":
+        issues.extend(_rig_issues(usable, rig))
     for r in failed.itertuples(index=False):
         orient = float(r.orientation_deg) if np.isfinite(r.orientation_deg) else None
         cycle = int(r.cycle) if np.isfinite(r.cycle) else None

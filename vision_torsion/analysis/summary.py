@@ -8,9 +8,9 @@ Notes
 -----
 - **Across all loops**: mean, sample standard deviation (ddof=1), min, max, range.
   The standard uncertainty of the mean combines the angle part, independent between
-  loops (``sqrt(Σσ_a²)/n``), with the torque part, which the level error model
-  (:mod:`.uncertainty`) makes common to all loops and so does not average down
-  (mean of ``σ_t``).
+  loops (``sqrt(Σσ_a²)/n``), with the torque part, which the torque error models
+  (:mod:`.uncertainty`: the same weight pieces, or the same levels, in every loop)
+  make common to all loops and so does not average down (mean of ``σ_t``).
 - **Per orientation**: the same over that orientation's cycles.
 - **Orientation test** (a chi-square test of equal means): with orientation means
   ``x_o`` and their uncertainties ``s_o``,

@@ -7,40 +7,255 @@ Error model (what the analysis assumes about ``measurements.csv``)
   angles of an orientation are relative to one reference image, whose error is a
   common offset; every figure computed here is a difference or slope of angles of
   the same orientation, so that offset cancels and is not propagated.
-- **Torques**: the torque error comes from the weights. The same weights produce the
-  same nominal torque each time it recurs, so images with the **same nominal torque**
-  (same signed value, to 1e-9 N·m) in a session share **one** torque error with the
-  ``torque_std_nm`` given; different torque levels are independent
-  (``torque_correlation="level"``, the default). ``"independent"`` treats every
-  image's torque error as its own. A common scale error (arm radius, g) is not
-  separable from ``torque_std_nm`` and is not modelled separately.
+- **Torques** are described by a *loading matrix* ``L`` (images × sources): the torque
+  error of image ``i`` is ``δτ_i = Σ_j L_ij·ξ_j`` with independent standard normal
+  sources ``ξ_j`` (:func:`torque_sources`), so ``cov(δτ) = L·Lᵀ``. Three models
+  (``torque_correlation``):
+
+  ``"pieces"`` (the rig is known; the default of :func:`.session.analyze_session`
+  when a ``rig`` is given) follows the weight pieces. Each of the four pans (+A, +B
+  for positive torque, −A, −B for negative) has its own set of pieces, each piece of
+  mass ``m_step + δm`` with ``σ(δm) = mass_std_kg``, drawn once for the session and
+  reused; a pan with ``n`` pieces carries pieces ``1..n`` (``n = round(mass_kg /
+  step_mass_kg)``). So the torque of an image with ``n`` pieces per pan and sign
+  ``s`` (from the phase) is
+
+  ``τ = s·g·r·Σ_{k≤n} (m_A,k + m_B,k)·(1 + ε) + δτ_f``,
+
+  ``δτ = s·g·r·Σ_{k≤n} e_s,k + τ·ε + δτ_f`` with ``e_s,k = δm_A,k + δm_B,k``
+  (σ = √2·mass_std_kg): one source per sign and piece index (a **random walk** in
+  the step number, shared by the two phases of one sign and by every orientation
+  and cycle of the session), one common scale source ``ε`` with
+  ``σ(ε) = sqrt((u_g/g)² + (u_r/r)²)``, and an independent friction term ``δτ_f`` per
+  image (``friction_torque_std_nm``). The marginal 1σ is
+  ``sqrt((g·r)²·2n·mass_std² + (τ·σ(ε))² + u_f²)``, the ``torque_std_nm`` that
+  :func:`vision_torsion.session.torque.couple_torque` writes.
+
+  ``"level"`` (no rig known): images with the **same nominal torque** (same signed
+  value, to 1e-9 N·m) share **one** torque error with the ``torque_std_nm`` given;
+  different torque levels are independent. It misses the random-walk correlation
+  between levels, which is what moves a slope: on the demo rig (0.0196 N·m steps,
+  ±0.1 g pieces) it under-reports the torque part of k_u, k_l, τ_c and the loop
+  energy by a factor of about 3–10.
+
+  ``"independent"``: every image's torque error is its own.
 - The **angle part** of an uncertainty is independent between loops (orientations,
-  cycles); the **torque part** is shared by all loops of a session under the level
-  model. :mod:`.summary` uses this split.
+  cycles); the **torque part** is shared by all loops of a session (the same
+  weights, or the same levels). :mod:`.summary` uses this split.
 
 Every figure therefore carries ``std_angle`` and ``std_torque`` (1σ), and
 ``std = sqrt(std_angle² + std_torque²)``; expanded uncertainties are
 ``u95 = 2·std`` (coverage factor k = 2, ≈95 % for a normal distribution).
+
+First order (fits and slopes)
+-----------------------------
+A weighted least-squares estimate ``p̂`` of a model ``θ = f(τ; p)`` with weights
+``W`` moves, to first order, by ``δp = G·(δθ − J_τ·δτ)``, ``G = (JᵀWJ)⁻¹JᵀW``
+(``J = ∂f/∂p``, ``J_τ = ∂f/∂τ``). With ``δτ = L·ξ`` the torque part of the covariance
+is the sandwich ``cov_τ = (G·J_τ·L)·(G·J_τ·L)ᵀ`` — the full torque covariance
+``L·Lᵀ``, correlations between levels included. ``J_τ·L`` is computed column by
+column as a directional central difference of the model along ``L_j``
+(:func:`torque_source_jacobian`). The weights stay the angle weights: the torque
+error is shared by all loops of a session, so weighting by it cannot average it
+down; the sandwich is valid for any weights.
 
 Monte Carlo
 -----------
 Model-free figures (hysteresis, lost motion, loop energy, ...) are non-linear in the
 data (maxima, interpolation), so they are propagated by drawing ``n_draws`` (default
 400: the std is then known to ≈ 1/sqrt(2·400) ≈ 3.5 %) perturbed copies of a loop,
-once with angle errors only and once with torque errors only, from
-``numpy.random.default_rng(seed)``; every figure is evaluated on all draws at once
-(vectorised), so a loop costs milliseconds. The std of a figure is the standard
-deviation over draws where it is finite.
+once with angle errors only and once with torque errors only (``δτ = L·ξ``,
+vectorised: one ``(n_draws, m)`` normal draw times ``Lᵀ``), from
+``numpy.random.default_rng(seed)``; every figure is evaluated on all draws at once,
+so a loop costs milliseconds. The std of a figure is the standard deviation over
+draws where it is finite.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["COVERAGE_FACTOR", "torque_groups", "monte_carlo_std", "linearised_covariance"]
+__all__ = [
+    "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
+    "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
+]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
 COVERAGE_FACTOR = 2.0
+
+#: Torque error models (see the module notes).
+TORQUE_MODELS = ("pieces", "level", "independent")
+
+#: Keys of the ``rig`` mapping: required ones, then optional ones (default 0).
+RIG_KEYS = ("step_mass_kg", "mass_std_kg", "gravity_m_per_s2", "arm_radius_m")
+_RIG_OPTIONAL = ("friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2")
+
+# phases of measurements.csv and the sign of their torque (as the sessions module)
+_PHASE_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1, "negative_unloading": -1,
+               "positive_loading": 1}
+
+
+def _error(message):
+    from ..errors import AnalysisError
+
+    return AnalysisError(message)
+
+
+def check_rig(rig) -> dict:
+    """Validate the rig constants of the ``"pieces"`` torque model.
+
+    Parameters
+    ----------
+    rig : mapping
+        ``step_mass_kg`` (mass of one weight piece, kg), ``mass_std_kg`` (1σ of one
+        piece, kg), ``gravity_m_per_s2``, ``arm_radius_m`` (m); optional
+        ``friction_torque_std_nm`` (1σ per image, N·m), ``arm_radius_std_m`` (m),
+        ``gravity_std_m_per_s2`` (m/s²), 0 when absent.
+
+    Returns
+    -------
+    dict
+        The rig as plain floats, optional keys filled in.
+
+    Raises
+    ------
+    AnalysisError
+        Not a mapping, a missing or unknown key, a non-finite value, a non-positive
+        step mass, g or r, or a negative uncertainty.
+
+    Examples
+    --------
+    >>> check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05))["friction_torque_std_nm"]
+    0.0
+    """
+    if not hasattr(rig, "keys"):
+        raise _error(f"rig must be a mapping of rig constants, got {type(rig).__name__}")
+    missing = [k for k in RIG_KEYS if k not in rig]
+    unknown = sorted(set(rig) - set(RIG_KEYS) - set(_RIG_OPTIONAL))
+    if missing or unknown:
+        raise _error(f"rig: missing key(s) {missing}, unknown key(s) {unknown}; expected {list(RIG_KEYS)} "
+                     f"and optionally {list(_RIG_OPTIONAL)}")
+    out = {}
+    for k in RIG_KEYS + _RIG_OPTIONAL:
+        v = rig.get(k, 0.0)
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            raise _error(f"rig: {k} must be a number, got {v!r}") from None
+        positive = k in ("step_mass_kg", "gravity_m_per_s2", "arm_radius_m")
+        if not np.isfinite(v) or (v <= 0 if positive else v < 0):
+            raise _error(f"rig: {k} must be a {'positive' if positive else 'non-negative'} finite number, got {v!r}")
+        out[k] = v
+    return out
+
+
+def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
+    """Loading matrix ``L`` of the torque errors: ``δτ = L·ξ``, ``ξ ~ N(0, I)``.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        Rows of ``measurements.csv`` (``torque_nm``, ``torque_std_nm``; for
+        ``"pieces"`` also ``phase`` and ``mass_kg``, the mass on each pan, kg).
+    correlation : {"pieces", "level", "independent"}
+        Error model (module notes).
+    rig : mapping, optional
+        Rig constants (:func:`check_rig`); required for ``"pieces"``.
+    resolution_nm : float
+        Torque resolution of the ``"level"`` grouping, N·m.
+
+    Returns
+    -------
+    L : numpy.ndarray, shape (n_rows, n_sources)
+        N·m per unit source. Columns are session-wide: rows of different loops that
+        share a source (a piece, a level, the scale) have entries in the same column.
+    groups : numpy.ndarray of int, shape (n_rows,)
+        Same-nominal-torque index (:func:`torque_groups` with ``"level"``, or
+        ``"independent"``), used to merge repeated torques inside a run.
+
+    Raises
+    ------
+    AnalysisError
+        Unknown model, or ``"pieces"`` without a valid rig.
+
+    Notes
+    -----
+    ``"pieces"``: with ``n_i = round(mass_kg_i / step_mass_kg)`` and ``s_i`` the sign of
+    the phase, ``L[i, (s, k)] = s·g·r·√2·mass_std_kg`` for ``k = 1..n_i`` and
+    ``s = s_i``; ``L[i, scale] = τ_i·sqrt((u_g/g)² + (u_r/r)²)``;
+    ``L[i, friction_i] = friction_torque_std_nm``. ``"level"``: ``L[i, g_i] = σ_g``,
+    the largest ``torque_std_nm`` of the group. ``"independent"``: ``diag(torque_std_nm)``.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> f = pd.DataFrame({"phase": ["positive_loading"] * 3, "mass_kg": [0.0, 0.02, 0.04],
+    ...                   "torque_nm": [0.0, 0.01962, 0.03924], "torque_std_nm": [0.0, 1.0, 1.0]})
+    >>> rig = dict(step_mass_kg=0.02, mass_std_kg=1.0, gravity_m_per_s2=1.0, arm_radius_m=1.0)
+    >>> L, _ = torque_sources(f, correlation="pieces", rig=rig)
+    >>> (L @ L.T).round(6).tolist()  # a random walk: cov(n, n') = 2·min(n, n')
+    [[0.0, 0.0, 0.0], [0.0, 2.0, 2.0], [0.0, 2.0, 4.0]]
+    """
+    tau = np.asarray(frame["torque_nm"], dtype=float).reshape(-1)
+    std = np.asarray(frame["torque_std_nm"], dtype=float).reshape(-1)
+    if correlation not in TORQUE_MODELS:
+        raise _error(f"torque_correlation must be one of {', '.join(TORQUE_MODELS)}, got {correlation!r}")
+    groups = torque_groups(tau, correlation="independent" if correlation == "independent" else "level",
+                           resolution_nm=resolution_nm)
+    if correlation == "independent":
+        return np.diag(std), groups
+    if correlation == "level":
+        return group_sources(groups, std), groups
+    if rig is None:
+        raise _error("torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, "
+                     "arm_radius_m)")
+    rig = check_rig(rig)
+    import pandas as pd
+
+    mass = pd.to_numeric(pd.Series(np.asarray(frame["mass_kg"], dtype=object)), errors="coerce").to_numpy(float)
+    bad = ~np.isfinite(mass) | (mass < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        where = f"image {frame['image'].iloc[i]!r}" if "image" in frame else f"row {i}"
+        raise _error(f"measurements table, {where}: mass_kg is {frame['mass_kg'].iloc[i]!r}; the 'pieces' torque "
+                     "model needs the mass on each pan (kg, >= 0)")
+    n = pieces_per_pan(mass, rig["step_mass_kg"])
+    sign = np.asarray(frame["phase"].map(_PHASE_SIGN), dtype=float)
+    sign = np.where(np.isfinite(sign), sign, np.sign(tau))
+    g_r = rig["gravity_m_per_s2"] * rig["arm_radius_m"]
+    n_max = int(n.max()) if n.size else 0
+    k = np.arange(1, n_max + 1)
+    step = g_r * np.sqrt(2.0) * rig["mass_std_kg"]
+    cols = []
+    for s in (1.0, -1.0):
+        cols.append(np.where((sign[:, None] == s) & (n[:, None] >= k[None, :]), s * step, 0.0))
+    rel = float(np.hypot(rig["gravity_std_m_per_s2"] / rig["gravity_m_per_s2"], rig["arm_radius_std_m"] / rig["arm_radius_m"]))
+    if rel > 0:
+        cols.append((tau * rel)[:, None])
+    if rig["friction_torque_std_nm"] > 0:
+        cols.append(np.eye(tau.size) * rig["friction_torque_std_nm"])
+    return np.concatenate(cols, axis=1) if cols else np.zeros((tau.size, 0)), groups
+
+
+def pieces_per_pan(mass_kg, step_mass_kg) -> np.ndarray:
+    """Weight pieces on a pan, ``round(mass_kg / step_mass_kg)`` (int array)."""
+    m = np.asarray(mass_kg, dtype=float).reshape(-1)
+    return np.rint(np.where(np.isfinite(m), m, 0.0) / step_mass_kg).astype(int).clip(min=0)
+
+
+def group_sources(groups, torque_std_nm) -> np.ndarray:
+    """Loading matrix of the ``"level"`` model: one column per group, ``L[i, g_i] = σ_g``."""
+    groups = np.asarray(groups, dtype=int).reshape(-1)
+    g_std = _group_std(groups, torque_std_nm)
+    out = np.zeros((groups.size, g_std.size))
+    out[np.arange(groups.size), groups] = g_std[groups]
+    return out
+
+
+def compact_sources(sources) -> np.ndarray:
+    """Drop the all-zero columns of a loading matrix (sources that do not touch these rows)."""
+    L = np.asarray(sources, dtype=float)
+    return L[:, np.any(L != 0.0, axis=0)]
 
 
 def torque_groups(torque_nm, *, correlation="level", resolution_nm=1e-9) -> np.ndarray:
@@ -82,8 +297,8 @@ def _group_std(groups: np.ndarray, torque_std_nm: np.ndarray) -> np.ndarray:
     return out
 
 
-def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, groups,
-                    n_draws=400, seed=0):
+def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std_nm=None, groups=None,
+                    torque_sources=None, n_draws=400, seed=0):
     """Standard deviation of each figure of a loop from angle and from torque errors.
 
     Parameters
@@ -93,10 +308,13 @@ def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std
         on D perturbed copies at once (``tau2d``, ``theta2d`` of shape (D, n)).
     torque_nm, angle_rad : ndarray (n,)
         Nominal data (N·m, rad).
-    angle_std_rad, torque_std_nm : ndarray (n,)
-        1σ per sample.
-    groups : ndarray of int (n,)
-        Shared torque error index (:func:`torque_groups`).
+    angle_std_rad : ndarray (n,)
+        1σ per sample, rad.
+    torque_std_nm, groups : ndarray (n,), optional
+        1σ per sample (N·m) and shared torque error index (:func:`torque_groups`):
+        the ``"level"`` model; ignored when ``torque_sources`` is given.
+    torque_sources : ndarray (n, m), optional
+        Loading matrix ``L`` of the torque errors (:func:`torque_sources`), N·m.
     n_draws : int
         Draws per error source.
     seed : int
@@ -107,13 +325,20 @@ def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std
     (dict, dict)
         ``std_angle[name]`` and ``std_torque[name]`` (NaN where fewer than half the
         draws gave a finite value).
+
+    Notes
+    -----
+    Torque draws are ``δτ = ξ·Lᵀ`` with ``ξ`` of shape ``(n_draws, m)`` standard
+    normal, so their covariance is ``L·Lᵀ`` with every correlation of the model.
     """
     rng = np.random.default_rng(seed)
     tau = np.asarray(torque_nm, float)[None, :]
     th = np.asarray(angle_rad, float)[None, :]
-    g_std = _group_std(groups, torque_std_nm)
+    if torque_sources is None:
+        torque_sources = group_sources(groups, torque_std_nm)
+    L = np.asarray(torque_sources, float)
     d_theta = rng.standard_normal((n_draws, th.shape[1])) * np.asarray(angle_std_rad, float)[None, :]
-    d_tau = (rng.standard_normal((n_draws, g_std.size)) * g_std[None, :])[:, groups]
+    d_tau = rng.standard_normal((n_draws, L.shape[1])) @ L.T
     by_angle = evaluate(np.repeat(tau, n_draws, axis=0), th + d_theta)
     by_torque = evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
     return _stds(by_angle), _stds(by_torque)
@@ -153,6 +378,38 @@ def torque_jacobian(model, tau: np.ndarray, groups: np.ndarray, h: float = 1e-7)
     return np.column_stack(cols) if cols else np.zeros((tau.size, 0))
 
 
+def torque_source_jacobian(model, tau: np.ndarray, sources: np.ndarray, h: float = 1e-7) -> np.ndarray:
+    """``J_τ·L``: d(model angles)/d(each torque source), by directional central differences.
+
+    Parameters
+    ----------
+    model : callable
+        ``model(tau) -> angles`` (rad) for a torque sequence (N·m).
+    tau : ndarray (n,)
+        Nominal torques, N·m.
+    sources : ndarray (n, m)
+        Loading matrix ``L`` (N·m per unit source).
+    h : float
+        Step along the normalised column, N·m.
+
+    Returns
+    -------
+    ndarray (n, m)
+        rad per unit source: column ``j`` is ``(f(τ + h·ℓ_j) − f(τ − h·ℓ_j))/(2h)·c_j``
+        with ``ℓ_j = L_j / c_j``, ``c_j = max|L_j|``.
+    """
+    L = np.asarray(sources, float)
+    cols = []
+    for j in range(L.shape[1]):
+        c = float(np.max(np.abs(L[:, j])))
+        if c == 0.0:
+            cols.append(np.zeros(tau.size))
+            continue
+        d = L[:, j] * (h / c)
+        cols.append((model(tau + d) - model(tau - d)) / (2.0 * h) * c)
+    return np.column_stack(cols) if cols else np.zeros((tau.size, 0))
+
+
 def linearised_covariance(jac_p, weights, angle_var, jac_tau, group_var):
     """Covariance of a weighted least-squares estimate from angle and torque errors.
 
@@ -165,9 +422,10 @@ def linearised_covariance(jac_p, weights, angle_var, jac_tau, group_var):
     angle_var : ndarray (n,)
         Variance of each (independent) angle, rad².
     jac_tau : ndarray (n, g)
-        d(model)/d(torque error of each group).
+        d(model)/d(torque error of each group), or ``J_τ·L`` (per unit torque
+        source, :func:`torque_source_jacobian`).
     group_var : ndarray (g,)
-        Variance of each group's torque error, (N·m)².
+        Variance of each group's torque error, (N·m)² (ones for unit sources).
 
     Returns
     -------
@@ -184,7 +442,9 @@ def linearised_covariance(jac_p, weights, angle_var, jac_tau, group_var):
     To first order ``δp = G·δθ`` with ``G = (JᵀWJ)⁻¹JᵀW``; a torque error ``δτ`` moves
     the model by ``J_τ·δτ``, which the estimate absorbs like an angle error of opposite
     sign, so ``cov = G·diag(σθ²)·Gᵀ + (G·J_τ)·diag(στ²)·(G·J_τ)ᵀ`` (sandwich form,
-    valid also when the weights are not the inverse variances).
+    valid also when the weights are not the inverse variances). With correlated
+    torque errors ``δτ = L·ξ`` pass ``jac_tau = J_τ·L`` and ``group_var = 1``: the
+    torque term is then ``(G·J_τ·L)(G·J_τ·L)ᵀ``, the full covariance ``L·Lᵀ``.
     """
     jw = jac_p * weights[:, None]
     normal = jac_p.T @ jw
