@@ -55,7 +55,8 @@ def test_marginal_std_is_the_sessions_torque_std():
     """couple_torque (sessions module) writes the marginal 1σ of this model."""
     rig_cfg = RigConfig(arm_radius_m=0.05, mass_std_kg=MASS_STD, friction_torque_std_nm=2e-5,
                         arm_radius_std_m=1e-4, gravity_std_m_per_s2=0.01)
-    rows = [(m, ph) for m in (0.0, 0.02, 0.1, 0.36) for ph in ("positive_unloading", "negative_loading")]
+    # 0.05 kg is 2.5 pieces: both count it as 3 (the conservative choice)
+    rows = [(m, ph) for m in (0.0, 0.02, 0.05, 0.1, 0.36) for ph in ("positive_unloading", "negative_loading")]
     tv = [couple_torque(m, ph, rig_cfg, step_mass_kg=0.02) for m, ph in rows]
     frame = pd.DataFrame({"mass_kg": [m for m, _ in rows], "phase": [ph for _, ph in rows],
                           "torque_nm": [t.torque_nm for t in tv], "torque_std_nm": [t.torque_std_nm for t in tv]})
@@ -182,6 +183,8 @@ def test_table_disagreeing_with_the_rig_is_reported():
                for i in a.issues)
     ok = analyze_session(_table(3), rig=RIG, **FAST)
     assert not any(i.figure == "torque uncertainty" for i in ok.issues)
+    partial = analyze_session(_table(3), rig=dict(RIG, step_mass_kg=0.03), **FAST)
+    assert any("not a whole number of 0.03 kg pieces" in i.reason for i in partial.issues)
 
 
 def test_simulated_pieces_are_reused():

@@ -371,7 +371,7 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
         out.append(Issue(None, None, "torque uncertainty",
                          f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
                          f"{rig['step_mass_kg']:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
-                         "the 'pieces' torque model counts round(mass_kg / step_mass_kg) pieces"))
+                         "the 'pieces' torque model counts a partial piece as a whole one"))
     sources, _ = torque_sources(usable, correlation="pieces", rig=rig)
     model_std = np.sqrt(np.sum(sources**2, axis=1))
     table_std = usable["torque_std_nm"].to_numpy(float)
@@ -408,7 +408,8 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
         ``arm_radius_m`` (m) and optionally ``friction_torque_std_nm`` (1σ per image,
         N·m), ``arm_radius_std_m``, ``gravity_std_m_per_s2`` (see
         :func:`.uncertainty.check_rig`). The pieces per pan of an image are
-        ``round(mass_kg / step_mass_kg)``, the sign that of its phase.
+        ``mass_kg / step_mass_kg`` (:func:`.uncertainty.pieces_per_pan`), the sign
+        that of its phase.
     lost_motion_fractions : (float, float)
         Fractions of ``max_torque_nm`` for the two lost-motion figures (3 % and 4 %).
     secant_interval : (float, float)

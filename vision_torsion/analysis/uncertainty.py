@@ -16,8 +16,8 @@ Error model (what the analysis assumes about ``measurements.csv``)
   when a ``rig`` is given) follows the weight pieces. Each of the four pans (+A, +B
   for positive torque, −A, −B for negative) has its own set of pieces, each piece of
   mass ``m_step + δm`` with ``σ(δm) = mass_std_kg``, drawn once for the session and
-  reused; a pan with ``n`` pieces carries pieces ``1..n`` (``n = round(mass_kg /
-  step_mass_kg)``). So the torque of an image with ``n`` pieces per pan and sign
+  reused; a pan with ``n`` pieces carries pieces ``1..n`` (``n = mass_kg /
+  step_mass_kg``, a partial piece counted as a whole one). So the torque of an image with ``n`` pieces per pan and sign
   ``s`` (from the phase) is
 
   ``τ = s·g·r·Σ_{k≤n} (m_A,k + m_B,k)·(1 + ε) + δτ_f``,
@@ -180,7 +180,7 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
 
     Notes
     -----
-    ``"pieces"``: with ``n_i = round(mass_kg_i / step_mass_kg)`` and ``s_i`` the sign of
+    ``"pieces"``: with ``n_i`` = :func:`pieces_per_pan` and ``s_i`` the sign of
     the phase, ``L[i, (s, k)] = s·g·r·√2·mass_std_kg`` for ``k = 1..n_i`` and
     ``s = s_i``; ``L[i, scale] = τ_i·sqrt((u_g/g)² + (u_r/r)²)``;
     ``L[i, friction_i] = friction_torque_std_nm``. ``"level"``: ``L[i, g_i] = σ_g``,
@@ -238,9 +238,20 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
 
 
 def pieces_per_pan(mass_kg, step_mass_kg) -> np.ndarray:
-    """Weight pieces on a pan, ``round(mass_kg / step_mass_kg)`` (int array)."""
+    """Weight pieces on a pan (int array): ``mass_kg / step_mass_kg`` for whole pieces.
+
+    A load that is not a whole number of pieces counts as the next whole number, as
+    :func:`vision_torsion.session.torque.pieces_per_pan` counts it (so the marginal
+    1σ is the table's ``torque_std_nm``; :func:`.session.analyze_session` lists such
+    loads as an issue).
+
+    Examples
+    --------
+    >>> pieces_per_pan([0.0, 0.02, 0.06, 0.05], 0.02).tolist()
+    [0, 1, 3, 3]
+    """
     m = np.asarray(mass_kg, dtype=float).reshape(-1)
-    return np.rint(np.where(np.isfinite(m), m, 0.0) / step_mass_kg).astype(int).clip(min=0)
+    return np.ceil(np.where(np.isfinite(m), m, 0.0) / step_mass_kg - 1e-6).astype(int).clip(min=0)
 
 
 def group_sources(groups, torque_std_nm) -> np.ndarray:
