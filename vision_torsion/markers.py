@@ -316,13 +316,27 @@ def find_markers(
     return markers_to_frame(find_marker_list(as_grey_array(image), settings))
 
 
-def find_marker_list(img: np.ndarray, settings: MeasureSettings) -> list[Marker]:
-    """The work of :func:`find_markers` on a validated float32 image, as a list of :class:`Marker`."""
+def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None) -> list[Marker]:
+    """The work of :func:`find_markers` on a validated float32 image, as a list of :class:`Marker`.
+
+    Parameters
+    ----------
+    img : numpy.ndarray
+        2-D float32 image.
+    settings : MeasureSettings
+        Polarity, radius range and fit.
+    enough : callable, optional
+        ``enough(markers, blob) -> bool``, asked before each further candidate
+        (largest first): True stops, leaving the smaller candidates unfitted. Used
+        when only the target pair is wanted (bolt holes need no sub-pixel fit).
+    """
     polarity, radius_range, fit = settings.polarity, settings.radius_range, settings.fit
     r_min, r_max = radius_range if radius_range is not None else default_radius_range(img.shape)
     markers = []
     width = 1.2  # the optics are the same for every marker: pass the fitted width on
     for blob in detect_blobs(img, polarity=polarity, radius_range=(r_min, r_max)):
+        if enough is not None and enough(markers, blob):
+            break
         marker = _judge(blob, img.shape, r_min, r_max, fit)
         if marker is None:
             marker = fit_marker(img, blob, polarity=polarity, fit=fit, edge_width=width)

@@ -40,7 +40,8 @@ class PairMeasurement:
         between images is decided by the angle (:mod:`vision_torsion.angle`),
         not by this order.
     n_candidates : int
-        Marker candidates found in the image, of any status.
+        Marker candidates examined, of any status (:func:`measure_pair` stops
+        examining smaller ones once they cannot change the pair).
     """
 
     first: Marker
@@ -168,5 +169,19 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     settings = settings or MeasureSettings()
     if name is None:
         name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
-    markers = find_marker_list(as_grey_array(image, name=name), settings)
+    enough = _pair_settled if settings.pair == "largest" else None
+    markers = find_marker_list(as_grey_array(image, name=name), settings, enough=enough)
     return select_pair(markers, pair=settings.pair, name=name)
+
+
+def _pair_settled(markers, blob) -> bool:
+    """True when no smaller candidate can change the "largest" choice.
+
+    That is when the two largest usable markers match each other and the next
+    candidate (coarse radius, good to ~1 px) is clearly too small to match them,
+    so it can be neither part of the pair nor make it ambiguous.
+    """
+    ok = sorted((m.radius_px for m in markers if m.ok), reverse=True)
+    if len(ok) < 2 or ok[0] - ok[1] > radius_tolerance(ok[0]):
+        return False
+    return blob.radius < ok[1] - radius_tolerance(ok[1]) - 2.0
