@@ -97,6 +97,15 @@ def _metrics(mt: pd.DataFrame, orients) -> str:
     return _table(pd.DataFrame(cols), left=("figure", "unit"))
 
 
+_TORQUE_MODELS = {
+    "pieces": "every weight piece has its own mass error, drawn once and reused: a pan with n pieces carries "
+    "pieces 1..n, so torque errors add up step by step (shared by both phases of a sign), plus the common scale "
+    "error of g and r and an independent friction term.",
+    "level": "images at the same nominal torque share one error (the same weights).",
+    "independent": "every image has its own independent torque error.",
+}
+
+
 def render_html(*, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=()) -> str:
     """Assemble the report page.
 
@@ -139,9 +148,9 @@ def render_html(*, title, conditions, analysis, stiffness, metrics, figures, fai
         "<h2>Uncertainty</h2>",
         "<ul><li>Angles: independent per image (given <code>angle_std_deg</code>); the common reference-image "
         "error cancels in every figure.</li>"
-        f"<li>Torques: <code>{html.escape(str(s['torque_correlation']))}</code> model — images at the same nominal "
-        "torque share one error (the same weights); this part is common to all orientations and does not average "
-        "down over cycles.</li>"
+        f"<li>Torques: <code>{html.escape(str(s['torque_correlation']))}</code> model — "
+        f"{_TORQUE_MODELS.get(str(s['torque_correlation']), '')} This part is common to all orientations and does "
+        "not average down over cycles.</li>"
         "<li>Slopes and model fits: first-order propagation through the least-squares estimate. Hysteresis, "
         f"lost motion, secant stiffness, loop energy, loss factor: Monte Carlo, {s['n_draws']} draws per error "
         f"source, seed {s['seed']}.</li>"

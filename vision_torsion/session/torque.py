@@ -98,9 +98,10 @@ def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: f
     Correlation between images: ``g`` and ``r`` are the same for every image, so
     their part ``|tau| * sqrt((u_g/g)^2 + (u_r/r)^2)`` is fully correlated
     (:attr:`TorqueValue.torque_common_std_nm`). The pieces are reused, so mass
-    errors of images sharing pieces are partly correlated, and pulley friction
-    depends on the direction of motion; both are treated as independent per image,
-    which is what a point-by-point fit needs.
+    errors of images sharing pieces are partly correlated: this value is each
+    image's marginal uncertainty, and the analysis models the correlations between
+    images (``torque_correlation="pieces"`` in :mod:`vision_torsion.analysis.uncertainty`).
+    Pulley friction is taken as independent per image.
 
     Examples
     --------
