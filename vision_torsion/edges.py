@@ -208,8 +208,20 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     # robust scale: an occluder's own pixels must not widen the cut that finds them
     sig = 1.4826 * float(np.median(np.abs(resid))) or 1e-6
     keep = np.abs(resid) < 4.5 * sig  # a wire or a speck in the ring
+    edge_zone = np.abs(u) < 3.0
+    if not keep.all() and keep[edge_zone].mean() > 0.75:
+        # The levels above were pulled by the occluder, so that cut also chose
+        # ordinary pixels by their values (a truncation bias). Cut again against
+        # levels solved without it, then widen the cut over the occluder's flanks.
+        coef, resid = _solve_levels(ndtr(u), nx, ny, vals, keep.astype(np.float64))
+        sig = 1.4826 * float(np.median(np.abs(resid[keep]))) or 1e-6
+        keep = _grow_cut(np.abs(resid) < 4.5 * sig, ring_idx, patch.shape)
+    if keep[edge_zone].mean() <= 0.75:
+        # a quarter of the edge cut away is the model not fitting the edge yet (a
+        # first iteration, a sharp or odd edge profile), not an occluder
+        keep = np.ones_like(keep)
     if not keep.all():
-        keep = _grow_cut(keep, ring_idx, patch.shape)
+        coef, resid = _solve_levels(ndtr(u), nx, ny, vals, keep.astype(np.float64))
     pdf = np.exp(-0.5 * u * u) * _INV_SQRT_2PI
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
     band = keep & (np.abs(u) < 3.0)
