@@ -118,7 +118,7 @@ def main(argv=None) -> int:
     rows = [
         ("angles measured", f"{acc['n']}", ""),
         ("RMS angle error", f"{acc['rms_deg']:.5f}°", "≤ 0.0007°"),
-        ("largest |error|", f"{acc['max_abs_deg']:.5f}°", ""),
+        ("largest abs error", f"{acc['max_abs_deg']:.5f}°", ""),
         ("mean error (bias)", f"{acc['mean_deg']:+.5f}°", ""),
         ("Cramér-Rao bound", f"{acc['crb_deg']:.5f}°", ""),
         ("RMS / bound", f"{acc['rms_over_crb']:.2f}", "≤ 1.5"),
