@@ -139,7 +139,7 @@ def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
     return None
 
 
-def _start(image, blob: Blob, polarity: str):
+def _start(image, blob: Blob):
     """Centre and radius from a thresholded intensity centroid in full resolution."""
     r0 = blob.radius
     roi = marker_roi(image.shape, blob.x, blob.y, 1.3 * r0 + 8)
@@ -160,7 +160,7 @@ def _start(image, blob: Blob, polarity: str):
     area = w.sum()
     if not area > 0:
         raise FitError("the marker has no contrast")
-    return (w * xs).sum() / area, (w * ys).sum() / area, np.sqrt(area / np.pi), abs(F - B)
+    return (w * xs).sum() / area, (w * ys).sum() / area, np.sqrt(area / np.pi)
 
 
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
@@ -175,7 +175,7 @@ def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
 
 
 def fit_marker(
-    image, blob: Blob, *, polarity: str = "dark", fit: str = "geometric", max_iter: int = 10, edge_width: float = 1.2
+    image, blob: Blob, *, fit: str = "geometric", max_iter: int = 10, edge_width: float = 1.2
 ) -> Marker:
     """Fit one marker candidate to sub-pixel accuracy.
 
@@ -185,10 +185,9 @@ def fit_marker(
         2-D grey image indexed ``[y, x]``.
     blob : Blob
         Coarse candidate from :func:`~vision_torsion.detect.detect_blobs`.
-    polarity : {"dark", "bright"}
-        Marker polarity.
     fit : {"geometric", "algebraic", "ellipse"}
-        Circle-fit method.
+        Circle-fit method. (Polarity needs no option here: the edge model's two
+        levels take either sign of contrast.)
     max_iter : int
         Edge/fit alternations at most.
     edge_width : float
@@ -202,7 +201,7 @@ def fit_marker(
         ``low_contrast`` with the reason.
     """
     try:
-        cx, cy, r, _ = _start(image, blob, polarity)
+        cx, cy, r = _start(image, blob)
         s = float(edge_width)
         shape = None
         # one patch for all iterations: wide enough for the ring at the widest edge
@@ -339,7 +338,7 @@ def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None)
             break
         marker = _judge(blob, img.shape, r_min, r_max, fit)
         if marker is None:
-            marker = fit_marker(img, blob, polarity=polarity, fit=fit, edge_width=width)
+            marker = fit_marker(img, blob, fit=fit, edge_width=width)
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)
