@@ -91,7 +91,14 @@ def _stiffness_section(measurements: pd.DataFrame):
     try:
         section = stiffness_section(measurements)
     except VisionTorsionError as exc:
-        return _STIFFNESS_TITLE, f"<p>Not computed: {html.escape(str(exc))}</p>"
+        why = f"<p>Not computed: {html.escape(str(exc))}.</p>"
+        if "not monotonic" in str(exc):
+            why += (
+                "<p>A smooth stiffness curve K(T) describes a gear that stiffens gradually as "
+                "more tooth pairs come into mesh; loading branches with a sharp stiffness switch "
+                "are described by the bilinear model fit above instead.</p>"
+            )
+        return _STIFFNESS_TITLE, why
     parts = [f"<p>{html.escape(p)}</p>" for p in section.markdown.split("\n\n") if p.strip()]
     for name, fig in section.figures.items():
         buf = io.BytesIO()
