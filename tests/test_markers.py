@@ -152,3 +152,13 @@ def test_circularity_of_a_circle_with_missing_sectors_is_one():
 
     t = np.linspace(0.3, 0.3 + np.deg2rad(300), 200)
     assert _harmonic_circularity(812.0 + 35 * np.cos(t), 455.0 + 35 * np.sin(t), 812.0, 455.0, 35.0) > 0.999
+
+
+def test_integer_and_float_images_give_the_same_markers(small_scene):
+    """uint8/uint16 arrays are measured without a full-frame float copy, to the same result."""
+    img = render(small_scene, 12.0, seed=7).image
+    a = find_markers(img)
+    b = find_markers(img.astype(np.float32))
+    np.testing.assert_allclose(a[["x_px", "y_px"]].to_numpy(), b[["x_px", "y_px"]].to_numpy(), atol=1e-9)
+    c = find_markers(img.astype(np.uint16) * 16)
+    np.testing.assert_allclose(a[["x_px", "y_px"]].to_numpy(), c[["x_px", "y_px"]].to_numpy(), atol=1e-6)

@@ -99,7 +99,7 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
     Parameters
     ----------
     image : numpy.ndarray
-        2-D grey image (float32), indexed ``[y, x]``.
+        2-D grey image (float32, uint8 or uint16), indexed ``[y, x]``.
     polarity : {"dark", "bright"}
         Markers darker or brighter than their surroundings.
     radius_range : tuple of float, optional
@@ -118,6 +118,7 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         small = cv2.resize(image, (w // f, h // f), interpolation=cv2.INTER_AREA)
     else:
         small = image
+    small = np.asarray(small, dtype=np.float32)  # integer images are reduced first, converted after
     background = _background(small, r_max / f, polarity)
     diff = background - small if polarity == "dark" else small - background
     top = float(diff.max())

@@ -210,7 +210,7 @@ def _to_grey(arr: np.ndarray, *, name: str, kind: str, raw: bytes, bit_depth) ->
     return GreyImage(data=data, path=name, bit_depth=depth, was_colour=was_colour)
 
 
-def as_grey_array(image, *, name: str = "image") -> np.ndarray:
+def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) -> np.ndarray:
     """Validate an image given as an array, a :class:`GreyImage` or a path.
 
     Parameters
@@ -220,12 +220,16 @@ def as_grey_array(image, *, name: str = "image") -> np.ndarray:
         file to load with :func:`load_image`.
     name : str
         What to call the image in error messages.
+    keep_integers : bool
+        Return 8- and 16-bit integer arrays as they are (they cannot hold NaN), for
+        callers that convert only the pixels they use.
 
     Returns
     -------
     numpy.ndarray
-        2-D float32 array. The caller's array is never modified (a copy is made when
-        a conversion is needed, and callers must not write into the result).
+        2-D float32 array (or the integer array, with `keep_integers`). The caller's
+        array is never modified (a copy is made when a conversion is needed, and
+        callers must not write into the result).
 
     Raises
     ------
@@ -245,6 +249,8 @@ def as_grey_array(image, *, name: str = "image") -> np.ndarray:
         raise ImageReadError(f"{name}: image too small ({arr.shape[1]}x{arr.shape[0]} px)")
     if arr.dtype.kind not in "uif":
         raise ImageReadError(f"{name}: unsupported array type {arr.dtype}")
+    if keep_integers and arr.dtype in (np.uint8, np.uint16):
+        return arr
     out = np.asarray(arr, dtype=np.float32)
     if arr.dtype.kind == "f" and not np.all(np.isfinite(out)):
         raise ImageReadError(f"{name}: contains NaN or infinite values")

@@ -312,16 +312,16 @@ def find_markers(
     """
     if settings is None:
         settings = MeasureSettings(polarity=polarity, radius_range=radius_range, fit=fit)  # validates
-    return markers_to_frame(find_marker_list(as_grey_array(image), settings))
+    return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
 
 
 def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None) -> list[Marker]:
-    """The work of :func:`find_markers` on a validated float32 image, as a list of :class:`Marker`.
+    """The work of :func:`find_markers` on a validated image, as a list of :class:`Marker`.
 
     Parameters
     ----------
     img : numpy.ndarray
-        2-D float32 image.
+        2-D grey image: float32, or uint8/uint16 (only the pixels used are converted).
     settings : MeasureSettings
         Polarity, radius range and fit.
     enough : callable, optional

@@ -170,7 +170,7 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     if name is None:
         name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
     enough = _pair_settled if settings.pair == "largest" else None
-    markers = find_marker_list(as_grey_array(image, name=name), settings, enough=enough)
+    markers = find_marker_list(as_grey_array(image, name=name, keep_integers=True), settings, enough=enough)
     return select_pair(markers, pair=settings.pair, name=name)
 
 
