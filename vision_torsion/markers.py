@@ -205,7 +205,7 @@ def fit_marker(
         s = float(edge_width)
         shape = None
         # one patch for all iterations: wide enough for the ring at the widest edge
-        patch = marker_patch(image, cx, cy, 1.15 * r + 3.0 * max(s, 1.5) + 6.0)
+        patch = marker_patch(image, cx, cy, 1.15 * r + 3.0 * max(s, 1.5) + 9.0)
         for _ in range(max_iter):
             ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape, patch=patch)
             w = 1.0 / ep.std**2
