@@ -16,7 +16,7 @@ import sys
 
 from ..errors import VisionTorsionError
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "failure_line"]
 
 # Subcommand modules, in the order `--help` lists them.
 _COMMAND_MODULES = [
@@ -64,6 +64,11 @@ def add_common_options(parser: argparse.ArgumentParser) -> None:
 def progress_enabled(args) -> bool:
     """Progress bars show on a terminal unless --quiet was given."""
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
+
+
+def failure_line(image: str, message: str) -> str:
+    """One line for a failed item, naming the image once (most messages already do)."""
+    return f"failed: {message}" if image in message else f"failed: {image}: {message}"
 
 
 def main(argv=None) -> int:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from . import add_common_options, progress_enabled
+from . import add_common_options, failure_line, progress_enabled
 from .options import add_marker_options, settings_from_args
 
 
@@ -37,5 +37,5 @@ def run(args) -> int:
     print(f"{res.n_ok} of {res.n_ok + res.n_failed} images measured; wrote {res.path}")
     for row in res.table.itertuples():
         if row.status != "ok":
-            print(f"  failed: {row.image}: {row.message}")
+            print(f"  {failure_line(row.image, row.message)}")
     return 1 if res.n_failed else 0

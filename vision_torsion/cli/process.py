@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from . import add_common_options, progress_enabled
+from . import add_common_options, failure_line, progress_enabled
 
 __all__ = ["register", "run"]
 
@@ -36,7 +36,7 @@ def run(args) -> int:
     result = process_session(args.session_dir, out_dir=args.out_dir, jobs=args.jobs,
                              progress=progress_enabled(args))
     for image, message in result.failures:
-        print(f"failed: {image}: {message}", file=sys.stderr)
+        print(failure_line(image, message), file=sys.stderr)
     if not args.quiet:
         print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed "
               f"of {result.n_images} images ({result.n_measured} measured, "
