@@ -236,8 +236,14 @@ def _reduced_chi2(resid: np.ndarray, angle_std: np.ndarray, n_params: int) -> fl
     return float(np.sum((resid / angle_std) ** 2) / dof)
 
 
-def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups, torque_sources=None):
+def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups, torque_sources=None, *,
+                model: str, min_samples: int):
+    """Validated fit inputs: torque, angle, angle std and the torque-error loading matrix."""
     tau = _as_torque(torque_nm)
+    if tau.size < min_samples:
+        raise AnalysisError(f"{model} fit needs at least {min_samples} samples, got {tau.size}")
+    if not (tau.max() > 0 and tau.min() < 0):
+        raise AnalysisError(f"{model} fit needs torque of both signs (the torque never reverses)")
     th = np.array(angle_rad, dtype=float, copy=True).reshape(-1)
     if th.shape != tau.shape:
         raise AnalysisError(f"angle and torque sequences differ in length ({th.size} vs {tau.size})")
@@ -361,11 +367,7 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     (``cov(δτ) = L·Lᵀ``) are propagated with all their correlations.
     """
     tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
-                                       torque_sources)
-    if tau.size < 6:
-        raise AnalysisError(f"bilinear fit needs at least 6 samples, got {tau.size}")
-    if not (tau.max() > 0 and tau.min() < 0):
-        raise AnalysisError("bilinear fit needs torque of both signs (the torque never reverses)")
+                                       torque_sources, model="bilinear", min_samples=6)
     w = least_squares_weights(sa)
     amp = float(np.max(np.abs(tau)))
 
@@ -623,11 +625,7 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     best is kept. Uncertainties: first-order propagation as in :func:`fit_bilinear`.
     """
     tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
-                                       torque_sources)
-    if tau.size < 8:
-        raise AnalysisError(f"Bouc–Wen fit needs at least 8 samples, got {tau.size}")
-    if not (tau.max() > 0 and tau.min() < 0):
-        raise AnalysisError("Bouc–Wen fit needs torque of both signs (the torque never reverses)")
+                                       torque_sources, model="Bouc–Wen", min_samples=8)
     w = least_squares_weights(sa)
     sw = np.sqrt(w)
     amp = float(np.max(np.abs(tau)))
