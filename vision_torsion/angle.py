@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from .errors import MarkerError
 from .pair import PairMeasurement, measure_pair, select_pair
@@ -190,13 +191,8 @@ def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0
 def _as_pair(obj, settings, name) -> PairMeasurement:
     if isinstance(obj, PairMeasurement):
         return obj
-    try:
-        import pandas as pd
-
-        if isinstance(obj, pd.DataFrame):
-            return select_pair(obj, pair=settings.pair, name=name)
-    except ImportError:  # pragma: no cover - pandas is a dependency
-        pass
+    if isinstance(obj, pd.DataFrame):  # a find_markers table
+        return select_pair(obj, pair=settings.pair, name=name)
     return measure_pair(obj, settings=settings, name=name)
 
 
