@@ -25,7 +25,7 @@ from .images import IMAGE_SUFFIXES
 from .pair import measure_pair
 from .settings import MeasureSettings
 
-__all__ = ["MeasureResult", "measure_folder", "list_images", "ANGLE_COLUMNS", "pair_columns"]
+__all__ = ["MeasureResult", "measure_folder", "measure_sequence", "list_images", "ANGLE_COLUMNS", "pair_columns"]
 
 logger = logging.getLogger(__name__)
 
@@ -76,6 +76,40 @@ def pair_columns(pair, swapped: bool) -> dict:
     return {f"marker{k}_{f}": getattr(m, f) for k, m in ((1, a), (2, b)) for f in _MARKER_FIELDS}
 
 
+def measure_sequence(reference_pair, images, *, settings, correction=None, progress=False):
+    """Measure images in order against a reference pair; one bad image never stops it.
+
+    Parameters
+    ----------
+    reference_pair : PairMeasurement
+        The reference image's target.
+    images : sequence of (path, name)
+        Images in sequence order and the names messages use.
+    settings : MeasureSettings
+        How markers are found.
+    correction : PlaneCorrection, optional
+        Applied to the centres before the angles.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    (list, list, list)
+        Per image: the PairMeasurement or None, the AngleResult or None (identity
+        tracked, unwrapped), and the failure message or "".
+    """
+    pairs, messages = [], []
+    for path, name in tqdm(images, desc="measuring", unit="image", disable=not progress):
+        try:
+            pairs.append(measure_pair(path, settings=settings, name=name))
+            messages.append("")
+        except VisionTorsionError as exc:
+            logger.warning("%s", exc)
+            pairs.append(None)
+            messages.append(str(exc))
+    return pairs, sequence_angles(reference_pair, pairs, correction=correction), messages
+
+
 def measure_folder(
     image_dir,
     *,
@@ -121,16 +155,9 @@ def measure_folder(
     files = list_images(image_dir)
     out = Path(out_dir) if out_dir is not None else Path(image_dir) / "results"
     ref_pair = measure_pair(reference, settings=settings, name=f"reference {reference}")
-    pairs, messages = [], []
-    for f in tqdm(files, desc="measuring", unit="image", disable=not progress):
-        try:
-            pairs.append(measure_pair(f, settings=settings, name=f.name))
-            messages.append("")
-        except VisionTorsionError as exc:
-            logger.warning("%s", exc)
-            pairs.append(None)
-            messages.append(str(exc))
-    angles = sequence_angles(ref_pair, pairs, correction=correction)
+    pairs, angles, messages = measure_sequence(
+        ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress
+    )
     rows = []
     for f, pair, ang, msg in zip(files, pairs, angles, messages):
         row = {"image": f.name, "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}

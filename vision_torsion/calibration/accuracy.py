@@ -52,11 +52,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from scipy import stats
-from tqdm.auto import tqdm
 
-from ..angle import sequence_angles
 from ..errors import ReferenceTableError, VisionTorsionError
 from ..fileio import atomic_write_bytes, write_csv, write_json
+from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
 from .correction import load_correction
@@ -347,16 +346,9 @@ def check_accuracy(
     out = Path(out_dir) if out_dir is not None else folder / "results"
     names, refs = list(table["image"]), table["reference_angle_deg"].to_numpy()
     ref_pair = measure_pair(folder / names[0], settings=settings, name=f"reference {names[0]}")
-    pairs, reasons = [], []
-    for name in tqdm(names[1:], desc="measuring", unit="image", disable=not progress):
-        try:
-            pairs.append(measure_pair(folder / name, settings=settings, name=name))
-            reasons.append("")
-        except VisionTorsionError as exc:
-            logger.warning("%s", exc)
-            pairs.append(None)
-            reasons.append(str(exc))
-    angles = sequence_angles(ref_pair, pairs, correction=corr)
+    _, angles, reasons = measure_sequence(
+        ref_pair, [(folder / name, name) for name in names[1:]], settings=settings, correction=corr, progress=progress
+    )
     rows = [dict(image=names[0], reference_angle_deg=refs[0], measured_angle_deg=refs[0], error_deg=0.0, angle_std_deg=np.nan, status="reference")]
     for name, ref, ang, why in zip(names[1:], refs[1:], angles, reasons):
         row = dict(image=name, reference_angle_deg=ref, measured_angle_deg=np.nan, error_deg=np.nan, angle_std_deg=np.nan, status=f"failed: {why}")
