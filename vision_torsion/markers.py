@@ -1,16 +1,17 @@
 """Finding and fitting circular markers: ``find_markers``.
 
-The chain is the paper's (edge points, least-squares circle, centre), done so that
-it reaches close to the physical limit of the image:
+The paper's chain is edge points, a least-squares circle, its centre. Here:
 
 1. coarse candidates, robust to uneven lighting (:mod:`.detect`);
 2. each candidate judged: cut by the border, too small or large, or not round are
    reported with that status, not fitted;
 3. a start from the thresholded intensity centroid in full resolution;
-4. sub-pixel edge points from the edge-profile model (:mod:`.edges`) alternated with
-   the circle fit (:mod:`.circlefit`: ``geometric`` by default, the paper's
-   ``algebraic`` or an ``ellipse`` by name) until the centre moves less than
-   1e-4 px.
+4. by default (``fit="pixels"``), the maximum-likelihood fit of the blurred-disc
+   model to the pixels around the edge (:mod:`.pixelfit`), which reaches the
+   Cramér-Rao bound; or the paper's chain done carefully: sub-pixel edge points
+   from the edge-profile model (:mod:`.edges`) alternated with a circle fit
+   (:mod:`.circlefit`: ``geometric``, the paper's ``algebraic``, or an ``ellipse``
+   for oblique views) until the centre moves less than 1e-3 px.
 
 Coordinates are image pixels (x, y), origin at the centre of the top-left pixel,
 x to the right, y downwards.
@@ -30,9 +31,10 @@ import pandas as pd
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from .edges import edge_points, marker_patch, marker_roi
+from .edges import MarkerPatch, edge_points, marker_patch, marker_roi
 from .errors import FitError
 from .images import as_grey_array
+from .pixelfit import DiscFit, fit_disc
 from .settings import MeasureSettings
 
 __all__ = ["Marker", "find_markers", "find_marker_list", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
@@ -139,28 +141,33 @@ def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
     return None
 
 
-def _start(image, blob: Blob):
-    """Centre and radius from a thresholded intensity centroid in full resolution."""
+def _patch_extent(r0, edge_width):
+    """Half-size (px) of the square around a blob (coarse radius `r0`) holding the
+    start's outer ring (to 1.15·r0 + 7 px) and the edge ring of the fit at up to
+    twice the edge width, with room for the coarse centre's and radius's error."""
+    return max(1.15 * r0 + 8.0, r0 + 3.0 * max(edge_width, 1.5) + 10.0)
+
+
+def _start(patch: MarkerPatch, blob: Blob):
+    """Centre, radius and the two grey levels from a thresholded intensity centroid
+    in full resolution: (x, y, r) in px and (outside, inside) in DN."""
     r0 = blob.radius
-    roi = marker_roi(image.shape, blob.x, blob.y, 1.3 * r0 + 8)
-    if roi is None:
-        raise FitError("the marker's neighbourhood leaves the image")
-    x0, y0, x1, y1 = roi
-    patch = image[y0:y1, x0:x1].astype(np.float64)
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    d = np.hypot(xs - blob.x, ys - blob.y)
-    outside = patch[(d > 1.15 * r0 + 3) & (d < 1.3 * r0 + 7)]
-    inside = patch[d < 0.6 * r0]
+    dx, dy = patch.xs - blob.x, patch.ys - blob.y
+    d2 = dx * dx + dy * dy
+    r_in = 1.15 * r0 + 3  # generous: the coarse radius is good to about a pixel
+    outside = patch.values[(d2 > r_in**2) & (d2 < (r_in + 4.0) ** 2)]
+    inside = patch.values[d2 < (0.6 * r0) ** 2]
     if outside.size < 8 or inside.size < 4:
         raise FitError("too few pixels around the marker to start the fit")
-    B, F = np.median(outside), np.median(inside)
+    B, F = float(np.median(outside)), float(np.median(inside))
     if B == F:
         raise FitError("the marker has no contrast")
-    w = np.clip((patch - B) / (F - B), 0.0, 1.0) * (d < 1.15 * r0 + 3)
-    area = w.sum()
+    w = np.clip((patch.values - B) * (1.0 / (F - B)), 0.0, 1.0)
+    w[d2 >= r_in**2] = 0.0
+    area = float(w.sum())
     if not area > 0:
         raise FitError("the marker has no contrast")
-    return (w * xs).sum() / area, (w * ys).sum() / area, np.sqrt(area / np.pi)
+    return float(w @ patch.xs) / area, float(w @ patch.ys) / area, np.sqrt(area / np.pi), (B, F)
 
 
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
@@ -175,7 +182,7 @@ def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
 
 
 def fit_marker(
-    image, blob: Blob, *, fit: str = "geometric", max_iter: int = 10, edge_width: float = 1.2
+    image, blob: Blob, *, fit: str = "pixels", max_iter: int = 10, edge_width: float = 1.2
 ) -> Marker:
     """Fit one marker candidate to sub-pixel accuracy.
 
@@ -185,11 +192,12 @@ def fit_marker(
         2-D grey image indexed ``[y, x]``.
     blob : Blob
         Coarse candidate from :func:`~vision_torsion.detect.detect_blobs`.
-    fit : {"geometric", "algebraic", "ellipse"}
-        Circle-fit method. (Polarity needs no option here: the edge model's two
-        levels take either sign of contrast.)
+    fit : {"pixels", "geometric", "algebraic", "ellipse"}
+        Marker-fit method (:data:`~vision_torsion.settings.FIT_METHODS`).
+        (Polarity needs no option here: the models' two levels take either sign of
+        contrast.)
     max_iter : int
-        Edge/fit alternations at most.
+        Edge/fit alternations at most (fits to edge points).
     edge_width : float
         Starting edge width s (px); a neighbouring marker's fitted width saves
         iterations.
@@ -201,11 +209,14 @@ def fit_marker(
         ``low_contrast`` with the reason.
     """
     try:
-        cx, cy, r = _start(image, blob)
+        # one patch for the start and every iteration: wide enough for the start's
+        # outer ring and for the edge ring at the widest edge
+        patch = marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width))
+        cx, cy, r, levels = _start(patch, blob)
+        if fit == "pixels":
+            return _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch))
         s = float(edge_width)
         shape = None
-        # one patch for all iterations: wide enough for the ring at the widest edge
-        patch = marker_patch(image, cx, cy, 1.15 * r + 3.0 * max(s, 1.5) + 9.0)
         for _ in range(max_iter):
             ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape, patch=patch)
             w = 1.0 / ep.std**2
@@ -232,11 +243,10 @@ def fit_marker(
             if moved < 1e-3:
                 break
     except FitError as exc:
-        status = "low_contrast" if "contrast" in str(exc) else "fit_failed"
-        return _rejected(blob, status, str(exc))
+        return _failed(blob, exc)
     circ = _harmonic_circularity(ep.x, ep.y, cx, cy, r)
     if fit != "ellipse" and circ < 0.9:
-        return Marker(x_px=cx, y_px=cy, radius_px=r, status="not_round", message=f"edge is not circular (axis ratio {circ:.3f})")
+        return _not_round(cx, cy, r, circ)
     return Marker(
         x_px=float(cx),
         y_px=float(cy),
@@ -250,6 +260,36 @@ def fit_marker(
         contrast_dn=float(ep.foreground_dn - ep.background_dn),
         circularity=circ,
         edge_width_px=float(s),
+    )
+
+
+def _failed(blob: Blob, exc: FitError) -> Marker:
+    status = "low_contrast" if "contrast" in str(exc) else "fit_failed"
+    return _rejected(blob, status, str(exc))
+
+
+def _not_round(cx, cy, r, circ) -> Marker:
+    return Marker(x_px=cx, y_px=cy, radius_px=r, status="not_round", message=f"edge is not circular (axis ratio {circ:.3f})")
+
+
+def _pixels_marker(f: DiscFit) -> Marker:
+    """A :class:`Marker` from the pixel-model fit (``fit="pixels"``)."""
+    circ = _harmonic_circularity(f.edge_x, f.edge_y, f.x, f.y, f.radius)
+    if circ < 0.9:
+        return _not_round(f.x, f.y, f.radius, circ)
+    return Marker(
+        x_px=f.x,
+        y_px=f.y,
+        radius_px=f.radius,
+        x_std_px=float(np.sqrt(f.cov[0, 0])),
+        y_std_px=float(np.sqrt(f.cov[1, 1])),
+        xy_cov_px2=float(f.cov[0, 1]),
+        radius_std_px=float(np.sqrt(f.cov[2, 2])),
+        residual_rms_px=f.residual_rms_px,
+        n_edge_points=int(f.edge_x.size),
+        contrast_dn=f.foreground_dn - f.background_dn,
+        circularity=circ,
+        edge_width_px=f.edge_width,
     )
 
 
@@ -269,7 +309,7 @@ def find_markers(
     *,
     polarity: str = "dark",
     radius_range=None,
-    fit: str = "geometric",
+    fit: str = "pixels",
     settings: MeasureSettings | None = None,
 ) -> pd.DataFrame:
     """Find and fit every circular marker of one polarity in an image.
@@ -282,8 +322,8 @@ def find_markers(
         Dark markers on a bright disk, or bright on dark.
     radius_range : tuple of float, optional
         (smallest, largest) marker radius in px.
-    fit : {"geometric", "algebraic", "ellipse"}
-        Circle-fit method (see :mod:`vision_torsion.circlefit`).
+    fit : {"pixels", "geometric", "algebraic", "ellipse"}
+        Marker-fit method (see :data:`~vision_torsion.settings.FIT_METHODS`).
     settings : MeasureSettings, optional
         Overrides `polarity`, `radius_range` and `fit` when given.
 

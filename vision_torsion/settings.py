@@ -13,10 +13,13 @@ from .errors import VisionTorsionError
 
 __all__ = ["MeasureSettings", "FIT_METHODS", "POLARITIES"]
 
-#: Circle-fit methods by name: ``"geometric"`` (default: orthogonal-distance fit of
-#: sub-pixel edge points with outlier rejection), ``"algebraic"`` (the paper's Kasa
-#: fit of Q = sum[(x-a)^2 + (y-b)^2 - r^2]^2), ``"ellipse"`` (for oblique views).
-FIT_METHODS = ("geometric", "algebraic", "ellipse")
+#: Marker-fit methods by name: ``"pixels"`` (default: maximum-likelihood fit of the
+#: blurred-disc model to the pixels, :mod:`vision_torsion.pixelfit`), and three fits
+#: to sub-pixel edge points (:mod:`vision_torsion.edges`): ``"geometric"``
+#: (orthogonal-distance circle fit with outlier rejection), ``"algebraic"`` (the
+#: paper's Kasa fit of Q = sum[(x-a)^2 + (y-b)^2 - r^2]^2) and ``"ellipse"`` (for
+#: oblique views).
+FIT_METHODS = ("pixels", "geometric", "algebraic", "ellipse")
 POLARITIES = ("dark", "bright")
 
 
@@ -31,8 +34,8 @@ class MeasureSettings:
     radius_range : tuple of float, optional
         (smallest, largest) marker radius in pixels; None accepts 4 px up to a fifth
         of the shorter image side.
-    fit : {"geometric", "algebraic", "ellipse"}
-        Circle-fit method (see :data:`FIT_METHODS`).
+    fit : {"pixels", "geometric", "algebraic", "ellipse"}
+        Marker-fit method (see :data:`FIT_METHODS`).
     pair : {"largest"} or tuple of int
         Which two markers make the target: ``"largest"`` picks the two largest
         round markers of matching radius.
@@ -43,7 +46,7 @@ class MeasureSettings:
 
     polarity: str = "dark"
     radius_range: tuple[float, float] | None = None
-    fit: str = "geometric"
+    fit: str = "pixels"
     pair: str = "largest"
     correction: str | None = None
 

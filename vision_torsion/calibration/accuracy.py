@@ -34,7 +34,7 @@ Spec files (TOML, e.g. ``calibration/rotary_stage.toml``)::
     correction = "plane.toml"       # optional, relative to the spec file
     [markers]                       # optional MeasureSettings fields
     polarity = "dark"
-    fit = "geometric"
+    fit = "pixels"
     radius_range = [20.0, 60.0]
 
 Arguments given to :func:`check_accuracy` take precedence over the spec.

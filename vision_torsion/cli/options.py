@@ -14,7 +14,9 @@ def add_marker_options(parser) -> None:
     g.add_argument(
         "--radius-range", nargs=2, type=float, metavar=("MIN", "MAX"), help="marker radius range in pixels"
     )
-    g.add_argument("--fit", choices=FIT_METHODS, default="geometric", help="circle fit: geometric (default), algebraic (the paper's), ellipse")
+    g.add_argument("--fit", choices=FIT_METHODS, default="pixels",
+                   help="marker fit: pixels (default: the disc model fitted to the pixels), or a fit to "
+                        "edge points: geometric, algebraic (the paper's), ellipse")
     g.add_argument(
         "--correction", metavar="FILE", help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres"
     )

@@ -1,0 +1,109 @@
+"""The default fit: the blurred-disc model fitted to the pixels (vision_torsion.pixelfit)."""
+
+import numpy as np
+import pytest
+from scipy.special import ndtr
+
+from vision_torsion.edges import robust_sigma
+from vision_torsion.errors import FitError
+from vision_torsion.pixelfit import _normal_cdf, fit_disc
+from vision_torsion.synthetic import render
+
+
+def test_normal_cdf_matches_scipy_to_1e7():
+    u = np.linspace(-12.0, 12.0, 100_001)
+    assert np.abs(_normal_cdf(u, np.exp(-0.5 * u * u)) - ndtr(u)).max() < 1e-7
+
+
+def test_centres_are_accurate_and_the_covariance_is_honest(small_scene):
+    """30 renders, markers of radius 20 px at random sub-pixel positions.
+
+    The reported σ (≈ 0.0035 px) must match the scatter about the truth: the ratio
+    of the RMS reported σ to the RMS error is within 0.75-1.33 (60 independent
+    values per coordinate give the ratio to about ±10 %, 1σ).
+    """
+    rng = np.random.default_rng(11)
+    errs, stds = [], []
+    for seed in range(30):
+        r = render(small_scene, float(rng.uniform(-180, 180)), seed=seed)
+        for x, y in r.centres:
+            f = fit_disc(r.image, x + rng.uniform(-0.5, 0.5), y + rng.uniform(-0.5, 0.5), 20.0 + rng.uniform(-0.5, 0.5))
+            errs.append((f.x - x, f.y - y))
+            stds.append(np.sqrt(np.diag(f.cov)[:2]))
+    errs, stds = np.array(errs), np.array(stds)
+    rms = np.sqrt(np.mean(errs**2, axis=0))
+    assert (rms < 0.006).all(), rms  # the Cramér-Rao bound is ~0.0034 px here
+    ratio = np.sqrt(np.mean(stds**2, axis=0)) / rms
+    assert ((0.75 < ratio) & (ratio < 1.33)).all(), ratio
+
+
+def test_result_does_not_depend_on_the_start(small_scene):
+    """Starts 0.6 px apart end within 0.3 σ of each other.
+
+    Not closer: the ring of pixels is chosen around the start, so two starts fit
+    slightly different pixel sets, each an unbiased estimate (≈ 0.1 σ apart here).
+    """
+    r = render(small_scene, 33.0, seed=4)
+    x, y = r.centres[0]
+    a = fit_disc(r.image, x + 0.6, y - 0.3, 19.4)
+    b = fit_disc(r.image, x - 0.2, y + 0.3, 20.5, edge_width=0.9)
+    sx, sy = np.sqrt(np.diag(a.cov)[:2])
+    assert abs(a.x - b.x) < 0.3 * sx and abs(a.y - b.y) < 0.3 * sy
+    assert abs(a.radius - b.radius) < 0.3 * np.sqrt(a.cov[2, 2])
+
+
+def test_a_wire_across_the_edge_does_not_move_the_centre(small_scene):
+    """A 3 px wire crossing the marker's edge on a chord: the centre stays within
+    0.01 px of where the same image without the wire puts it (an unhandled wire
+    moves it by 0.02-0.1 px)."""
+    clean = render(small_scene, 0.0, seed=5)
+    x, y = clean.centres[np.argmax(clean.centres[:, 0])]
+    cx = small_scene.disk.center_x
+    # a vertical wire through the right marker, 3 px inside its right edge
+    wired = render(small_scene.replace(distractors={"wire": True, "wire_angle_deg": 90.0,
+                                                    "wire_offset_px": x + 17.0 - cx}), 0.0, seed=5)
+    a = fit_disc(clean.image, x + 0.3, y, 20.0)
+    b = fit_disc(wired.image, x + 0.3, y, 20.0)
+    assert np.hypot(b.x - a.x, b.y - a.y) < 0.01
+    assert b.n_pixels < a.n_pixels  # the wire's pixels were cut
+
+
+def test_diagnostics_of_a_round_marker(small_scene):
+    r = render(small_scene, 0.0, seed=2)
+    x, y = r.centres[0]
+    f = fit_disc(r.image, x, y, 20.0)
+    assert f.edge_x.size > 100  # sectors of ~1 px of arc: 2π·20 ≈ 126
+    assert f.residual_rms_px < 0.1
+    assert abs(f.foreground_dn - f.background_dn - (-160.0)) < 2.0
+    assert 0.9 < f.edge_width < 1.3  # blur σ = 1 px combined with the pixel width: ≈ 1.04 px
+
+
+def test_too_little_contrast_is_an_error():
+    rng = np.random.default_rng(0)
+    img = 200 + 8 * rng.standard_normal((120, 120))
+    yy, xx = np.mgrid[0:120, 0:120]
+    img[(xx - 60.3) ** 2 + (yy - 59.8) ** 2 < 20**2] -= 5  # 5 DN against 8 DN noise
+    with pytest.raises(FitError, match="too little contrast|does not converge|did not converge"):
+        fit_disc(img, 60.0, 60.0, 20.0)
+
+
+def test_a_flat_patch_is_an_error():
+    with pytest.raises(FitError, match="degenerate|too little contrast|does not converge"):
+        fit_disc(np.full((120, 120), 100.0), 60.0, 60.0, 20.0)
+
+
+def test_a_ring_leaving_the_image_is_an_error(small_scene):
+    r = render(small_scene, 0.0, seed=1)
+    with pytest.raises(FitError, match="leaves the image"):
+        fit_disc(r.image, 15.0, 150.0, 20.0)
+
+
+def test_robust_sigma_is_unbiased_for_quantised_noise_and_ignores_an_occluder():
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0.0, 2.0, 4000)
+    assert abs(robust_sigma(noise) / 2.0 - 1) < 0.05
+    quantised = np.round(noise + 0.3) - 0.3  # 8-bit rounding adds 1/12 DN² of variance
+    assert abs(robust_sigma(quantised) / np.sqrt(4.0 + 1 / 12) - 1) < 0.05
+    occluded = noise.copy()
+    occluded[:400] += rng.uniform(0.0, 100.0, 400)  # 10 % of the ring under a wire
+    assert abs(robust_sigma(occluded) / 2.0 - 1) < 0.05
