@@ -125,14 +125,14 @@ class FakeCore:
         self.corrections: list = []
         self.interrupt_after = interrupt_after
 
-    def measure_pair(self, image, *, settings):
+    def measure_pair(self, image, *, settings, name=None):
         if self.interrupt_after is not None and len(self.measured) >= self.interrupt_after:
             raise KeyboardInterrupt
-        data = load_image(image).data
+        data = np.asarray(image.data if hasattr(image, "data") else load_image(image).data, dtype=np.float64)
         weight = np.clip(BACKGROUND - data, 0, None)  # darkness, anti-aliased edges included
         n, labels, stats, _ = cv2.connectedComponentsWithStats((weight > 0).astype(np.uint8))
         if n - 1 < 2:
-            raise MarkerError(f"{image}: found {n - 1} marker(s), expected 2")
+            raise MarkerError(f"{name or image}: found {n - 1} marker(s), expected 2")
         big = 1 + np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:2]
         ys, xs = np.indices(data.shape)
         centres = []
@@ -140,7 +140,7 @@ class FakeCore:
             w = np.where(labels == label, weight, 0)
             centres.append((float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())))
         (x1, y1), (x2, y2) = sorted(centres)
-        self.measured.append(str(image))
+        self.measured.append(name or str(image))
         return FakePair(x1, y1, x2, y2)
 
     @staticmethod

@@ -14,7 +14,7 @@ Examples
 True
 """
 
-from importlib import import_module
+from ._lazy import attach
 
 from .errors import *  # noqa: F401,F403
 from .errors import __all__ as _errors_all
@@ -26,6 +26,7 @@ _LAZY = {
     # images and settings
     "GreyImage": "images",
     "load_image": "images",
+    "decode_image": "images",
     "MeasureSettings": "settings",
     # the measurement core
     "find_markers": "markers",
@@ -35,6 +36,8 @@ _LAZY = {
     "CircleFit": "circlefit",
     "EllipseFit": "circlefit",
     "edge_points": "edges",
+    "fit_disc": "pixelfit",
+    "DiscFit": "pixelfit",
     "measure_pair": "pair",
     "select_pair": "pair",
     "PairMeasurement": "pair",
@@ -84,16 +87,4 @@ _LAZY = {
 }
 
 __all__ = [*_errors_all, *_LAZY]
-
-
-def __getattr__(name):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'vision_torsion' has no attribute {name!r}")
-    value = getattr(import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = attach(__name__, _LAZY)

@@ -17,16 +17,23 @@ import numpy as np
 __all__ = ["atomic_write_bytes", "atomic_write_text", "write_json", "write_csv"]
 
 
-def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write `data` to `path` atomically, creating parent folders; return the path."""
+def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
+    """Write `data` to `path` atomically, creating parent folders; return the path.
+
+    With `durable` (the default) the data is flushed to the disk (fsync) before
+    the rename, so that after a power cut the file holds either the old or the new
+    content. Without it, a power cut may leave it empty; for files whose reader
+    checks them anyway (cache entries) that saves a disk flush per file.
+    """
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
         os.replace(tmp, p)
     except BaseException:
         try:
@@ -37,9 +44,9 @@ def atomic_write_bytes(path, data: bytes) -> Path:
     return p
 
 
-def atomic_write_text(path, text: str) -> Path:
-    """Write UTF-8 `text` to `path` atomically."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+def atomic_write_text(path, text: str, *, durable: bool = True) -> Path:
+    """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`)."""
+    return atomic_write_bytes(path, text.encode("utf-8"), durable=durable)
 
 
 def _json_default(obj):

@@ -23,7 +23,7 @@ import numpy as np
 
 from .errors import ImageReadError
 
-__all__ = ["GreyImage", "load_image", "as_grey_array", "IMAGE_SUFFIXES", "write_image"]
+__all__ = ["GreyImage", "load_image", "decode_image", "as_grey_array", "IMAGE_SUFFIXES", "write_image"]
 
 logger = logging.getLogger(__name__)
 
@@ -45,9 +45,10 @@ class GreyImage:
     Attributes
     ----------
     data : numpy.ndarray
-        2-D float32 array of grey levels in digital numbers (DN) of the file, indexed
-        ``data[y, x]``; pixel centres are at integer coordinates, origin at the centre
-        of the top-left pixel.
+        2-D float32 array of grey levels in digital numbers (DN) of the file (or the
+        file's own uint8/uint16 samples, when read with ``keep_integers=True``),
+        indexed ``data[y, x]``; pixel centres are at integer coordinates, origin at
+        the centre of the top-left pixel.
     path : str
         The file it came from.
     bit_depth : int
@@ -102,7 +103,7 @@ def _png_significant_bits(raw: bytes) -> int | None:
     return int(raw[pos + 4])
 
 
-def load_image(path, *, bit_depth: int | None = None) -> GreyImage:
+def load_image(path, *, bit_depth: int | None = None, keep_integers: bool = False) -> GreyImage:
     """Read an image file as grey levels.
 
     Parameters
@@ -113,11 +114,15 @@ def load_image(path, *, bit_depth: int | None = None) -> GreyImage:
         Significant bits of a 16-bit file. None infers it: 8 for 8-bit files; for
         16-bit files the PNG ``sBIT`` chunk if present, else 12 when no sample exceeds
         4095, else 16.
+    keep_integers : bool
+        Keep the file's uint8/uint16 samples instead of converting them to float32
+        (the measuring code converts only the pixels it uses).
 
     Returns
     -------
     GreyImage
-        The grey levels (DN, float32) with the file's path and bit depth.
+        The grey levels (DN, float32 unless `keep_integers`) with the file's path
+        and bit depth.
 
     Raises
     ------
@@ -138,8 +143,6 @@ def load_image(path, *, bit_depth: int | None = None) -> GreyImage:
     """
     p = Path(path)
     name = str(p)
-    if bit_depth not in (None, 8, 12, 16):
-        raise ImageReadError(f"{name}: bit_depth must be 8, 12 or 16, got {bit_depth!r}")
     if not p.exists():
         raise ImageReadError(f"{name}: no such file")
     if p.is_dir():
@@ -148,6 +151,35 @@ def load_image(path, *, bit_depth: int | None = None) -> GreyImage:
         raw = p.read_bytes()
     except OSError as exc:
         raise ImageReadError(f"{name}: cannot be read ({exc.strerror or exc})") from exc
+    return decode_image(raw, name=name, bit_depth=bit_depth, keep_integers=keep_integers)
+
+
+def decode_image(raw: bytes, *, name: str, bit_depth: int | None = None, keep_integers: bool = False) -> GreyImage:
+    """Decode and validate the bytes of an image file, as :func:`load_image` does.
+
+    For callers that already hold the file's bytes (a session worker hashes them
+    for its cache before measuring): the file is read once.
+
+    Parameters
+    ----------
+    raw : bytes
+        The file's contents.
+    name : str
+        The file's path, for :attr:`GreyImage.path` and error messages.
+    bit_depth, keep_integers
+        As for :func:`load_image`.
+
+    Returns
+    -------
+    GreyImage
+
+    Raises
+    ------
+    ImageReadError
+        As for :func:`load_image`, for everything but reading the file.
+    """
+    if bit_depth not in (None, 8, 12, 16):
+        raise ImageReadError(f"{name}: bit_depth must be 8, 12 or 16, got {bit_depth!r}")
     if not raw:
         raise ImageReadError(f"{name}: empty file (0 bytes)")
     kind = _kind_from_magic(raw[:8])
@@ -162,10 +194,10 @@ def load_image(path, *, bit_depth: int | None = None) -> GreyImage:
     arr = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
     if arr is None or arr.size == 0:
         raise ImageReadError(f"{name}: corrupt {kind.upper()} data (the decoder failed)")
-    return _to_grey(arr, name=name, kind=kind, raw=raw, bit_depth=bit_depth)
+    return _to_grey(arr, name=name, kind=kind, raw=raw, bit_depth=bit_depth, keep_integers=keep_integers)
 
 
-def _to_grey(arr: np.ndarray, *, name: str, kind: str, raw: bytes, bit_depth) -> GreyImage:
+def _to_grey(arr: np.ndarray, *, name: str, kind: str, raw: bytes, bit_depth, keep_integers=False) -> GreyImage:
     was_colour = False
     if arr.ndim == 3:
         channels = arr.shape[2]
@@ -206,7 +238,7 @@ def _to_grey(arr: np.ndarray, *, name: str, kind: str, raw: bytes, bit_depth) ->
         raise ImageReadError(
             f"{name}: unsupported sample type {arr.dtype} (expected 8- or 16-bit integers)"
         )
-    data = np.ascontiguousarray(arr, dtype=np.float32)
+    data = np.ascontiguousarray(arr) if keep_integers else np.ascontiguousarray(arr, dtype=np.float32)
     return GreyImage(data=data, path=name, bit_depth=depth, was_colour=was_colour)
 
 
@@ -239,7 +271,7 @@ def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) ->
     if isinstance(image, GreyImage):
         return image.data
     if isinstance(image, (str, os.PathLike)):
-        return load_image(image).data
+        return load_image(image, keep_integers=keep_integers).data
     arr = np.asarray(image)
     if arr.ndim == 3 and arr.shape[2] in (3, 4):
         raise ImageReadError(f"{name}: colour array given; pass a grey image or a file path")

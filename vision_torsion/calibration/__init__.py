@@ -9,20 +9,22 @@
 - :func:`calibrate_from_target` — from chessboard / circle-grid images (OpenCV).
 """
 
-from .accuracy import AccuracyResult, AccuracySpec, check_accuracy, load_spec, read_reference_table
-from .correction import PlaneCorrection, load_correction
-from .selfcal import MIN_SWEEP_DEG, calibrate_plane
-from .target import calibrate_from_target
+from .._lazy import attach
 
-__all__ = [
-    "AccuracyResult",
-    "AccuracySpec",
-    "check_accuracy",
-    "load_spec",
-    "read_reference_table",
-    "PlaneCorrection",
-    "load_correction",
-    "calibrate_plane",
-    "MIN_SWEEP_DEG",
-    "calibrate_from_target",
-]
+# public name -> submodule; imported on first use, so that ``process`` (which needs
+# only the correction) does not pay for scipy.stats (~0.6 s) in every run
+_LAZY = {
+    "AccuracyResult": "accuracy",
+    "AccuracySpec": "accuracy",
+    "check_accuracy": "accuracy",
+    "load_spec": "accuracy",
+    "read_reference_table": "accuracy",
+    "PlaneCorrection": "correction",
+    "load_correction": "correction",
+    "calibrate_plane": "selfcal",
+    "MIN_SWEEP_DEG": "selfcal",
+    "calibrate_from_target": "target",
+}
+
+__all__ = list(_LAZY)
+__getattr__, __dir__ = attach(__name__, _LAZY)
