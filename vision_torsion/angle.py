@@ -29,9 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 
 from .errors import MarkerError
+from .markers import is_frame
 from .pair import PairMeasurement, measure_pair, select_pair
 from .settings import MeasureSettings
 
@@ -191,7 +191,7 @@ def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0
 def _as_pair(obj, settings, name) -> PairMeasurement:
     if isinstance(obj, PairMeasurement):
         return obj
-    if isinstance(obj, pd.DataFrame):  # a find_markers table
+    if is_frame(obj):  # a find_markers table
         return select_pair(obj, pair=settings.pair, name=name)
     return measure_pair(obj, settings=settings, name=name)
 

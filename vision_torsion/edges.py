@@ -47,11 +47,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.special import ndtr
 
 from .errors import FitError
 
-__all__ = ["EdgePoints", "MarkerPatch", "marker_roi", "marker_patch", "edge_points"]
+__all__ = ["EdgePoints", "MarkerPatch", "marker_roi", "marker_patch", "edge_points", "normal_cdf", "robust_sigma"]
 
 _INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 #: Extra background ring (px) beyond the edge zone, for the background plane.
@@ -86,6 +85,24 @@ class EdgePoints:
     background_dn: float
     foreground_dn: float
     n_pixels: int
+
+
+def normal_cdf(u, gauss=None):
+    """Standard normal distribution function Φ(u), to 1e-7 (Abramowitz & Stegun 7.1.26).
+
+    ``gauss`` is ``exp(-u²/2)`` when the caller has it already (the edge model's
+    derivative needs it): ``scipy.special.ndtr`` is exact but was half the cost of
+    a model evaluation, and importing scipy.special costs every worker process
+    0.4 s. An error of 1e-7 of the contrast is far below the noise of any image
+    (8-bit: 4e-3).
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if gauss is None:
+        gauss = np.exp(-0.5 * u * u)
+    t = 1.0 / (1.0 + (0.3275911 / np.sqrt(2.0)) * np.abs(u))
+    half_tail = t * (0.127414796 + t * (-0.142248368 + t * (0.7107068705 + t * (-0.7265760135 + t * 0.5307027145))))
+    half_tail *= gauss  # = Φ(-|u|)
+    return np.where(u >= 0, 1.0 - half_tail, half_tail)
 
 
 def marker_roi(shape, cx, cy, extent):
@@ -292,14 +309,14 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     # pass 1: levels from every pixel, the outlier cut, and a Gauss-Newton step for
     # the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
     u = (R - d) / s
-    coef, resid = _solve_levels(ndtr(u), nx, ny, vals, np.ones_like(vals))
+    coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, np.ones_like(vals))
     keep = cut_occluders(
-        resid, np.abs(u) < 3.0, lambda k: _solve_levels(ndtr(u), nx, ny, vals, k.astype(np.float64))[1], ring_idx, patch.shape
+        resid, np.abs(u) < 3.0, lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1], ring_idx, patch.shape
     )
     if keep is None:
         keep = np.ones(vals.size, bool)
     else:
-        coef, resid = _solve_levels(ndtr(u), nx, ny, vals, keep.astype(np.float64))
+        coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64))
     pdf = np.exp(-0.5 * u * u) * _INV_SQRT_2PI
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
     band = keep & (np.abs(u) < 3.0)
@@ -312,7 +329,7 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     # reflectance, so one illumination gradient serves inside and outside
     u = (R - d) / s
     kappa = coef[3] / coef[0] if coef[0] != 0 else None
-    coef, resid = _solve_levels(ndtr(u), nx, ny, vals, keep.astype(np.float64), kappa=kappa)
+    coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64), kappa=kappa)
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
     g = FB * (np.exp(-0.5 * u * u) * _INV_SQRT_2PI) / s  # dI/dR
     band = keep & (np.abs(u) < 3.0)

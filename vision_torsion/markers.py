@@ -26,8 +26,10 @@ from __future__ import annotations
 import logging
 from dataclasses import asdict, dataclass
 
+import sys
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
@@ -36,6 +38,9 @@ from .errors import FitError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc
 from .settings import MeasureSettings
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["Marker", "find_markers", "find_marker_list", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
 
@@ -117,7 +122,16 @@ class Marker:
 
 def markers_to_frame(markers) -> pd.DataFrame:
     """Markers as a pandas DataFrame with :data:`MARKER_COLUMNS`."""
+    import pandas as pd  # here: measuring alone (a session worker) never needs it
+
     return pd.DataFrame([asdict(m) for m in markers], columns=MARKER_COLUMNS)
+
+
+def is_frame(obj) -> bool:
+    """True for a pandas DataFrame, without importing pandas (if it is not loaded,
+    `obj` cannot be one)."""
+    pd = sys.modules.get("pandas")
+    return pd is not None and isinstance(obj, pd.DataFrame)
 
 
 def _rejected(blob: Blob, status: str, message: str) -> Marker:

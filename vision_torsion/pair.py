@@ -14,11 +14,10 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
-import pandas as pd
 
 from .errors import MarkerError
 from .images import as_grey_array
-from .markers import Marker, find_marker_list
+from .markers import Marker, find_marker_list, is_frame
 from .settings import MeasureSettings
 
 __all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance"]
@@ -72,7 +71,7 @@ class PairMeasurement:
 
 
 def _as_markers(table) -> list[Marker]:
-    if isinstance(table, pd.DataFrame):
+    if is_frame(table):
         names = [f.name for f in fields(Marker)]
         missing = [c for c in ("x_px", "y_px", "radius_px", "status") if c not in table.columns]
         if missing:

@@ -6,30 +6,30 @@ A session folder holds ``session.toml`` (rig, markers, protocol, angle sign),
 else into the session folder. See the README section "Session folders".
 """
 
-from .config import (ProtocolConfig, RigConfig, SessionConfig, load_config,
-                     write_config)
-from .load import Session, load_session
-from .manifest import Manifest, ManifestRow, load_manifest
-from .plan import SessionPlan, plan_session
-from .process import ProcessResult, process_session
-from .torque import PHASES, TorqueValue, couple_torque
+from .._lazy import attach
 
-__all__ = [
-    "PHASES",
-    "Manifest",
-    "ManifestRow",
-    "ProcessResult",
-    "ProtocolConfig",
-    "RigConfig",
-    "Session",
-    "SessionConfig",
-    "SessionPlan",
-    "TorqueValue",
-    "couple_torque",
-    "load_config",
-    "load_manifest",
-    "load_session",
-    "plan_session",
-    "process_session",
-    "write_config",
-]
+# public name -> submodule, imported on first use: a worker process of ``process``
+# imports .worker, which must not pull in pandas and scipy through this package
+_LAZY = {
+    "PHASES": "torque",
+    "Manifest": "manifest",
+    "ManifestRow": "manifest",
+    "ProcessResult": "process",
+    "ProtocolConfig": "config",
+    "RigConfig": "config",
+    "Session": "load",
+    "SessionConfig": "config",
+    "SessionPlan": "plan",
+    "TorqueValue": "torque",
+    "couple_torque": "torque",
+    "load_config": "config",
+    "load_manifest": "manifest",
+    "load_session": "load",
+    "plan_session": "plan",
+    "process_session": "process",
+    "write_config": "config",
+}
+
+__all__ = list(_LAZY)
+__getattr__, __dir__ = attach(__name__, _LAZY)
+

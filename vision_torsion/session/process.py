@@ -27,7 +27,6 @@ Only the output folder (``SESSION_DIR/results/`` by default) is written.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import math
@@ -35,20 +34,17 @@ import multiprocessing
 import os
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
-import cv2
 import pandas as pd
-from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from ..errors import SessionError, VisionTorsionError
-from ..fileio import atomic_write_text, write_csv
+from ..fileio import write_csv
 from ..settings import MeasureSettings
 from .load import Session, load_session
+from .worker import digest, measure_task, one_thread, one_thread_here
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
 
@@ -93,12 +89,6 @@ class ProcessResult:
         return self.n_failed == 0
 
 
-def _digest(data: bytes) -> str:
-    """SHA-256 of `data`, hex: file contents and cache keys (2.5x faster than
-    BLAKE2b here: CPUs hash SHA-256 in hardware)."""
-    return hashlib.sha256(data).hexdigest()
-
-
 #: Subpackages that only use measurements; everything else in vision_torsion may
 #: change what an image measures, so its source is part of the cache key.
 _DOWNSTREAM = ("session", "cli", "analysis", "stiffness", "report", "synthetic")
@@ -118,63 +108,16 @@ def _code_fingerprint() -> str:
         rel = path.relative_to(root)
         if rel.parts[0] not in _DOWNSTREAM:
             parts.append(rel.as_posix().encode() + b"\0" + path.read_bytes())
-    return _digest(b"\0".join(parts))
+    return digest(b"\0".join(parts))
 
 
 def _settings_key(settings: MeasureSettings) -> str:
     """JSON identifying how images are measured: settings, correction content, code."""
     d = settings.to_dict()
     if d.get("correction"):
-        d["correction"] = _digest(Path(d["correction"]).read_bytes())
+        d["correction"] = digest(Path(d["correction"]).read_bytes())
     return json.dumps({"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT},
                       sort_keys=True)
-
-
-@lru_cache(maxsize=4)
-def _settings_from(settings_json: str) -> MeasureSettings:
-    return MeasureSettings.from_dict(json.loads(settings_json))
-
-
-def _measure_task(task: tuple[str, str, str, str]) -> tuple[str, str]:
-    """Measure one image, or take it from the cache; runs in a worker process.
-
-    Returns the cache entry as JSON text and where it came from: "measured",
-    "cached" or "unread" (the file could not be read). An unexpected exception is
-    reported as a failure but not cached, so it is retried on the next run.
-    """
-    path, settings_json, settings_key, cache_dir = task
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        return json.dumps({"status": "failed",
-                           "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"
-    image_hash = _digest(data)
-    key = _digest(f"{image_hash}\n{settings_key}".encode())
-    cache_file = Path(cache_dir) / key[:2] / f"{key}.json"
-    try:
-        text = cache_file.read_text(encoding="utf-8")
-        if json.loads(text).get("status") in ("ok", "failed"):
-            return text, "cached"
-    except (OSError, ValueError, AttributeError):
-        pass  # no entry, or a damaged one: measure again
-    from ..images import decode_image
-    from ..pair import measure_pair
-
-    try:
-        image = decode_image(data, name=path, keep_integers=True)
-        del data
-        pair = measure_pair(image, settings=_settings_from(settings_json), name=path)
-        entry = {"status": "ok", "pair": pair.to_dict()}
-    except VisionTorsionError as exc:
-        entry = {"status": "failed", "message": str(exc)}
-    except Exception as exc:  # noqa: BLE001 - one broken image must not stop a batch
-        logger.exception("unexpected error measuring %s", path)
-        return json.dumps({"status": "failed", "message":
-                           f"internal error: {type(exc).__name__}: {exc}"}), "measured"
-    entry["image_sha256"] = image_hash
-    text = json.dumps(entry, sort_keys=True)
-    atomic_write_text(cache_file, text, durable=False)
-    return text, "measured"
 
 
 def _default_jobs() -> int:
@@ -189,41 +132,16 @@ def _pool_context():
 
     Not fork: the parent may hold threads (tqdm's monitor, BLAS) and forking a
     threaded process can deadlock (Python 3.12 warns, 3.14 no longer forks by
-    default). The fork server preloads the measuring modules, so each worker starts
-    by a cheap fork instead of importing them again (~0.7 s of scipy/pandas each);
-    this sets the process-wide preload list of :mod:`multiprocessing`'s fork server,
-    keeping its default ``__main__`` entry.
+    default). The fork server preloads the worker's modules (:mod:`.worker` and the
+    measuring code, ~0.2 s of numpy and OpenCV), so each worker starts by a cheap
+    fork instead of importing them again; this sets the process-wide preload list
+    of :mod:`multiprocessing`'s fork server, keeping its default ``__main__`` entry.
     """
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["__main__", __name__, "vision_torsion.pair",
-                                    "vision_torsion.angle"])
+    context.set_forkserver_preload(["__main__", "vision_torsion.session.worker", "vision_torsion.pair"])
     return context
-
-
-def _one_thread() -> None:
-    """Worker initializer: one thread for BLAS and OpenCV in each worker.
-
-    The pool already keeps every core busy. The measuring code's small matrix
-    products (8 x ~4000) are what OpenBLAS splits over threads by default, and its
-    waiting threads then compete with the other workers: two workers ran 3.5x
-    slower than one.
-    """
-    cv2.setNumThreads(1)
-    threadpool_limits(1)
-
-
-@contextmanager
-def _one_thread_here():
-    """:func:`_one_thread` for this process while measuring in it, then as it was."""
-    threads = cv2.getNumThreads()
-    try:
-        with threadpool_limits(1):
-            cv2.setNumThreads(1)
-            yield
-    finally:
-        cv2.setNumThreads(threads)
 
 
 def _run_tasks(tasks, *, jobs: int, progress: bool):
@@ -231,16 +149,16 @@ def _run_tasks(tasks, *, jobs: int, progress: bool):
     bar = tqdm(total=len(tasks), unit="image", desc="measuring", disable=not progress)
     try:
         if jobs == 1 or len(tasks) <= 1:
-            with _one_thread_here():
+            with one_thread_here():
                 for task in tasks:
-                    yield _measure_task(task)
+                    yield measure_task(task)
                     bar.update()
             return
         context = _pool_context()
         chunksize = max(1, min(16, len(tasks) // (jobs * 8)))
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_one_thread)
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=one_thread)
         try:
-            for result in pool.map(_measure_task, tasks, chunksize=chunksize):
+            for result in pool.map(measure_task, tasks, chunksize=chunksize):
                 yield result
                 bar.update()
         finally:
