@@ -159,7 +159,7 @@ def _patch_extent(r0, edge_width):
     """Half-size (px) of the square around a blob (coarse radius `r0`) holding the
     start's outer ring (to 1.15·r0 + 7 px) and the edge ring of the fit at up to
     twice the edge width, with room for the coarse centre's and radius's error."""
-    return max(1.15 * r0 + 8.0, r0 + 3.0 * max(edge_width, 1.5) + 10.0)
+    return max(1.15 * r0 + 8.0, r0 + 3.0 * max(edge_width, 1.5) + 12.0)
 
 
 def _start(patch: MarkerPatch, blob: Blob):
