@@ -34,6 +34,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from common import one_core  # noqa: E402
 
 from vision_torsion.angle import pair_angle  # noqa: E402
 from vision_torsion.errors import MarkerError  # noqa: E402
@@ -81,12 +84,15 @@ def accuracy(scene, repeats: int):
 
 
 def speed(scene, n: int = 20) -> dict:
-    """CPU time of measure_pair + pair_angle per decoded (float32) image, best of 3 each.
+    """CPU time of measure_pair + pair_angle per decoded (8-bit) image, best of 3
+    each, on one thread (as a session worker runs).
 
     Timed apart from rendering, which would otherwise evict the caches between
     renders and inflate the figure.
     """
-    imgs = [as_grey_array(render(scene, a, seed=50_000 + i).image) for i, a in enumerate(np.linspace(-70, 70, n))]
+    one_core()
+    imgs = [as_grey_array(render(scene, a, seed=50_000 + i).image, keep_integers=True)
+            for i, a in enumerate(np.linspace(-70, 70, n))]
     ref = measure_pair(as_grey_array(render(scene, 0.0, seed=49_999).image))
     best = []
     for img in imgs:

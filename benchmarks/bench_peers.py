@@ -260,6 +260,24 @@ def scene_table(label, summary, crb_rms, n_images) -> str:
     return "\n".join(lines)
 
 
+def _ratio_ci(results_scene: dict, ours: str, other: str, n_boot: int = 2000) -> str:
+    """95 % interval of RMS(ours) / RMS(other) by a paired bootstrap over the angles.
+
+    Both methods measured the same images, so their errors are correlated and the
+    ratio is known far better than either RMS alone (±9 % for 63 angles)."""
+    cols = results_scene["measurements"]
+    a = np.array([np.nan if e is None else e for e in cols[ours]["error_deg"]], dtype=np.float64)
+    b = np.array([np.nan if e is None else e for e in cols[other]["error_deg"]], dtype=np.float64)
+    both = np.isfinite(a) & np.isfinite(b)
+    a, b = a[both], b[both]
+    if a.size < 5:
+        return ""
+    idx = np.random.default_rng(12345).integers(0, a.size, size=(n_boot, a.size))
+    ratio = np.sqrt(np.mean(a[idx] ** 2, axis=1) / np.mean(b[idx] ** 2, axis=1))
+    lo, hi = np.percentile(ratio, [2.5, 97.5])
+    return f", 95 % CI {lo:.2f}-{hi:.2f} (paired bootstrap, {a.size} angles)"
+
+
 def check_targets(results: dict, scene_meta) -> list[dict]:
     """The "Must reach" items of issues 2 and 8, each with the numbers behind it."""
     checks = []
@@ -279,7 +297,8 @@ def check_targets(results: dict, scene_meta) -> list[dict]:
                 "met": bool(best is None or (ours["rms_deg"] <= best[1]["rms_deg"] and not ours["n_failed"])),
                 "detail": (f"ours {ours['rms_deg']:.5f}° ({ours['n_failed']} failed, {ours['n_wrong']} wrong); "
                            f"best other {best[0]} {best[1]['rms_deg']:.5f}° "
-                           f"(ours / best = {ours['rms_deg'] / best[1]['rms_deg']:.2f})" + note)
+                           f"(ours / best = {ours['rms_deg'] / best[1]['rms_deg']:.2f}"
+                           f"{_ratio_ci(results[stem], 'ours_default', best[0])})" + note)
                 if best else "no other method measured",
             })
         if crb_target:
@@ -302,7 +321,8 @@ def check_targets(results: dict, scene_meta) -> list[dict]:
             checks.append({
                 "target": f"{stem}: >= 4x faster than the ML reference at <= 1.2x its error",
                 "met": bool(speed >= 4 and ratio <= 1.2),
-                "detail": f"speed-up {speed:.1f}x (CPU time), error ratio {ratio:.2f}",
+                "detail": f"speed-up {speed:.1f}x (CPU time), error ratio {ratio:.2f}"
+                          f"{_ratio_ci(results[stem], 'ours_default', 'ml_disc')}",
             })
     if "standard" in results:
         s = results["standard"]["methods"]

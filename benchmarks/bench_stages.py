@@ -10,11 +10,12 @@ It renders N images of the standard scene (``synthetic/standard.toml``: 1400x100
 reference into a temporary folder, then measures
 
 1. per image, on one core (this process), the time of each stage of
-   ``measure_pair`` + ``pair_angle``: decode (``load_image``: read, decode, to
-   float32), detection (``detect_blobs``), start (intensity centroid per marker),
-   edges (``edge_points``, every call of the edge/fit alternation), fit (the circle
-   fits), rest (judging candidates, building the table), and angle (pair selection
-   and ``pair_angle``). The stages are timed by wrapping the functions
+   ``measure_pair`` + ``pair_angle``: decode (``load_image``: read, decode, keeping
+   the 8-bit samples), detection (``detect_blobs``), start (intensity centroid per marker),
+   edges (``marker_patch``: the pixels around each marker, and ``edge_points`` when a
+   fit to edge points is chosen), fit (``fit_disc``, the default pixel-model fit, or
+   the circle fits), rest (judging candidates, choosing the pair), and angle
+   (``pair_angle``). The stages are timed by wrapping the functions
    ``vision_torsion.markers`` calls, in this process only; the uninstrumented
    per-image processing time (everything but decoding) is measured separately and
    is the number the ≤ 10 ms target is about (wall and CPU time: on a shared
@@ -89,6 +90,7 @@ class _Timers:
         "_start": "start",
         "edge_points": "edges",
         "marker_patch": "edges",
+        "fit_disc": "fit",
         "fit_circle_geometric": "fit",
         "fit_circle_algebraic": "fit",
         "fit_ellipse": "fit",
@@ -124,19 +126,18 @@ def stage_times(ref: Path, paths, repeats: int = 1) -> dict:
     """Per-image stage times (ms, medians over images) on one core, this process."""
     from vision_torsion.angle import pair_angle
     from vision_torsion.images import load_image
-    from vision_torsion.markers import find_markers
-    from vision_torsion.pair import measure_pair, select_pair
+    from vision_torsion.pair import measure_pair
 
-    ref_pair = measure_pair(load_image(ref))
+    ref_pair = measure_pair(load_image(ref, keep_integers=True))
     per = {k: [] for k in ("decode", "detection", "start", "edges", "fit", "rest", "angle", "sum_of_stages")}
     process, process_cpu = [], []
     for p in paths:  # warm-up of caches and lazy imports
-        measure_pair(load_image(p))
+        measure_pair(load_image(p, keep_integers=True))
         break
     for _ in range(repeats):
         for p in paths:
             t0 = time.perf_counter()
-            img = load_image(p)
+            img = load_image(p, keep_integers=True)
             t1, c1 = time.perf_counter(), time.process_time()
             pair_angle(ref_pair, measure_pair(img))
             process.append(time.perf_counter() - t1)
@@ -145,11 +146,11 @@ def stage_times(ref: Path, paths, repeats: int = 1) -> dict:
             timers = _Timers()
             try:
                 t2 = time.perf_counter()
-                table = find_markers(img)
+                pair = measure_pair(img)
                 t3 = time.perf_counter()
             finally:
                 timers.restore()
-            pair_angle(ref_pair, select_pair(table))
+            pair_angle(ref_pair, pair)
             t4 = time.perf_counter()
             staged = sum(timers.total.values())
             per["decode"].append(t1 - t0)
@@ -176,13 +177,13 @@ def _init_worker(ref):
     from vision_torsion.images import load_image
     from vision_torsion.pair import measure_pair
 
-    _REF = measure_pair(load_image(ref))
+    _REF = measure_pair(load_image(ref, keep_integers=True))
 
 
 def _decode_only(path):
     from vision_torsion.images import load_image
 
-    load_image(path)
+    load_image(path, keep_integers=True)
     return 1
 
 
@@ -191,7 +192,7 @@ def _measure(path):
     from vision_torsion.images import load_image
     from vision_torsion.pair import measure_pair
 
-    return pair_angle(_REF, measure_pair(load_image(path))).angle_deg
+    return pair_angle(_REF, measure_pair(load_image(path, keep_integers=True))).angle_deg
 
 
 def _spin(n):
@@ -254,8 +255,9 @@ def main(argv=None) -> int:
     print("\nPer image, one core (median ms):")
     print("| Stage | ms |\n|---|---:|")
     for k, label in (("decode", "decode (load_image)"), ("detection", "detection"), ("start", "start (centroid)"),
-                     ("edges", "edges"), ("fit", "circle fit"), ("rest", "rest (judging, table)"),
-                     ("angle", "pair selection + angle")):
+                     ("edges", "pixels around each marker"),
+                     ("fit", "marker fit (pixel model)"), ("rest", "rest (judging, pair selection)"),
+                     ("angle", "angle (pair_angle)")):
         print(f"| {label} | {stages[k]:.2f} |")
     print(f"| **processing excluding decoding** (uninstrumented, wall) | **{stages['processing_excl_decode_median']:.2f}** "
           f"(mean {stages['processing_excl_decode_mean']:.2f}, p90 {stages['processing_excl_decode_p90']:.2f}) |")

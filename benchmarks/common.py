@@ -12,12 +12,18 @@ THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NU
 
 
 def one_core() -> None:
-    """Restrict this process's numerical libraries (BLAS, OpenCV) to one thread each."""
+    """Restrict this process's numerical libraries (BLAS, OpenCV) to one thread each.
+
+    The environment variables reach worker processes started later; threadpoolctl
+    limits the BLAS already loaded here (otherwise its waiting threads count as
+    CPU time, and compete with other processes)."""
     for var in THREAD_VARS:
         os.environ.setdefault(var, "1")
     import cv2
+    from threadpoolctl import threadpool_limits
 
     cv2.setNumThreads(1)
+    threadpool_limits(1)
 
 
 def cpu_model() -> str:

@@ -339,7 +339,7 @@ def ours_algebraic(image: np.ndarray) -> Detection:
 
 
 def ours_default(image: np.ndarray) -> Detection:
-    """Our pipeline with its default settings (geometric fit with outlier rejection)."""
+    """Our pipeline with its default settings (the disc model fitted to the pixels)."""
     return _ours(image, _DEFAULT)
 
 

@@ -1,12 +1,16 @@
 """Circle and ellipse fits to edge points, each reporting failure with a reason.
 
+These serve ``fit="geometric"``, ``"algebraic"`` and ``"ellipse"``; the default
+marker fit (``"pixels"``, :mod:`.pixelfit`) fits the image model to the pixels
+instead of a circle to edge points.
+
 Three estimators, chosen by name:
 
 ``algebraic``
     The paper's fit (Kasa): minimise Q = Σ[(xᵢ-a)² + (yᵢ-b)² - r²]². Linear and
     fast, but it minimises an algebraic, not a geometric, distance: its radius is
     biased by noise and, with weighted or uneven point coverage, so is its centre.
-``geometric`` (default)
+``geometric``
     Orthogonal-distance fit: minimise Σ wᵢ(|pᵢ - c| - r)² by Gauss-Newton from the
     algebraic start, with iterative rejection of outliers (normalised residuals
     beyond ``clip`` robust standard deviations). With wᵢ = 1/σᵢ² this is the

@@ -64,7 +64,7 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
         "cycles per orientation": proto.cycles,
         "angle sign": session.config.angle_sign,
         "marker polarity": session.config.markers.polarity,
-        "circle fit": session.config.markers.fit,
+        "marker fit": session.config.markers.fit,
         "images": n_images,
         "images failed": n_failed,
     }
