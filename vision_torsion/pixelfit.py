@@ -56,7 +56,7 @@ _SETTLED_PX = 0.05
 #: Ring beyond the edge zone ±3s (px). Inside, the marker's pixels only inform its
 #: level, which is not correlated with the centre: 2.5 px instead of 0.5 px gave the
 #: same RMS on 120 centres. Outside, they also pin the lighting gradient, which is
-#: (a shift mimics a tilt). Paired against the maximum-likelihood reference of the
+#: correlated with the centre (a tilt of the levels mimics a shift). Paired against the maximum-likelihood reference of the
 #: benchmarks (square window, exact blurred-disc profile) on 200 centres of the
 #: standard scene: 5.5 px gave 1.054x its RMS, 7.5 px 1.033x, 9.5 px 1.025x, each
 #: 2 px costing ~15 % more pixels.
