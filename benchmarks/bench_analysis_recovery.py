@@ -31,7 +31,6 @@ tables measured from rendered synthetic images can be fed in the same way.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time

@@ -629,7 +629,6 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     w = least_squares_weights(sa)
     sw = np.sqrt(w)
     amp = float(np.max(np.abs(tau)))
-    span = float(np.ptp(th))
 
     def model(q, t=tau):
         theta0, k_e, z_s, a, rho, n = _bw_unpack(q)

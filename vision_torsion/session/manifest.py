@@ -19,7 +19,6 @@ import csv
 import io
 import math
 import os
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
