@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vision_torsion.errors import ImageReadError
-from vision_torsion.images import as_grey_array, load_image, write_image
+from vision_torsion.images import as_grey_array, decode_image, load_image, write_image
 
 
 @pytest.fixture
@@ -162,3 +162,17 @@ def test_write_image_is_atomic_and_readable(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["w.png"]  # no temporary file left
     img = load_image(tmp_path / "w.png")
     assert img.bit_depth == 12 and img.data.max() == 4095
+
+
+def test_decode_image_of_bytes_equals_load_image(tmp_path, grey8):
+    """A session worker decodes the bytes it already read and hashed: the same image,
+    kept as integers when asked; a bad file gets load_image's message."""
+    p = tmp_path / "a.png"
+    write_image(p, grey8)
+    raw = p.read_bytes()
+    img = decode_image(raw, name=str(p), keep_integers=True)
+    assert img.data.dtype == np.uint8 and img.bit_depth == 8 and img.path == str(p)
+    np.testing.assert_array_equal(img.data, load_image(p).data)
+    assert load_image(p, keep_integers=True).data.dtype == np.uint8
+    with pytest.raises(ImageReadError, match="a.png: truncated PNG"):
+        decode_image(raw[: len(raw) // 2], name=str(p))
