@@ -237,6 +237,56 @@ def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
     return keep if keep[edge_zone].mean() > 0.5 else None
 
 
+def sector_index(psi, radius):
+    """Angular sector (~1 px of arc at `radius` px, at least 24) of each direction
+    `psi` (rad, image axes), and the number of sectors."""
+    n_sec = max(24, int(round(2 * np.pi * radius)))
+    return ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec, n_sec
+
+
+def sector_edge_offsets(sector, n_sec, g, resid, g_cos, g_sin, *, drop=None):
+    """The edge's radial offset in each sector of arc, from that sector's pixels alone.
+
+    One Gauss-Newton step of the edge model, δₖ = Σ gᵢeᵢ / Σ gᵢ² over the sector's
+    pixels (g = ∂I/∂R, e the residual, both per pixel), placed along the sector's
+    g²-weighted mean direction (`g_cos`, `g_sin`: g·cos ψ and g·sin ψ per pixel).
+    Sectors with less than a tenth of the median information Σg², or flagged in
+    `drop`, are left out.
+
+    Returns
+    -------
+    delta, angle, information : numpy.ndarray
+        Per kept sector: the offset (px), the direction (rad) and Σg² (DN²/px²).
+
+    Raises
+    ------
+    FitError
+        Fewer than 12 sectors are kept.
+    """
+    den = np.bincount(sector, g * g, minlength=n_sec)
+    num = np.bincount(sector, g * resid, minlength=n_sec)
+    cs = np.bincount(sector, g * g_cos, minlength=n_sec)
+    sn = np.bincount(sector, g * g_sin, minlength=n_sec)
+    good = den > 0.1 * np.median(den[den > 0]) if np.any(den > 0) else den > 0
+    if drop is not None:
+        good &= ~drop
+    if good.sum() < 12:
+        raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
+    return num[good] / den[good], np.arctan2(sn[good], cs[good]), den[good]
+
+
+def check_contrast(contrast, sigma2) -> None:
+    """Raise FitError unless the marker's contrast (DN) exceeds 3x the noise σ (σ² in DN²)."""
+    if not abs(contrast) > 3.0 * np.sqrt(sigma2):
+        raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)")
+
+
+def bounded_edge_width(new, old) -> float:
+    """An updated edge width s (px) kept within [old/2, 2·old] and never below 0.3 px:
+    an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))."""
+    return float(min(max(new, 0.3, 0.5 * old), 2.0 * old))
+
+
 def lost_sectors(cut_sectors, n_sec, *, most=0.25):
     """Edge sectors to drop: those holding cut edge pixels, and two neighbours each side.
 
@@ -323,8 +373,7 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     gs = -(FB * pdf / s) * u
     den_s = float(np.sum(gs[band] ** 2))
     if den_s > 0:
-        # an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))
-        s = float(np.clip(s + float(np.sum(gs[band] * resid[band])) / den_s, max(0.5 * s, 0.3), 2.0 * s))
+        s = bounded_edge_width(s + float(np.sum(gs[band] * resid[band])) / den_s, s)
     # pass 2: levels with the new width, without the outliers; light multiplies
     # reflectance, so one illumination gradient serves inside and outside
     u = (R - d) / s
@@ -336,29 +385,18 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     contrast = coef[3] - coef[0]
     dof = max(int(keep.sum()) - 7, 1)
     sigma2 = float(np.sum(resid[keep] ** 2) / dof)
-    if not abs(contrast) > 3.0 * np.sqrt(sigma2):
-        raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)")
-    n_sec = max(24, int(round(2 * np.pi * radius)))
-    sector = ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec
+    check_contrast(contrast, sigma2)
+    sector, n_sec = sector_index(psi, radius)
     # A sector that lost pixels to the outlier cut (a wire or speck on the edge) is
     # biased by what remains of the occluder's blurred flank: drop it and its two
     # neighbours on each side rather than let it pull the circle.
     lost = lost_sectors(sector[~keep & (np.abs(u) < 3.0)], n_sec)
-    k = sector[band]
-    gb, eb, pb = g[band], resid[band], psi[band]
-    g2 = gb * gb
-    den = np.bincount(k, g2, minlength=n_sec)
-    num = np.bincount(k, gb * eb, minlength=n_sec)
-    cs = np.bincount(k, g2 * np.cos(pb), minlength=n_sec)
-    sn = np.bincount(k, g2 * np.sin(pb), minlength=n_sec)
-    good = (den > 0.1 * np.median(den[den > 0]) if np.any(den > 0) else den > 0) & ~lost
-    if good.sum() < 12:
-        raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
-    delta = num[good] / den[good]
-    ang = np.arctan2(sn[good], cs[good])
+    gb, pb = g[band], psi[band]
+    delta, ang, info = sector_edge_offsets(sector[band], n_sec, gb, resid[band], gb * np.cos(pb), gb * np.sin(pb),
+                                           drop=lost)
     Rk = radius if radial_shape is None else radial_shape(ang)
     rho = Rk + delta
-    std = np.sqrt(sigma2 / den[good])
+    std = np.sqrt(sigma2 / info)
     return EdgePoints(
         x=cx + rho * np.cos(ang),
         y=cy + rho * np.sin(ang),

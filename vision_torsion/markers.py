@@ -36,7 +36,7 @@ from .detect import Blob, default_radius_range, detect_blobs
 from .edges import MarkerPatch, edge_points, marker_patch, marker_roi
 from .errors import FitError
 from .images import as_grey_array
-from .pixelfit import DiscFit, fit_disc
+from .pixelfit import DiscFit, fit_disc, patch_extent
 from .settings import MeasureSettings
 
 if TYPE_CHECKING:
@@ -157,9 +157,9 @@ def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
 
 def _patch_extent(r0, edge_width):
     """Half-size (px) of the square around a blob (coarse radius `r0`) holding the
-    start's outer ring (to 1.15·r0 + 7 px) and the edge ring of the fit at up to
-    twice the edge width, with room for the coarse centre's and radius's error."""
-    return max(1.15 * r0 + 8.0, r0 + 3.0 * max(edge_width, 1.5) + 12.0)
+    start's outer ring (to 1.15·r0 + 7 px) and the fit's ring, with 1 px more for
+    the coarse centre's error."""
+    return max(1.15 * r0 + 8.0, patch_extent(r0, edge_width) + 1.0)
 
 
 def _start(patch: MarkerPatch, blob: Blob):

@@ -45,7 +45,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .edges import MarkerPatch, cut_occluders, lost_sectors, marker_patch, normal_cdf
+from .edges import (
+    MarkerPatch,
+    bounded_edge_width,
+    check_contrast,
+    cut_occluders,
+    lost_sectors,
+    marker_patch,
+    normal_cdf,
+    sector_edge_offsets,
+    sector_index,
+)
 from .errors import FitError
 
 __all__ = ["DiscFit", "fit_disc"]
@@ -68,6 +78,13 @@ _START_MARGIN_PX = 0.5
 #: Centre step (px) that ends the fit. Levenberg-Marquardt converges about
 #: quadratically here, so what remains after such a step is far below it.
 _CONVERGED_PX = 1e-3
+
+
+def patch_extent(radius, edge_width) -> float:
+    """Half-size (px) of the square of pixels a fit around a circle of `radius` (px)
+    needs: its ring, at an edge width up to 1.5 px (or `edge_width`), with 3 px to
+    spare."""
+    return radius + 3.0 * max(edge_width, 1.5) + _OUTER_PX + _START_MARGIN_PX + 3.0
 
 
 @dataclass(frozen=True)
@@ -184,9 +201,7 @@ def _start_levels(px: _Pixels, cx, cy, R, s):
 
 def _sectors(xs, ys, cx, cy, R):
     """Angular sector (~1 px of arc) of each pixel, and the number of sectors."""
-    n_sec = max(24, int(round(2 * np.pi * R)))
-    psi = np.arctan2(ys - cy, xs - cx)
-    return ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec, n_sec
+    return sector_index(np.arctan2(ys - cy, xs - cx), R)
 
 
 def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
@@ -214,28 +229,14 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
 
 def _edge_diagnostics(p, px: _Pixels, resid, J, u):
-    """Per-sector edge points and their RMS distance from the circle (px).
-
-    In each sector the edge's radial offset is the one-step Gauss-Newton estimate
-    from that sector's pixels alone, δ = Σ gᵢeᵢ / Σ gᵢ² (g = ∂I/∂R, e the residual),
-    placed along the sector's g²-weighted mean direction.
-    """
+    """Per-sector edge points (:func:`~vision_torsion.edges.sector_edge_offsets`)
+    and their RMS distance from the circle (px)."""
     cx, cy, R = p[0], p[1], p[2]
     band = np.abs(u) < 3.0
-    g = J[2][band]
     k, n_sec = _sectors(px.xs[band], px.ys[band], cx, cy, R)
-    den = np.bincount(k, g * g, minlength=n_sec)
-    num = np.bincount(k, g * resid[band], minlength=n_sec)
-    cs = np.bincount(k, g * J[0][band], minlength=n_sec)  # g²·cos ψ, as J[0] = g·cos ψ
-    sn = np.bincount(k, g * J[1][band], minlength=n_sec)
-    filled = den > 0
-    good = den > 0.1 * (den[filled].mean() if filled.any() else 0.0)
-    if good.sum() < 12:
-        raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
-    delta = num[good] / den[good]
-    norm = np.hypot(cs[good], sn[good])
-    rho = R + delta
-    return cx + rho * cs[good] / norm, cy + rho * sn[good] / norm, float(np.sqrt(np.mean(delta * delta)))
+    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R
+    delta, ang, _ = sector_edge_offsets(k, n_sec, J[2][band], resid[band], J[0][band], J[1][band])
+    return cx + (R + delta) * np.cos(ang), cy + (R + delta) * np.sin(ang), float(np.sqrt(np.mean(delta * delta)))
 
 
 def fit_disc(
@@ -290,7 +291,7 @@ def fit_disc(
     """
     s = float(edge_width)
     if patch is None:
-        patch = marker_patch(image, cx, cy, radius + 3.0 * max(s, 1.5) + 11.0)
+        patch = marker_patch(image, cx, cy, patch_extent(radius, s))
     x0, y0, r0 = float(cx), float(cy), float(radius)
     # one ring for the whole fit, a little wider than the edge zone needs as the
     # start may be off (the fit stays unbiased whatever the ring: every pixel in it
@@ -313,8 +314,7 @@ def fit_disc(
         except np.linalg.LinAlgError as exc:
             raise FitError("the marker's edge model is degenerate (no edge in the ring)") from exc
         trial = p + step
-        # an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))
-        trial[3] = min(max(trial[3], 0.3, 0.5 * p[3]), 2.0 * p[3])
+        trial[3] = bounded_edge_width(trial[3], p[3])
         r_t, J_t, u_t = _evaluate(trial, px)
         ssr_t = float(r_t @ r_t)
         if not ssr_t <= ssr:
@@ -351,9 +351,7 @@ def fit_disc(
         raise FitError(f"the marker's edge model did not converge in {max_iter} iterations")
     n = resid.size
     sigma2 = ssr / max(n - 8, 1)
-    contrast = p[5] - p[4]
-    if not abs(contrast) > 3.0 * np.sqrt(sigma2):
-        raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)")
+    check_contrast(p[5] - p[4], sigma2)
     try:
         cov = sigma2 * np.linalg.inv(J @ J.T)
     except np.linalg.LinAlgError as exc:
