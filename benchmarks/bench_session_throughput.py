@@ -147,6 +147,17 @@ def _peak_rss_mib(session_id: int) -> dict[int, float]:
     return peaks
 
 
+def _lines(cache: Path) -> int:
+    """Lines in the cache logs so far (cheap: no parsing while the run is timed)."""
+    total = 0
+    for log in cache.glob("*.jsonl") if cache.is_dir() else ():
+        try:
+            total += log.read_bytes().count(b"\n")
+        except OSError:
+            continue  # merged away meanwhile
+    return total
+
+
 def run_child(session: Path, out: Path, jobs: int, *, kill_at: int | None = None) -> dict:
     """Run `process` in a child process group, sampling the peak memory of the main
     process and of its workers; with `kill_at`, SIGKILL the whole group once that
@@ -158,8 +169,7 @@ def run_child(session: Path, out: Path, jobs: int, *, kill_at: int | None = None
     while proc.poll() is None:
         for pid, mib in _peak_rss_mib(proc.pid).items():
             peaks[pid] = max(mib, peaks.get(pid, 0.0))
-        if kill_at is not None and cache.is_dir() and \
-                sum(1 for _ in cache.rglob("*.json")) >= kill_at:
+        if kill_at is not None and _lines(cache) >= kill_at:
             os.killpg(proc.pid, signal.SIGKILL)  # the main process and its workers
             proc.wait()
             return {"killed": True}
@@ -177,7 +187,9 @@ def kill_and_resume(session: Path, out: Path, jobs: int, n: int) -> dict:
     """SIGKILL a run after ~n/3 cached results, then resume it."""
     killed = run_child(session, out, jobs, kill_at=n // 3).get("killed", False)
     killed_mid_run = killed and not (out / "measurements.csv").exists()
-    cached = sum(1 for _ in (out / ".cache").rglob("*.json"))
+    from vision_torsion.session.cache import count_entries
+
+    cached = count_entries(out / ".cache")
     resumed = run_child(session, out, jobs)
     return {"killed_mid_run": killed_mid_run, "cached_at_kill": cached, "resumed": resumed}
 

@@ -15,6 +15,7 @@ import pytest
 
 from test_session_support import make_session
 from vision_torsion.session import process_session
+from vision_torsion.session.cache import count_entries
 from vision_torsion.synthetic import Scene, render
 
 # Small frames keep the tests fast; the rotation centre is off the pixel grid.
@@ -71,13 +72,13 @@ def test_killed_run_resumes_to_the_same_file(tmp_path):
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and proc.poll() is None:
-            if cache.is_dir() and len(list(cache.rglob("*.json"))) >= 5:
+            if count_entries(cache) >= 5:
                 break
             time.sleep(0.005)
         proc.send_signal(signal.SIGKILL)
     finally:
         proc.wait()
-    done = len(list(cache.rglob("*.json")))
+    done = count_entries(cache)
     assert not (out / "measurements.csv").exists(), "the run finished before it was killed"
     assert 5 <= done < n
     result = process_session(folder, out_dir=out, jobs=1)

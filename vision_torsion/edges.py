@@ -44,6 +44,7 @@ y downwards.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -147,13 +148,23 @@ def marker_patch(image, cx, cy, extent) -> MarkerPatch:
     if roi is None:
         raise FitError("the marker's edge ring leaves the image")
     x0, y0, x1, y1 = roi
-    ys, xs = np.mgrid[y0:y1, x0:x1]
+    gx, gy = _grid(y1 - y0, x1 - x0)
     return MarkerPatch(
-        xs=xs.ravel().astype(np.float64),
-        ys=ys.ravel().astype(np.float64),
+        xs=gx + x0,
+        ys=gy + y0,
         values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
         shape=(y1 - y0, x1 - x0),
     )
+
+
+@lru_cache(maxsize=16)
+def _grid(rows, cols):
+    """Flat column and row indices (float64) of a rows x cols block, read-only: a
+    session's markers keep their size, so each block shape is built once."""
+    ys, xs = np.mgrid[0:rows, 0:cols]
+    gx, gy = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
+    gx.flags.writeable = gy.flags.writeable = False
+    return gx, gy
 
 
 def _solve_levels(Phi, nx, ny, vals, weight, kappa=None):
@@ -204,16 +215,25 @@ def robust_sigma(resid) -> float:
     along the edge.
     """
     a2 = np.square(resid)
-    sig = 1.4826 * float(np.sqrt(np.median(a2[::4] if a2.size >= 400 else a2)))
+    sample = a2[::4] if a2.size >= 400 else a2
+    k = sample.size // 2  # the upper median: a partition, without np.median's copies
+    sig = 1.4826 * float(np.sqrt(np.partition(sample, k)[k]))
+    largest = float(a2.max()) if a2.size else 0.0
     for _ in range(12):
-        inner = a2[a2 < 9.0 * sig * sig]
-        if inner.size < 8:
+        limit = 9.0 * sig * sig
+        if largest < limit:
+            inner_n, inner_sum = a2.size, float(a2.sum())
+        else:
+            inside = a2 < limit
+            inner_n = int(np.count_nonzero(inside))
+            inner_sum = float(np.dot(a2, inside))
+        if inner_n < 8:
             break
-        new = float(np.sqrt(np.mean(inner))) / 0.98658
-        if abs(new - sig) < 0.01 * sig:
-            sig = new
-            break
+        new = np.sqrt(inner_sum / inner_n) / 0.98658
+        done = abs(new - sig) < 0.01 * sig
         sig = new
+        if done:
+            break
     return sig or 1e-6
 
 
@@ -267,12 +287,36 @@ def sector_edge_offsets(sector, n_sec, g, resid, g_cos, g_sin, *, drop=None):
     num = np.bincount(sector, g * resid, minlength=n_sec)
     cs = np.bincount(sector, g * g_cos, minlength=n_sec)
     sn = np.bincount(sector, g * g_sin, minlength=n_sec)
-    good = den > 0.1 * np.median(den[den > 0]) if np.any(den > 0) else den > 0
+    positive = den[den > 0]
+    good = den > 0.1 * fast_median(positive) if positive.size else den > 0
     if drop is not None:
         good &= ~drop
     if good.sum() < 12:
         raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
     return num[good] / den[good], np.arctan2(sn[good], cs[good]), den[good]
+
+
+def fast_median(values) -> float:
+    """np.median of a 1-D array by one partition (np.median's checks and copies
+    cost more than the partition itself on a few thousand values)."""
+    k = values.size // 2
+    if values.size % 2:
+        return float(np.partition(values, k)[k])
+    lo, hi = np.partition(values, (k - 1, k))[k - 1 : k + 1]
+    return 0.5 * (float(lo) + float(hi))
+
+
+def harmonic_circularity(deviation, psi, radius) -> float:
+    """1 - 2·|second harmonic of the radial deviation|/R: the minor/major axis ratio
+    of a near-circle, from edge points' radial deviations (px) from a circle of
+    `radius` (px) at directions `psi` (rad).
+
+    Deviations, not radii: with sectors missing (an occluder) the radius itself
+    would leak into the harmonic and fake an ellipse.
+    """
+    a2 = 2 * np.mean(deviation * np.cos(2 * psi))
+    b2 = 2 * np.mean(deviation * np.sin(2 * psi))
+    return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
 
 
 def check_contrast(contrast, sigma2) -> None:

@@ -33,7 +33,7 @@ import numpy as np
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from .edges import MarkerPatch, edge_points, marker_patch, marker_roi
+from .edges import MarkerPatch, edge_points, fast_median, harmonic_circularity, marker_patch, marker_roi
 from .errors import FitError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, patch_extent
@@ -173,7 +173,7 @@ def _start(patch: MarkerPatch, blob: Blob):
     inside = patch.values[d2 < (0.6 * r0) ** 2]
     if outside.size < 8 or inside.size < 4:
         raise FitError("too few pixels around the marker to start the fit")
-    B, F = float(np.median(outside)), float(np.median(inside))
+    B, F = fast_median(outside), fast_median(inside)
     if B == F:
         raise FitError("the marker has no contrast")
     w = np.clip((patch.values - B) * (1.0 / (F - B)), 0.0, 1.0)
@@ -185,14 +185,9 @@ def _start(patch: MarkerPatch, blob: Blob):
 
 
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
-    """1 - 2·|second radial harmonic|/R: the minor/major axis ratio of a near-circle."""
-    psi = np.arctan2(ey - cy, ex - cx)
-    # radial deviations, not radii: with sectors missing (an occluder) the radius
-    # itself would leak into the harmonic and fake an ellipse
-    dev = np.hypot(ex - cx, ey - cy) - radius
-    a2 = 2 * np.mean(dev * np.cos(2 * psi))
-    b2 = 2 * np.mean(dev * np.sin(2 * psi))
-    return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
+    """:func:`~vision_torsion.edges.harmonic_circularity` of edge points (px) around
+    a circle centred on (cx, cy) (px)."""
+    return harmonic_circularity(np.hypot(ex - cx, ey - cy) - radius, np.arctan2(ey - cy, ex - cx), radius)
 
 
 def fit_marker(
@@ -288,7 +283,7 @@ def _not_round(cx, cy, r, circ) -> Marker:
 
 def _pixels_marker(f: DiscFit) -> Marker:
     """A :class:`Marker` from the pixel-model fit (``fit="pixels"``)."""
-    circ = _harmonic_circularity(f.edge_x, f.edge_y, f.x, f.y, f.radius)
+    circ = f.circularity
     if circ < 0.9:
         return _not_round(f.x, f.y, f.radius, circ)
     return Marker(

@@ -50,6 +50,7 @@ from .edges import (
     bounded_edge_width,
     check_contrast,
     cut_occluders,
+    harmonic_circularity,
     lost_sectors,
     marker_patch,
     normal_cdf,
@@ -113,6 +114,9 @@ class DiscFit:
         edge's shape, not used by the fit.
     residual_rms_px : float
         RMS radial distance of those edge points from the fitted circle (px).
+    circularity : float
+        1 - 2·|second radial harmonic of those edge points|/R: the minor/major axis
+        ratio of a near-circle.
     """
 
     x: float
@@ -127,6 +131,7 @@ class DiscFit:
     edge_x: np.ndarray
     edge_y: np.ndarray
     residual_rms_px: float
+    circularity: float
 
 
 class _Pixels:
@@ -228,15 +233,20 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     return keep & ~(lost[sector] & edge_zone)
 
 
-def _edge_diagnostics(p, px: _Pixels, resid, J, u):
-    """Per-sector edge points (:func:`~vision_torsion.edges.sector_edge_offsets`)
-    and their RMS distance from the circle (px)."""
+def _edge_diagnostics(p, resid, J, u):
+    """Per-sector edge points (:func:`~vision_torsion.edges.sector_edge_offsets`),
+    their RMS distance from the circle (px) and the circularity they give
+    (:func:`~vision_torsion.edges.harmonic_circularity`)."""
     cx, cy, R = p[0], p[1], p[2]
-    band = np.abs(u) < 3.0
-    k, n_sec = _sectors(px.xs[band], px.ys[band], cx, cy, R)
-    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R
-    delta, ang, _ = sector_edge_offsets(k, n_sec, J[2][band], resid[band], J[0][band], J[1][band])
-    return cx + (R + delta) * np.cos(ang), cy + (R + delta) * np.sin(ang), float(np.sqrt(np.mean(delta * delta)))
+    band = np.flatnonzero(np.abs(u) < 3.0)
+    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R (of the contrast's
+    # sign): the pixels' directions need no coordinates
+    g_cos, g_sin, g = J[:3, band]
+    sign = 1.0 if p[5] >= p[4] else -1.0
+    k, n_sec = sector_index(np.arctan2(sign * g_sin, sign * g_cos), R)
+    delta, ang, _ = sector_edge_offsets(k, n_sec, g, resid[band], g_cos, g_sin)
+    return (cx + (R + delta) * np.cos(ang), cy + (R + delta) * np.sin(ang),
+            float(np.sqrt(np.mean(delta * delta))), harmonic_circularity(delta, ang, R))
 
 
 def fit_disc(
@@ -315,6 +325,14 @@ def fit_disc(
             raise FitError("the marker's edge model is degenerate (no edge in the ring)") from exc
         trial = p + step
         trial[3] = bounded_edge_width(trial[3], p[3])
+        if final and max(abs(step[0]), abs(step[1])) < _CONVERGED_PX:
+            # Converged: take this last step without evaluating the model there.
+            # Gauss-Newton converges quadratically here, so what it leaves is far
+            # below 1e-3 px; the noise, covariance and diagnostics of the model at
+            # p differ from those at the step's end by as little. This saves a
+            # third of the model evaluations.
+            p = trial
+            break
         r_t, J_t, u_t = _evaluate(trial, px)
         ssr_t = float(r_t @ r_t)
         if not ssr_t <= ssr:
@@ -346,6 +364,7 @@ def fit_disc(
                 if not final:
                     continue
         if final and moved < _CONVERGED_PX:
+            A = J @ J.T
             break
     else:
         raise FitError(f"the marker's edge model did not converge in {max_iter} iterations")
@@ -353,10 +372,10 @@ def fit_disc(
     sigma2 = ssr / max(n - 8, 1)
     check_contrast(p[5] - p[4], sigma2)
     try:
-        cov = sigma2 * np.linalg.inv(J @ J.T)
+        cov = sigma2 * np.linalg.inv(A)
     except np.linalg.LinAlgError as exc:
         raise FitError("the marker's edge model is degenerate (no edge in the ring)") from exc
-    ex, ey, rms = _edge_diagnostics(p, px, resid, J, u)
+    ex, ey, rms, circularity = _edge_diagnostics(p, resid, J, u)
     return DiscFit(
         x=float(p[0]),
         y=float(p[1]),
@@ -370,4 +389,5 @@ def fit_disc(
         edge_x=ex,
         edge_y=ey,
         residual_rms_px=rms,
+        circularity=circularity,
     )

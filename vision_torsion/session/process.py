@@ -7,13 +7,15 @@ Steps
    measured.
 2. Every image is measured by :func:`vision_torsion.pair.measure_pair` in a pool of
    worker processes. A worker reads the file itself (images are never all in
-   memory), hashes its bytes (SHA-256), and looks up ``OUT_DIR/.cache/`` for a
-   result with the same image hash and measurement settings; only on a miss does
-   it decode the bytes it already holds and measure, writing the result (or the
-   reason it failed) to the cache atomically right away (without a disk flush: an
-   entry a power cut left empty or damaged is measured again). So an interrupted run keeps everything it finished, and a
-   re-run (after an interruption, after images were added or replaced, after the
-   settings changed) measures only what is new or changed.
+   memory) and hashes its bytes (SHA-256). Unless the cache (``OUT_DIR/.cache/``,
+   :mod:`.cache`) held a result for that image hash and those measurement settings
+   when the run started, it decodes the bytes it already holds and measures,
+   appending the result (or the reason it failed) to its own cache log right away,
+   one line in one write (without a disk flush: a line a kill or a power cut left
+   incomplete is ignored, and that image measured again). So an interrupted run
+   keeps everything it finished, and a re-run (after an interruption, after images
+   were added or replaced, after the settings changed) measures only what is new
+   or changed. At the end, the logs are merged into one.
 3. Per orientation, in manifest order, :func:`vision_torsion.angle.sequence_angles`
    turns the marker pairs into unwrapped angles relative to the orientation's
    reference image (its ``reference`` row, else its first row), multiplied by the
@@ -44,7 +46,8 @@ from ..errors import SessionError, VisionTorsionError
 from ..fileio import write_csv
 from ..settings import MeasureSettings
 from .load import Session, load_session
-from .worker import digest, measure_task, one_thread, one_thread_here
+from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache
+from .worker import digest, in_process, measure_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
 
@@ -56,7 +59,7 @@ MEASUREMENTS_NAME = "measurements.csv"
 OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
                   "angle_deg", "angle_std_deg", "status", "message")
 #: Bump when the cache entry layout changes; part of every cache key.
-_CACHE_FORMAT = 2
+_CACHE_FORMAT = 3
 
 
 @dataclass(frozen=True)
@@ -144,19 +147,20 @@ def _pool_context():
     return context
 
 
-def _run_tasks(tasks, *, jobs: int, progress: bool):
+def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset):
     """Yield each task's result in task order, in parallel when jobs > 1."""
     bar = tqdm(total=len(tasks), unit="image", desc="measuring", disable=not progress)
     try:
         if jobs == 1 or len(tasks) <= 1:
-            with one_thread_here():
+            with in_process(cache_dir, run, known):
                 for task in tasks:
                     yield measure_task(task)
                     bar.update()
             return
         context = _pool_context()
         chunksize = max(1, min(16, len(tasks) // (jobs * 8)))
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=one_thread)
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=start_worker,
+                                   initargs=(cache_dir, run, known))
         try:
             for result in pool.map(measure_task, tasks, chunksize=chunksize):
                 yield result
@@ -273,16 +277,23 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
     key = _settings_key(settings)
-    cache_dir = str(out / ".cache")
-    tasks = [(str(session.manifest.image_path(row)), settings_json, key, cache_dir)
+    cache_dir = out / CACHE_DIRNAME
+    cached, logs = read_cache(cache_dir)
+    run = CacheLog.new_run()
+    tasks = [(str(session.manifest.image_path(row)), settings_json, key)
              for row in session.manifest.rows]
     entries, sources = [], []
     jobs = min(jobs or _default_jobs(), len(tasks))
-    for text, source in _run_tasks(tasks, jobs=jobs, progress=progress):
-        entries.append(json.loads(text))
+    for image_key, text, source in _run_tasks(tasks, jobs=jobs, progress=progress,
+                                              cache_dir=str(cache_dir), run=run,
+                                              known=frozenset(cached)):
+        entries.append(cached[image_key] if text is None else json.loads(text))
         sources.append(source)
     table = _table(session, entries, correction)
     path = write_csv(out / MEASUREMENTS_NAME, table)
+    new_logs = CacheLog(cache_dir, run).files()
+    if new_logs or len(logs) > 1:
+        merge_cache(cache_dir, logs + new_logs)  # one log for the next run
     failed = table[table["status"] == "failed"]
     failures = tuple(zip(failed["image"], failed["message"]))
     logger.info("%s: %d images, %d ok, %d failed (%d measured, %d from the cache)", path,

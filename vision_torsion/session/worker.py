@@ -18,10 +18,10 @@ import cv2
 from threadpoolctl import threadpool_limits
 
 from ..errors import VisionTorsionError
-from ..fileio import atomic_write_text
 from ..settings import MeasureSettings
+from .cache import CacheLog
 
-__all__ = ["measure_task", "digest", "one_thread", "one_thread_here"]
+__all__ = ["measure_task", "digest", "start_worker", "in_process", "one_thread", "one_thread_here"]
 
 logger = logging.getLogger(__name__)
 
@@ -37,28 +37,34 @@ def _settings_from(settings_json: str) -> MeasureSettings:
     return MeasureSettings.from_dict(json.loads(settings_json))
 
 
-def measure_task(task: tuple[str, str, str, str]) -> tuple[str, str]:
-    """Measure one image, or take it from the cache; runs in a worker process.
+class _Cache:
+    """This process's view of the cache: the keys cached when the run started, and
+    its own log (:class:`~.cache.CacheLog`); set by :func:`start_worker` or
+    :func:`in_process`."""
 
-    Returns the cache entry as JSON text and where it came from: "measured",
-    "cached" or "unread" (the file could not be read). An unexpected exception is
-    reported as a failure but not cached, so it is retried on the next run.
+    known: frozenset = frozenset()
+    log: CacheLog | None = None
+
+
+def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:
+    """Measure one image unless its result is cached; runs in a worker process.
+
+    Returns the cache key, the entry as JSON text (None when it is cached: the
+    caller has the cached entries), and where it came from: "measured", "cached" or
+    "unread" (the file could not be read). A measured entry is appended to this
+    process's cache log at once. An unexpected exception is reported as a failure
+    but not cached, so it is retried on the next run.
     """
-    path, settings_json, settings_key, cache_dir = task
+    path, settings_json, settings_key = task
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
-        return json.dumps({"status": "failed",
-                           "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"
+        return "", json.dumps({"status": "failed",
+                               "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"
     image_hash = digest(data)
     key = digest(f"{image_hash}\n{settings_key}".encode())
-    cache_file = Path(cache_dir) / key[:2] / f"{key}.json"
-    try:
-        text = cache_file.read_text(encoding="utf-8")
-        if json.loads(text).get("status") in ("ok", "failed"):
-            return text, "cached"
-    except (OSError, ValueError, AttributeError):
-        pass  # no entry, or a damaged one: measure again
+    if key in _Cache.known:
+        return key, None, "cached"
     from ..images import decode_image
     from ..pair import measure_pair
 
@@ -71,12 +77,38 @@ def measure_task(task: tuple[str, str, str, str]) -> tuple[str, str]:
         entry = {"status": "failed", "message": str(exc)}
     except Exception as exc:  # noqa: BLE001 - one broken image must not stop a batch
         logger.exception("unexpected error measuring %s", path)
-        return json.dumps({"status": "failed", "message":
-                           f"internal error: {type(exc).__name__}: {exc}"}), "measured"
+        return key, json.dumps({"status": "failed", "message":
+                                f"internal error: {type(exc).__name__}: {exc}"}), "measured"
     entry["image_sha256"] = image_hash
     text = json.dumps(entry, sort_keys=True)
-    atomic_write_text(cache_file, text, durable=False)
-    return text, "measured"
+    if _Cache.log is not None:
+        try:
+            _Cache.log.append(key, text)
+        except OSError as exc:  # the result stands; only a re-run would measure it again
+            logger.warning("%s: result not cached (%s)", path, exc)
+    return key, text, "measured"
+
+
+def start_worker(cache_dir: str, run: str, known: frozenset) -> None:
+    """Worker initializer: one thread for BLAS and OpenCV (:func:`one_thread`), the
+    keys already cached, and a cache log of this run."""
+    one_thread()
+    _Cache.known = known
+    _Cache.log = CacheLog(cache_dir, run)
+
+
+@contextmanager
+def in_process(cache_dir: str, run: str, known: frozenset):
+    """:func:`start_worker` for measuring in this process (one thread while
+    measuring, then as it was; the log closed afterwards)."""
+    saved = _Cache.known, _Cache.log
+    _Cache.known, _Cache.log = known, CacheLog(cache_dir, run)
+    try:
+        with one_thread_here():
+            yield
+    finally:
+        _Cache.log.close()
+        _Cache.known, _Cache.log = saved
 
 
 def one_thread() -> None:
