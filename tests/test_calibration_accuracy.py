@@ -159,7 +159,7 @@ def test_correction_is_applied_by_check_and_measure(folder, tmp_path):
     # a similarity (turn + scale + shift) changes no angle: results must agree exactly,
     # while a shear must change them (so the correction is really applied)
     c, s = np.cos(0.3), np.sin(0.3)
-    sim = PlaneCorrection(np.array([[1.2 * c, -1.2 * s, 40.0], [1.2 * s, 1.2 * c, -7.0], [0, 0, 1.0]])).save(tmp_path / "sim.toml")
+    PlaneCorrection(np.array([[1.2 * c, -1.2 * s, 40.0], [1.2 * s, 1.2 * c, -7.0], [0, 0, 1.0]])).save(tmp_path / "sim.toml")
     shear = PlaneCorrection(np.array([[1.0, 0.01, 0.0], [0.0, 1.0, 0.0], [0, 0, 1.0]])).save(tmp_path / "shear.json")
     spec = tmp_path / "spec.toml"
     spec.write_text('tolerance_deg = 0.02\ncorrection = "sim.toml"\n')

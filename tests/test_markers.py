@@ -33,6 +33,21 @@ def test_table_columns_and_sub_pixel_accuracy(standard_scene):
         assert np.allclose(table["contrast_dn"], -160, atol=2)
 
 
+def test_coarsest_detection_scale_is_as_accurate(standard_scene):
+    """Markers of 20 px and more are found on an 8x reduced image (2.5 reduced px of
+    radius at least); the fit from that start lands on the same centres."""
+    from vision_torsion.detect import _reduction
+
+    assert (_reduction(20), _reduction(19.9), _reduction(10), _reduction(4)) == (8, 4, 4, 1)
+    r = render(standard_scene, 23.4, seed=5)
+    fine = find_markers(r.image, radius_range=(10, 60))
+    coarse = find_markers(r.image, radius_range=(20, 60))
+    assert list(coarse["status"]) == ["ok", "ok"]
+    assert np.abs(_match(coarse, r.centres)).max() < 0.015
+    by_x = [t.sort_values("x_px")[["x_px", "y_px"]].to_numpy() for t in (coarse, fine)]
+    np.testing.assert_allclose(*by_x, atol=2e-3)
+
+
 @pytest.mark.parametrize("fit", ["geometric", "algebraic", "ellipse"])
 def test_every_fit_method_is_accurate(small_scene, fit):
     r = render(small_scene, 17.0, seed=3)
