@@ -98,12 +98,26 @@ def normal_cdf(u, gauss=None):
     (8-bit: 4e-3).
     """
     u = np.asarray(u, dtype=np.float64)
+    if u.ndim == 0:
+        return normal_cdf(u[None], None if gauss is None else np.atleast_1d(gauss))[0]
     if gauss is None:
         gauss = np.exp(-0.5 * u * u)
-    t = 1.0 / (1.0 + (0.3275911 / np.sqrt(2.0)) * np.abs(u))
-    half_tail = t * (0.127414796 + t * (-0.142248368 + t * (0.7107068705 + t * (-0.7265760135 + t * 0.5307027145))))
-    half_tail *= gauss  # = Φ(-|u|)
-    return np.where(u >= 0, 1.0 - half_tail, half_tail)
+    # in place: on a few thousand values each numpy call costs about as much as
+    # its arithmetic
+    t = np.abs(u)
+    t *= 0.3275911 / np.sqrt(2.0)
+    t += 1.0
+    np.reciprocal(t, out=t)
+    tail = t * 0.5307027145
+    for c in (-0.7265760135, 0.7107068705, -0.142248368, 0.127414796):
+        tail += c
+        tail *= t
+    tail *= gauss  # = Φ(-|u|)
+    # Φ(u) = 1/2 + sign(u)·(1/2 - Φ(-|u|))
+    np.subtract(0.5, tail, out=tail)
+    np.copysign(tail, u, out=tail)
+    tail += 0.5
+    return tail
 
 
 def marker_roi(shape, cx, cy, extent):
@@ -128,12 +142,24 @@ class MarkerPatch:
         Grey levels (DN), float64.
     shape : tuple of int
         (rows, columns) of the square the flat arrays came from.
+    x0, y0 : int
+        Column and row of its top-left pixel in the image.
     """
 
     xs: np.ndarray
     ys: np.ndarray
     values: np.ndarray
     shape: tuple = ()
+    x0: int = 0
+    y0: int = 0
+
+    def squared_distance(self, cx, cy) -> np.ndarray:
+        """Squared distance (px²) of every pixel centre from (cx, cy), flat like
+        `xs`: by broadcasting a row and a column, one pass over the patch."""
+        rows, cols = self.shape
+        dx = np.arange(self.x0 - cx, self.x0 - cx + cols - 0.5)
+        dy = np.arange(self.y0 - cy, self.y0 - cy + rows - 0.5)
+        return np.add.outer(dy * dy, dx * dx).ravel()
 
 
 def marker_patch(image, cx, cy, extent) -> MarkerPatch:
@@ -154,6 +180,8 @@ def marker_patch(image, cx, cy, extent) -> MarkerPatch:
         ys=gy + y0,
         values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
         shape=(y1 - y0, x1 - x0),
+        x0=x0,
+        y0=y0,
     )
 
 
@@ -306,16 +334,17 @@ def fast_median(values) -> float:
     return 0.5 * (float(lo) + float(hi))
 
 
-def harmonic_circularity(deviation, psi, radius) -> float:
+def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:
     """1 - 2·|second harmonic of the radial deviation|/R: the minor/major axis ratio
     of a near-circle, from edge points' radial deviations (px) from a circle of
-    `radius` (px) at directions `psi` (rad).
+    `radius` (px) in directions ψ given by their cosines and sines.
 
     Deviations, not radii: with sectors missing (an occluder) the radius itself
     would leak into the harmonic and fake an ellipse.
     """
-    a2 = 2 * np.mean(deviation * np.cos(2 * psi))
-    b2 = 2 * np.mean(deviation * np.sin(2 * psi))
+    scale = 2.0 / max(deviation.size, 1)
+    a2 = scale * np.dot(deviation, cos_psi * cos_psi - sin_psi * sin_psi)  # cos 2ψ
+    b2 = scale * np.dot(deviation, 2.0 * cos_psi * sin_psi)  # sin 2ψ
     return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
 
 

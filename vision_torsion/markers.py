@@ -166,18 +166,20 @@ def _start(patch: MarkerPatch, blob: Blob):
     """Centre, radius and the two grey levels from a thresholded intensity centroid
     in full resolution: (x, y, r) in px and (outside, inside) in DN."""
     r0 = blob.radius
-    dx, dy = patch.xs - blob.x, patch.ys - blob.y
-    d2 = dx * dx + dy * dy
+    d2 = patch.squared_distance(blob.x, blob.y)
     r_in = 1.15 * r0 + 3  # generous: the coarse radius is good to about a pixel
-    outside = patch.values[(d2 > r_in**2) & (d2 < (r_in + 4.0) ** 2)]
+    beyond = d2 > r_in**2
+    outside = patch.values[beyond & (d2 < (r_in + 4.0) ** 2)]
     inside = patch.values[d2 < (0.6 * r0) ** 2]
     if outside.size < 8 or inside.size < 4:
         raise FitError("too few pixels around the marker to start the fit")
     B, F = fast_median(outside), fast_median(inside)
     if B == F:
         raise FitError("the marker has no contrast")
-    w = np.clip((patch.values - B) * (1.0 / (F - B)), 0.0, 1.0)
-    w[d2 >= r_in**2] = 0.0
+    w = patch.values - B
+    w *= 1.0 / (F - B)
+    np.clip(w, 0.0, 1.0, out=w)
+    w[beyond] = 0.0
     area = float(w.sum())
     if not area > 0:
         raise FitError("the marker has no contrast")
@@ -187,7 +189,9 @@ def _start(patch: MarkerPatch, blob: Blob):
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
     """:func:`~vision_torsion.edges.harmonic_circularity` of edge points (px) around
     a circle centred on (cx, cy) (px)."""
-    return harmonic_circularity(np.hypot(ex - cx, ey - cy) - radius, np.arctan2(ey - cy, ex - cx), radius)
+    dx, dy = ex - cx, ey - cy
+    dist = np.maximum(np.hypot(dx, dy), 1e-12)
+    return harmonic_circularity(dist - radius, dx / dist, dy / dist, radius)
 
 
 def fit_marker(

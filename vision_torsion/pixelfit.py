@@ -43,6 +43,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .edges import (
@@ -139,9 +140,9 @@ class _Pixels:
 
     def __init__(self, patch: MarkerPatch, index, x0, y0, r0):
         self.index = index
-        self.xs = patch.xs[index]
-        self.ys = patch.ys[index]
-        self.vals = patch.values[index]
+        self.xs = patch.xs.take(index)
+        self.ys = patch.ys.take(index)
+        self.vals = patch.values.take(index)
         self.nx = (self.xs - x0) / r0
         self.ny = (self.ys - y0) / r0
 
@@ -153,24 +154,38 @@ class _Pixels:
 
 
 def _evaluate(p, px: _Pixels):
-    """Residuals, Jacobian (8 x N) and the edge coordinate u = (R - d)/s at `p`."""
+    """Residuals, Jacobian (8 x N) and the edge coordinate u = (R - d)/s at `p`.
+
+    Written with few array passes and in place: a marker's ring has a few thousand
+    pixels, where each numpy call costs about as much as its arithmetic.
+    """
     cx, cy, R, s, B, F, gx, gy = p
-    dx = px.xs - cx
-    dy = px.ys - cy
-    d = np.sqrt(dx * dx + dy * dy)
-    u = (R - d) / s
-    gauss = np.exp(-0.5 * u * u)
+    n = px.xs.size
+    J = np.empty((8, n))
+    dx, dy = J[0], J[1]  # filled with the centre derivatives at the end
+    np.subtract(px.xs, cx, out=dx)
+    np.subtract(px.ys, cy, out=dy)
+    d = np.hypot(dx, dy) if n < 64 else cv2.magnitude(dx, dy).ravel()
+    u = d * (-1.0 / s)
+    u += R / s
+    gauss = np.square(u, out=J[3])
+    gauss *= -0.5
+    np.exp(gauss, out=gauss)
     Phi = normal_cdf(u, gauss)
-    L = 1.0 + gx * px.nx + gy * px.ny
-    M = B + (F - B) * Phi
+    L = px.nx * gx
+    L += px.ny * gy
+    L += 1.0
+    M = Phi * (F - B)
+    M += B
     resid = px.vals - L * M
-    J = np.empty((8, d.size))
-    g = J[2]
-    np.multiply(L * ((F - B) * _INV_SQRT_2PI / s), gauss, out=g)  # dI/dR
-    gd = g / np.maximum(d, 1e-9)
-    np.multiply(gd, dx, out=J[0])  # dI/dcx
-    np.multiply(gd, dy, out=J[1])  # dI/dcy
-    np.multiply(g, -u, out=J[3])  # dI/ds
+    g = np.multiply(L, gauss, out=J[2])  # dI/dR
+    g *= (F - B) * _INV_SQRT_2PI / s
+    np.maximum(d, 1e-9, out=d)
+    np.divide(g, d, out=d)  # d is not needed any more: g/d
+    dx *= d  # dI/dcx
+    dy *= d  # dI/dcy
+    np.multiply(g, u, out=J[3])
+    np.negative(J[3], out=J[3])  # dI/ds
     np.multiply(L, Phi, out=J[5])  # dI/dF
     np.subtract(L, J[5], out=J[4])  # dI/dB
     np.multiply(px.nx, M, out=J[6])  # dI/dgx
@@ -182,8 +197,7 @@ def _ring(patch: MarkerPatch, cx, cy, R, s, margin=0.0):
     """Indices of the patch pixels of the ring: from 3s + 0.5 px inside the edge to
     3s + 7.5 px outside it (the edge zone ±3s, and background pixels that pin the
     lighting gradient), `margin` px wider each side."""
-    dx, dy = patch.xs - cx, patch.ys - cy
-    d2 = dx * dx + dy * dy
+    d2 = patch.squared_distance(cx, cy)
     inner = max(R - 3.0 * s - _INNER_PX - margin, 0.0)
     outer = R + 3.0 * s + _OUTER_PX + margin
     index = np.flatnonzero((d2 > inner * inner) & (d2 < outer * outer))
@@ -239,14 +253,18 @@ def _edge_diagnostics(p, resid, J, u):
     (:func:`~vision_torsion.edges.harmonic_circularity`)."""
     cx, cy, R = p[0], p[1], p[2]
     band = np.flatnonzero(np.abs(u) < 3.0)
-    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R (of the contrast's
-    # sign): the pixels' directions need no coordinates
-    g_cos, g_sin, g = J[:3, band]
-    sign = 1.0 if p[5] >= p[4] else -1.0
-    k, n_sec = sector_index(np.arctan2(sign * g_sin, sign * g_cos), R)
-    delta, ang, _ = sector_edge_offsets(k, n_sec, g, resid[band], g_cos, g_sin)
-    return (cx + (R + delta) * np.cos(ang), cy + (R + delta) * np.sin(ang),
-            float(np.sqrt(np.mean(delta * delta))), harmonic_circularity(delta, ang, R))
+    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
+    # directions need no coordinates (half a turn off when g < 0, a dark marker)
+    g_cos, g_sin, g = J[:3].take(band, axis=1)
+    psi = np.arctan2(g_sin, g_cos)
+    if p[5] < p[4]:
+        psi += np.pi
+    k, n_sec = sector_index(psi, R)
+    delta, ang, _ = sector_edge_offsets(k, n_sec, g, resid.take(band), g_cos, g_sin)
+    c, s = np.cos(ang), np.sin(ang)
+    r = R + delta
+    return (cx + r * c, cy + r * s, float(np.sqrt(np.dot(delta, delta) / delta.size)),
+            harmonic_circularity(delta, c, s, R))
 
 
 def fit_disc(
