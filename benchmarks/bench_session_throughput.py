@@ -11,8 +11,11 @@ two files are identical and the content-hash cache cannot share results), then
 measures, each ``process`` run in a fresh child process with an empty cache:
 
 - decode-only time: reading and decoding every file (``cv2.imdecode``), one core;
-- ``process`` wall time with 1 and 2 worker processes, and the ratio
-  ``process / (decode / workers)`` (issue 4 asks for <= 1.3);
+- ``process`` wall time with 1 and 2 worker processes, each run between two
+  decode-only runs with as many processes (this VM's speed drifts by tens of percent
+  over minutes, and its two vCPUs do not give two processes twice the speed of one),
+  and the ratios ``process / (decode with as many processes)`` and
+  ``process / (1-core decode / workers)`` (issue 4 asks for <= 1.3);
 - peak resident memory of the main process and of the largest worker, at N and at
   N/4 (streaming means it should not grow with N);
 - kill-and-resume: a run SIGKILLed (whole process group) after about a third of the
@@ -105,17 +108,39 @@ def subset_session(source: Path, folder: Path, n: int) -> None:
         os.link(source / image, folder / image)
 
 
-def decode_only(folder: Path) -> float:
-    """Seconds to read and decode every image of the manifest, on one core."""
+def _manifest_images(folder: Path) -> list[str]:
+    return [str(folder / line.split(",")[0]) for line in
+            (folder / "manifest.csv").read_text().splitlines()[1:]]
+
+
+def _decode_files(paths: list[str]) -> int:
+    """Read and decode each file (``cv2.imdecode``, as ``process`` does)."""
     import cv2
 
-    images = [line.split(",")[0] for line in
-              (folder / "manifest.csv").read_text().splitlines()[1:]]
-    start = time.perf_counter()
-    for image in images:
-        data = np.frombuffer((folder / image).read_bytes(), np.uint8)
+    cv2.setNumThreads(1)
+    for path in paths:
+        data = np.frombuffer(Path(path).read_bytes(), np.uint8)
         assert cv2.imdecode(data, cv2.IMREAD_UNCHANGED) is not None
-    return time.perf_counter() - start
+    return len(paths)
+
+
+def _ready(_):
+    return None
+
+
+def decode_only(folder: Path, jobs: int = 1) -> float:
+    """Wall seconds to read and decode every image of the manifest with `jobs`
+    processes (already started), each taking every jobs-th file."""
+    images = _manifest_images(folder)
+    if jobs == 1:
+        start = time.perf_counter()
+        _decode_files(images)
+        return time.perf_counter() - start
+    with ProcessPoolExecutor(jobs) as pool:
+        list(pool.map(_ready, range(jobs)))
+        start = time.perf_counter()
+        assert sum(pool.map(_decode_files, [images[i::jobs] for i in range(jobs)])) == len(images)
+        return time.perf_counter() - start
 
 
 def child(session: str, out: str, jobs: int) -> None:
@@ -230,10 +255,17 @@ def main() -> None:
         render_s = time.perf_counter() - t0
         print(f"rendered {n} images in {render_s:.0f} s", file=sys.stderr)
         decode_s = decode_only(work / "full")
-        runs = {}
+        runs, decode_around = {}, {}
         for jobs in (1, 2):
+            # decoding with as many processes, just before and just after: this
+            # machine's speed drifts by tens of percent over minutes, and two
+            # processes on its two vCPUs do not run twice as fast as one
+            before = decode_only(work / "full", jobs)
             runs[jobs] = run_child(work / "full", work / f"out_j{jobs}", jobs)
-            print(f"process --jobs {jobs}: {runs[jobs]['wall_s']:.1f} s", file=sys.stderr)
+            after = decode_only(work / "full", jobs)
+            decode_around[jobs] = (before, after)
+            print(f"process --jobs {jobs}: {runs[jobs]['wall_s']:.1f} s (decoding with {jobs} "
+                  f"process(es): {before:.1f} s before, {after:.1f} s after)", file=sys.stderr)
         small = run_child(work / "quarter", work / "out_quarter", 2)
         resume = kill_and_resume(work / "full", work / "out_killed", 2, n)
         reference = (work / "out_j2" / "measurements.csv").read_bytes()
@@ -249,9 +281,13 @@ def main() -> None:
     rows = []
     for jobs in (1, 2):
         r = runs[jobs]
+        parallel_decode_s = float(np.mean(decode_around[jobs]))
         rows.append({
             "workers": jobs, "process_s": r["wall_s"],
             "per_image_ms": 1000 * r["wall_s"] / n,
+            "decode_same_processes_s": parallel_decode_s,
+            "decode_same_processes_before_after_s": decode_around[jobs],
+            "ratio_to_decode_same_processes": r["wall_s"] / parallel_decode_s,
             "ratio_to_decode_per_worker": r["wall_s"] / (decode_s / jobs),
             "main_peak_rss_mib": r["main_peak_rss_mib"],
             "worker_peak_rss_mib": r["worker_peak_rss_mib"],
@@ -274,13 +310,17 @@ def main() -> None:
     print(f"\nsession of {n} images (1400x1000 8-bit PNG), {cores} cores, "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"decode only, 1 core: {decode_s:.1f} s ({1000 * decode_s / n:.1f} ms/image)\n")
-    print("| workers | process (s) | ms/image | process / (decode / workers) | "
-          "main peak RSS (MiB) | worker peak RSS (MiB) | ok | failed |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| workers | process (s) | decode, same processes (s) | process / that decode | "
+          "process / (1-core decode / workers) | main peak RSS (MiB) | worker peak RSS (MiB) "
+          "| ok | failed |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['workers']} | {r['process_s']:.1f} | {r['per_image_ms']:.1f} | "
+        print(f"| {r['workers']} | {r['process_s']:.1f} | {r['decode_same_processes_s']:.1f} | "
+              f"{r['ratio_to_decode_same_processes']:.2f} | "
               f"{r['ratio_to_decode_per_worker']:.2f} | {r['main_peak_rss_mib']:.0f} | "
               f"{r['worker_peak_rss_mib']:.0f} | {r['n_ok']} | {r['n_failed']} |")
+    print("(decode, same processes: reading and decoding every file with as many processes, "
+          "mean of a run just before and one just after; the 1-core decode ran first)")
     print(f"\nmemory vs size (2 workers, peak RSS sampled every 0.1 s): main {small['main_peak_rss_mib']:.0f} MiB at "
           f"N/4 = {quarter}, {rows[1]['main_peak_rss_mib']:.0f} MiB at N = {n}; largest "
           f"worker {small['worker_peak_rss_mib']:.0f} vs "
