@@ -11,7 +11,9 @@ y downwards.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+import math
+from dataclasses import dataclass, fields
+from functools import lru_cache
 
 import numpy as np
 
@@ -54,15 +56,19 @@ class PairMeasurement:
     def to_dict(self) -> dict:
         """JSON-safe dict (NaN written as None)."""
 
+        names = _marker_fields()
+
         def clean(m):
-            return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in asdict(m).items()}
+            # flat fields: no recursive copy (dataclasses.asdict) needed
+            return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                    for k, v in ((k, getattr(m, k)) for k in names)}
 
         return {"first": clean(self.first), "second": clean(self.second), "n_candidates": self.n_candidates}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PairMeasurement":
         """Rebuild from :meth:`to_dict` output."""
-        names = {f.name for f in fields(Marker)}
+        names = set(_marker_fields())
 
         def marker(m):
             return Marker(**{k: (np.nan if v is None else v) for k, v in m.items() if k in names})
@@ -70,9 +76,14 @@ class PairMeasurement:
         return cls(first=marker(d["first"]), second=marker(d["second"]), n_candidates=int(d.get("n_candidates", 2)))
 
 
+@lru_cache(maxsize=1)
+def _marker_fields() -> tuple[str, ...]:
+    return tuple(f.name for f in fields(Marker))
+
+
 def _as_markers(table) -> list[Marker]:
     if is_frame(table):
-        names = [f.name for f in fields(Marker)]
+        names = list(_marker_fields())
         missing = [c for c in ("x_px", "y_px", "radius_px", "status") if c not in table.columns]
         if missing:
             raise MarkerError(f"marker table lacks column(s) {missing}")
