@@ -44,7 +44,7 @@ y downwards.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -136,30 +136,51 @@ class MarkerPatch:
 
     Attributes
     ----------
-    xs, ys : numpy.ndarray
-        Pixel-centre coordinates (px), float64.
     values : numpy.ndarray
-        Grey levels (DN), float64.
+        Grey levels (DN), float64, row by row.
     shape : tuple of int
-        (rows, columns) of the square the flat arrays came from.
+        (rows, columns) of the square the flat array came from.
     x0, y0 : int
         Column and row of its top-left pixel in the image.
+    xs, ys : numpy.ndarray
+        Pixel-centre coordinates (px), float64, flat like `values` (made when
+        first asked for: the pixel-model fit works from indices).
     """
 
-    xs: np.ndarray
-    ys: np.ndarray
     values: np.ndarray
-    shape: tuple = ()
+    shape: tuple
     x0: int = 0
     y0: int = 0
 
+    @cached_property
+    def xs(self) -> np.ndarray:
+        return _grid(*self.shape)[0] + self.x0
+
+    @cached_property
+    def ys(self) -> np.ndarray:
+        return _grid(*self.shape)[1] + self.y0
+
+    def coordinates(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) in px of the pixels at flat positions `index`."""
+        row, col = np.divmod(index, self.shape[1])
+        return col + float(self.x0), row + float(self.y0)
+
     def squared_distance(self, cx, cy) -> np.ndarray:
         """Squared distance (px²) of every pixel centre from (cx, cy), flat like
-        `xs`: by broadcasting a row and a column, one pass over the patch."""
+        `values`: by broadcasting a row and a column, one pass over the patch."""
         rows, cols = self.shape
         dx = np.arange(self.x0 - cx, self.x0 - cx + cols - 0.5)
         dy = np.arange(self.y0 - cy, self.y0 - cy + rows - 0.5)
         return np.add.outer(dy * dy, dx * dx).ravel()
+
+    def centroid(self, weights) -> tuple[float, float, float]:
+        """Sum of `weights` (flat like `values`) and their weighted mean (x, y) in px."""
+        rows, cols = self.shape
+        w = weights.reshape(rows, cols)
+        total = float(w.sum())
+        x = self.x0 + float(w.sum(axis=0) @ np.arange(cols)) / total
+        y = self.y0 + float(w.sum(axis=1) @ np.arange(rows)) / total
+        return total, x, y
 
 
 def marker_patch(image, cx, cy, extent) -> MarkerPatch:
@@ -174,10 +195,7 @@ def marker_patch(image, cx, cy, extent) -> MarkerPatch:
     if roi is None:
         raise FitError("the marker's edge ring leaves the image")
     x0, y0, x1, y1 = roi
-    gx, gy = _grid(y1 - y0, x1 - x0)
     return MarkerPatch(
-        xs=gx + x0,
-        ys=gy + y0,
         values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
         shape=(y1 - y0, x1 - x0),
         x0=x0,

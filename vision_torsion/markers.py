@@ -180,10 +180,10 @@ def _start(patch: MarkerPatch, blob: Blob):
     w *= 1.0 / (F - B)
     np.clip(w, 0.0, 1.0, out=w)
     w[beyond] = 0.0
-    area = float(w.sum())
+    area, x, y = patch.centroid(w) if w.any() else (0.0, 0.0, 0.0)
     if not area > 0:
         raise FitError("the marker has no contrast")
-    return float(w @ patch.xs) / area, float(w @ patch.ys) / area, np.sqrt(area / np.pi), (B, F)
+    return x, y, np.sqrt(area / np.pi), (B, F)
 
 
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:

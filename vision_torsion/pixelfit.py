@@ -140,8 +140,7 @@ class _Pixels:
 
     def __init__(self, patch: MarkerPatch, index, x0, y0, r0):
         self.index = index
-        self.xs = patch.xs.take(index)
-        self.ys = patch.ys.take(index)
+        self.xs, self.ys = patch.coordinates(index)
         self.vals = patch.values.take(index)
         self.nx = (self.xs - x0) / r0
         self.ny = (self.ys - y0) / r0
