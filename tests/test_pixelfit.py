@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from vision_torsion.edges import normal_cdf, robust_sigma
+from vision_torsion.edges import fast_median, marker_patch, normal_cdf, robust_sigma
 from vision_torsion.errors import FitError
 from vision_torsion.pixelfit import fit_disc
 from vision_torsion.synthetic import render
@@ -14,6 +14,34 @@ def test_normal_cdf_matches_scipy_to_1e7():
     u = np.linspace(-12.0, 12.0, 100_001)
     assert np.abs(normal_cdf(u) - ndtr(u)).max() < 1e-7
     assert np.abs(normal_cdf(u, np.exp(-0.5 * u * u)) - ndtr(u)).max() < 1e-7
+    assert normal_cdf(0.5) == pytest.approx(ndtr(0.5), abs=1e-7)  # scalars too
+    assert normal_cdf(np.zeros((2, 3))).shape == (2, 3)
+
+
+def test_fast_median_is_numpys_median():
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 10, 11, 999, 1000):
+        x = rng.normal(size=n)
+        assert fast_median(x) == np.median(x)
+
+
+def test_patch_geometry_matches_explicit_coordinates():
+    """Squared distances, centroid and index coordinates of a patch against its
+    pixel-centre coordinate arrays, on a non-square patch off the image's origin."""
+    image = np.random.default_rng(5).random((90, 120))
+    patch = marker_patch(image, 61.3, 40.8, 25.4)
+    assert (patch.x0, patch.y0) == (35, 15) and patch.values.size == patch.xs.size
+    np.testing.assert_array_equal(patch.values, image[15:15 + patch.shape[0], 35:35 + patch.shape[1]].ravel())
+    np.testing.assert_allclose(patch.squared_distance(61.3, 40.8),
+                               (patch.xs - 61.3) ** 2 + (patch.ys - 40.8) ** 2, rtol=1e-12)
+    w = patch.values
+    total, x, y = patch.centroid(w)
+    assert total == pytest.approx(w.sum())
+    assert (x, y) == pytest.approx((w @ patch.xs / w.sum(), w @ patch.ys / w.sum()), abs=1e-9)
+    index = np.array([0, 7, patch.values.size - 1])
+    xs, ys = patch.coordinates(index)
+    np.testing.assert_array_equal(xs, patch.xs[index])
+    np.testing.assert_array_equal(ys, patch.ys[index])
 
 
 def test_centres_are_accurate_and_the_covariance_is_honest(small_scene):
