@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from vision_torsion.session.cache import CacheLog, count_entries, merge_cache, read_cache
+from vision_torsion.session.cache import CacheLog, count_entries, merge_cache, read_cache, read_logs
 
 KEY_A, KEY_B, KEY_C = "a" * 64, "b" * 64, "c" * 64
 
@@ -48,11 +48,13 @@ def test_merge_keeps_the_latest_entry_per_key_and_leaves_other_runs_logs(tmp_pat
     other.append(KEY_C, _entry(4))
     for log in (first, second, other):
         log.close()
-    merged = merge_cache(folder, first.files() + second.files())
+    logs = first.files() + second.files()
+    merged = merge_cache(folder, read_logs(logs), logs)
     assert sorted(p.name for p in folder.iterdir()) == sorted([merged.name, other.files()[0].name])
     assert read_cache(folder)[0] == {KEY_A: {"status": "ok", "value": 2},
                                      KEY_B: {"status": "ok", "value": 3},
                                      KEY_C: {"status": "ok", "value": 4}}
     # merging the merged log again changes nothing
-    assert merge_cache(folder, [merged]).read_text() == merged.read_text()
+    text = merged.read_text()
+    assert merge_cache(folder, read_logs([merged]), [merged]).read_text() == text
     assert count_entries(folder) == 3

@@ -164,7 +164,7 @@ def _evaluate(p, px: _Pixels):
     dx, dy = J[0], J[1]  # filled with the centre derivatives at the end
     np.subtract(px.xs, cx, out=dx)
     np.subtract(px.ys, cy, out=dy)
-    d = np.hypot(dx, dy) if n < 64 else cv2.magnitude(dx, dy).ravel()
+    d = cv2.magnitude(dx, dy).ravel()
     u = d * (-1.0 / s)
     u += R / s
     gauss = np.square(u, out=J[3])

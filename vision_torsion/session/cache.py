@@ -21,7 +21,7 @@ from pathlib import Path
 
 from ..fileio import atomic_write_text
 
-__all__ = ["CacheLog", "read_cache", "merge_cache", "count_entries", "CACHE_DIRNAME"]
+__all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "CACHE_DIRNAME"]
 
 #: Name of the cache folder inside the output folder.
 CACHE_DIRNAME = ".cache"
@@ -48,22 +48,28 @@ def _entries(path: Path):
             yield key, value
 
 
+def read_logs(files) -> dict[str, dict]:
+    """Every valid entry of the logs `files`, by cache key (a later line, or a later
+    file's, wins over an earlier one with the same key)."""
+    entries: dict[str, dict] = {}
+    for path in files:
+        entries.update(_entries(Path(path)))
+    return entries
+
+
 def read_cache(folder) -> tuple[dict[str, dict], list[Path]]:
     """Every valid entry of the cache in `folder`, and the log files read.
 
     Returns
     -------
     entries : dict
-        Cache key -> entry (a later line wins over an earlier one with the same key).
+        Cache key -> entry (:func:`read_logs`).
     files : list of pathlib.Path
         The ``*.jsonl`` files read (to merge them later with :func:`merge_cache`).
     """
     folder = Path(folder)
     files = sorted(folder.glob("*.jsonl")) if folder.is_dir() else []
-    entries: dict[str, dict] = {}
-    for path in files:
-        entries.update(_entries(path))
-    return entries, files
+    return read_logs(files), files
 
 
 def count_entries(folder) -> int:
@@ -71,16 +77,11 @@ def count_entries(folder) -> int:
     return len(read_cache(folder)[0])
 
 
-def merge_cache(folder, files) -> Path:
-    """Merge the logs `files` of the cache `folder` into one, written atomically,
-    and remove the others. Logs not listed (another run's) are left alone.
-
-    Entries are kept once per key (a later file's wins), sorted by key.
-    """
+def merge_cache(folder, entries: dict[str, dict], files) -> Path:
+    """Write `entries` (as read from the logs `files` by :func:`read_logs`) as one
+    log of the cache `folder`, sorted by key and atomically, then remove `files`.
+    Logs not listed (another run's) are left alone."""
     folder = Path(folder)
-    entries: dict[str, dict] = {}
-    for path in files:
-        entries.update(_entries(Path(path)))
     text = "".join(f"{key} {json.dumps(entry, sort_keys=True)}\n" for key, entry in sorted(entries.items()))
     merged = atomic_write_text(folder / _MERGED, text, durable=False)
     for path in files:

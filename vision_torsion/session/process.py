@@ -46,7 +46,7 @@ from ..errors import SessionError, VisionTorsionError
 from ..fileio import write_csv
 from ..settings import MeasureSettings
 from .load import Session, load_session
-from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache
+from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .worker import digest, in_process, measure_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
@@ -295,7 +295,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     path = write_csv(out / MEASUREMENTS_NAME, table)
     new_logs = CacheLog(cache_dir, run).files()
     if new_logs or len(logs) > 1:
-        merge_cache(cache_dir, logs + new_logs)  # one log for the next run
+        # one log for the next run; the old logs' entries were read at the start
+        merge_cache(cache_dir, {**cached, **read_logs(new_logs)}, logs + new_logs)
     failed = table[table["status"] == "failed"]
     failures = tuple(zip(failed["image"], failed["message"]))
     logger.info("%s: %d images, %d ok, %d failed (%d measured, %d from the cache)", path,
