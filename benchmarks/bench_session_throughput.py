@@ -11,13 +11,16 @@ two files are identical and the content-hash cache cannot share results), then
 measures, each ``process`` run in a fresh child process with an empty cache:
 
 - decode-only time: reading and decoding every file (``cv2.imdecode``), one core;
-- ``process`` wall time with 1 and 2 worker processes, each run between two
-  decode-only runs with as many processes (this VM's speed drifts by tens of percent
-  over minutes, and its two vCPUs do not give two processes twice the speed of one),
-  and the ratios ``process / (decode with as many processes)`` and
-  ``process / (1-core decode / workers)`` (issue 4 asks for <= 1.3);
-- peak resident memory of the main process and of the largest worker, at N and at
-  N/4 (streaming means it should not grow with N);
+- ``process`` wall time with 1 job (measured in the calling process), 2 jobs (the
+  default on two cores: two threads read and decode, the calling thread measures)
+  and 2 jobs forced into 2 worker processes (the path ``process`` takes above four
+  jobs), each run between two decode-only runs with as many processes (this VM's
+  speed drifts by tens of percent over minutes, and its two vCPUs do not give two
+  processes twice the speed of one), and the ratios ``process / (decode with as
+  many processes)`` and ``process / (1-core decode / jobs)`` (issue 4 asks for
+  <= 1.3);
+- peak resident memory of the main process (and of the largest worker process),
+  at N and at N/4 (streaming means it should not grow with N);
 - kill-and-resume: a run SIGKILLed (whole process group) after about a third of the
   images, then resumed; the resumed measurements.csv must equal an uninterrupted
   run's byte for byte, and the resumed run must measure only the images not cached.
@@ -44,6 +47,9 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "session_throughput.json"
+#: (name, jobs, mode) of the timed runs; the second is the default on two cores.
+CONFIGS = (("1 job", 1, "default"), ("2 jobs, threads", 2, "default"),
+           ("2 jobs, processes", 2, "processes"))
 ANGLE_GRID_DEG = 0.25  # ideal renders are shared between images on this grid
 
 
@@ -143,11 +149,16 @@ def decode_only(folder: Path, jobs: int = 1) -> float:
         return time.perf_counter() - start
 
 
-def child(session: str, out: str, jobs: int) -> None:
-    """Run process_session here and print wall time and counts as JSON."""
-    from vision_torsion.session import process_session
-
+def child(session: str, out: str, jobs: int, mode: str) -> None:
+    """Run process_session here and print wall time and counts as JSON; `mode`
+    "processes" sends even 2 jobs to worker processes."""
     import resource
+
+    from vision_torsion.session import process_session
+    from vision_torsion.session import process as process_module
+
+    if mode == "processes":
+        process_module._MAX_THREAD_JOBS = 0
 
     start = time.perf_counter()
     result = process_session(session, out_dir=out, jobs=jobs)
@@ -187,7 +198,8 @@ def _lines(cache: Path) -> int:
     return total
 
 
-def run_child(session: Path, out: Path, jobs: int, *, kill_at: int | None = None) -> dict:
+def run_child(session: Path, out: Path, jobs: int, *, mode: str = "default",
+              kill_at: int | None = None) -> dict:
     """Run `process` in a child process group, sampling the peak memory of its
     workers (the main process reports its own); with `kill_at`, SIGKILL the whole
     group once that many results are cached.
@@ -196,7 +208,7 @@ def run_child(session: Path, out: Path, jobs: int, *, kill_at: int | None = None
     process costs a few ms, which taken from the measured run every 0.1 s would
     slow it by a few percent. A worker's peak (VmHWM) holds for its whole life, so
     sparse samples still see it."""
-    cmd = [sys.executable, __file__, "--child", str(session), str(out), str(jobs)]
+    cmd = [sys.executable, __file__, "--child", str(session), str(out), str(jobs), mode]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
     peaks: dict[int, float] = {}
     cache = out / ".cache"
@@ -247,10 +259,10 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=1000, help="images in the session")
     parser.add_argument("--workdir", type=Path, help="where to build the sessions "
                         "(default: a temporary folder, removed afterwards)")
-    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        child(args.child[0], args.child[1], int(args.child[2]))
+        child(args.child[0], args.child[1], int(args.child[2]), args.child[3])
         return
     n, quarter = args.n, max(1, args.n // 4)
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_session_"))
@@ -267,39 +279,40 @@ def main() -> None:
         print(f"rendered {n} images in {render_s:.0f} s", file=sys.stderr)
         decode_s = decode_only(work / "full")
         runs, decode_around = {}, {}
-        for jobs in (1, 2):
+        for index, (name, jobs, mode) in enumerate(CONFIGS):
             # decoding with as many processes, just before and just after: this
             # machine's speed drifts by tens of percent over minutes, and two
             # processes on its two vCPUs do not run twice as fast as one
             before = decode_only(work / "full", jobs)
-            runs[jobs] = run_child(work / "full", work / f"out_j{jobs}", jobs)
+            runs[name] = run_child(work / "full", work / f"out_{index}", jobs, mode=mode)
             after = decode_only(work / "full", jobs)
-            decode_around[jobs] = (before, after)
-            print(f"process --jobs {jobs}: {runs[jobs]['wall_s']:.1f} s (decoding with {jobs} "
+            decode_around[name] = (before, after)
+            print(f"process, {name}: {runs[name]['wall_s']:.1f} s (decoding with {jobs} "
                   f"process(es): {before:.1f} s before, {after:.1f} s after)", file=sys.stderr)
         small = run_child(work / "quarter", work / "out_quarter", 2)
         resume = kill_and_resume(work / "full", work / "out_killed", 2, n)
-        reference = (work / "out_j2" / "measurements.csv").read_bytes()
+        reference = (work / "out_1" / "measurements.csv").read_bytes()
         identical = (work / "out_killed" / "measurements.csv").read_bytes() == reference
         only_rest = (resume["resumed"]["n_measured"] == n - resume["cached_at_kill"]
                      and resume["resumed"]["n_cached"] == resume["cached_at_kill"])
-        same_j1_j2 = (work / "out_j1" / "measurements.csv").read_bytes() == reference
-        worst = angle_errors(work / "out_j2" / "measurements.csv", truth)
+        same_files = all((work / f"out_{index}" / "measurements.csv").read_bytes() == reference
+                         for index in range(len(CONFIGS)))
+        worst = angle_errors(work / "out_1" / "measurements.csv", truth)
     finally:
         if args.workdir is None:
             shutil.rmtree(work, ignore_errors=True)
 
     rows = []
-    for jobs in (1, 2):
-        r = runs[jobs]
-        parallel_decode_s = float(np.mean(decode_around[jobs]))
+    for name, jobs, _ in CONFIGS:
+        r = runs[name]
+        parallel_decode_s = float(np.mean(decode_around[name]))
         rows.append({
-            "workers": jobs, "process_s": r["wall_s"],
+            "run": name, "jobs": jobs, "process_s": r["wall_s"],
             "per_image_ms": 1000 * r["wall_s"] / n,
             "decode_same_processes_s": parallel_decode_s,
-            "decode_same_processes_before_after_s": decode_around[jobs],
+            "decode_same_processes_before_after_s": decode_around[name],
             "ratio_to_decode_same_processes": r["wall_s"] / parallel_decode_s,
-            "ratio_to_decode_per_worker": r["wall_s"] / (decode_s / jobs),
+            "ratio_to_decode_per_job": r["wall_s"] / (decode_s / jobs),
             "main_peak_rss_mib": r["main_peak_rss_mib"],
             "worker_peak_rss_mib": r["worker_peak_rss_mib"],
             "n_ok": r["n_ok"], "n_failed": r["n_failed"]})
@@ -312,7 +325,7 @@ def main() -> None:
         "quarter": {"n_images": quarter, **small},
         "kill_and_resume": {**resume, "identical_to_uninterrupted": identical,
                             "measured_only_the_rest": only_rest},
-        "jobs1_equals_jobs2": same_j1_j2, "max_angle_error_deg": worst,
+        "all_runs_give_the_same_file": same_files, "max_angle_error_deg": worst,
         "target_ratio": 1.3,
         "measuring_code_changed_during_run": _code_fingerprint() != code_at_start,
     }
@@ -321,26 +334,27 @@ def main() -> None:
     print(f"\nsession of {n} images (1400x1000 8-bit PNG), {cores} cores, "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"decode only, 1 core: {decode_s:.1f} s ({1000 * decode_s / n:.1f} ms/image)\n")
-    print("| workers | process (s) | decode, same processes (s) | process / that decode | "
-          "process / (1-core decode / workers) | main peak RSS (MiB) | worker peak RSS (MiB) "
+    print("| run | process (s) | decode, same processes (s) | process / that decode | "
+          "process / (1-core decode / jobs) | main peak RSS (MiB) | worker peak RSS (MiB) "
           "| ok | failed |")
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['workers']} | {r['process_s']:.1f} | {r['decode_same_processes_s']:.1f} | "
+        worker = "-" if np.isnan(r["worker_peak_rss_mib"]) else f"{r['worker_peak_rss_mib']:.0f}"
+        print(f"| {r['run']} | {r['process_s']:.1f} | {r['decode_same_processes_s']:.1f} | "
               f"{r['ratio_to_decode_same_processes']:.2f} | "
-              f"{r['ratio_to_decode_per_worker']:.2f} | {r['main_peak_rss_mib']:.0f} | "
-              f"{r['worker_peak_rss_mib']:.0f} | {r['n_ok']} | {r['n_failed']} |")
+              f"{r['ratio_to_decode_per_job']:.2f} | {r['main_peak_rss_mib']:.0f} | "
+              f"{worker} | {r['n_ok']} | {r['n_failed']} |")
     print("(decode, same processes: reading and decoding every file with as many processes, "
-          "mean of a run just before and one just after; the 1-core decode ran first)")
-    print(f"\nmemory vs size (2 workers; peak RSS of the main process from itself, of the workers sampled every 0.5 s): main {small['main_peak_rss_mib']:.0f} MiB at "
-          f"N/4 = {quarter}, {rows[1]['main_peak_rss_mib']:.0f} MiB at N = {n}; largest "
-          f"worker {small['worker_peak_rss_mib']:.0f} vs "
-          f"{rows[1]['worker_peak_rss_mib']:.0f} MiB")
+          "mean of a run just before and one just after; the 1-core decode ran first; "
+          "'-': no worker processes)")
+    print(f"\nmemory vs size (2 jobs, threads; peak RSS of the process from itself): "
+          f"{small['main_peak_rss_mib']:.0f} MiB at N/4 = {quarter}, "
+          f"{rows[1]['main_peak_rss_mib']:.0f} MiB at N = {n}")
     print(f"kill and resume: killed with {resume['cached_at_kill']} of {n} cached; resumed "
           f"run measured {resume['resumed']['n_measured']}, took "
           f"{resume['resumed']['n_cached']} from the cache; measurements.csv identical to "
           f"the uninterrupted run: {identical}; measured only the rest: {only_rest}")
-    print(f"jobs 1 and jobs 2 give the same file: {same_j1_j2}; largest angle error vs "
+    print(f"every run gives the same file: {same_files}; largest angle error vs "
           f"the rendered truth: {worst:.4f}°")
     if report["measuring_code_changed_during_run"]:
         print("WARNING: the measuring code changed during the run; the runs are not "

@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 from test_session_support import make_session
+from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
 from vision_torsion.session.cache import count_entries
 from vision_torsion.synthetic import Scene, render
@@ -41,9 +42,9 @@ def rendered(tmp_path_factory):
     return folder, plan, truth
 
 
-def test_angles_match_the_rendered_truth_in_parallel(rendered, tmp_path):
+def test_angles_match_the_rendered_truth_in_parallel(rendered, tmp_path, monkeypatch):
     folder, plan, truth = rendered
-    result = process_session(folder, out_dir=tmp_path / "two", jobs=2)
+    result = process_session(folder, out_dir=tmp_path / "two", jobs=2)  # threads
     assert result.ok and result.n_measured == len(plan.rows)
     table = pd.read_csv(result.measurements_path)
     for _, group in table.groupby("orientation_deg"):
@@ -51,9 +52,13 @@ def test_angles_match_the_rendered_truth_in_parallel(rendered, tmp_path):
         errors = [a - (truth[i] - ref) for i, a in zip(group["image"], group["angle_deg"])]
         assert max(map(abs, errors)) < ANGLE_TOL_DEG
     assert (table["angle_std_deg"][1:] > 0).all()
-    # one worker or two: the same file, byte for byte
+    # one job, two reading threads or two worker processes: the same file, byte for byte
     single = process_session(folder, out_dir=tmp_path / "one", jobs=1)
     assert single.measurements_path.read_bytes() == result.measurements_path.read_bytes()
+    monkeypatch.setattr(process_module, "_MAX_THREAD_JOBS", 1)
+    pooled = process_session(folder, out_dir=tmp_path / "pool", jobs=2)
+    assert pooled.n_measured == len(plan.rows)
+    assert pooled.measurements_path.read_bytes() == result.measurements_path.read_bytes()
 
 
 _RUN = ("import sys; from vision_torsion.session import process_session; "

@@ -18,6 +18,7 @@ from vision_torsion import fileio
 from vision_torsion.cli import process as process_cli
 from vision_torsion.errors import ManifestError, SessionError
 from vision_torsion.images import write_image
+from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
 from vision_torsion.session.cache import count_entries
 from vision_torsion.session.process import OUTPUT_COLUMNS
@@ -78,11 +79,12 @@ def test_angle_sign(tmp_path, core):
                                              abs=ANGLE_TOL_DEG)
 
 
-def test_one_bad_image_does_not_stop_the_run(session, core):
+@pytest.mark.parametrize("jobs", [1, 3])  # measured here; read by three threads
+def test_one_bad_image_does_not_stop_the_run(session, core, jobs):
     folder, plan, _ = session
     bad = plan.rows[3]["image"]
     (folder / bad).write_bytes(b"this is not a png")
-    result = process_session(folder, jobs=1)
+    result = process_session(folder, jobs=jobs)
     assert not result.ok and (result.n_ok, result.n_failed) == (19, 1)
     table = read(result.measurements_path)
     row = table[table["image"] == bad].iloc[0]
@@ -92,11 +94,12 @@ def test_one_bad_image_does_not_stop_the_run(session, core):
     assert result.failures == ((bad, row["message"]),)
 
 
-def test_failed_reference_fails_its_orientation_only(session, core):
+@pytest.mark.parametrize("jobs", [1, 3])
+def test_failed_reference_fails_its_orientation_only(session, core, jobs):
     folder, plan, _ = session
     ref = plan.rows[0]["image"]
     write_image(folder / ref, np.full((150, 200), 220.0))  # markers missing
-    result = process_session(folder, jobs=1)
+    result = process_session(folder, jobs=jobs)
     table = read(result.measurements_path)
     o0 = table[table["orientation_deg"] == 0]
     assert (o0["status"] == "failed").all() and result.n_failed == len(o0) == 10
@@ -149,7 +152,8 @@ def test_session_folder_is_never_modified(session, core, tmp_path):
     assert (folder / "results" / "measurements.csv").is_file()
 
 
-def test_resume_after_interruption_gives_the_same_file(session, monkeypatch, tmp_path):
+@pytest.mark.parametrize("jobs", [1, 3])  # with threads reading ahead, the same
+def test_resume_after_interruption_gives_the_same_file(session, monkeypatch, tmp_path, jobs):
     folder, plan, _ = session
     (folder / plan.rows[4]["image"]).write_bytes(b"garbage")  # failures are cached too
     full = install_fake_core(monkeypatch, FakeCore())
@@ -158,14 +162,52 @@ def test_resume_after_interruption_gives_the_same_file(session, monkeypatch, tmp
     # failing on the way), nothing written but the cache
     install_fake_core(monkeypatch, FakeCore(interrupt_after=8))
     with pytest.raises(KeyboardInterrupt):
-        process_session(folder, out_dir=tmp_path / "b", jobs=1)
+        process_session(folder, out_dir=tmp_path / "b", jobs=jobs)
     assert not (tmp_path / "b" / "measurements.csv").exists()
     assert count_entries(tmp_path / "b" / ".cache") == 8 + 1  # + the failure
     resumed = install_fake_core(monkeypatch, FakeCore())
-    result = process_session(folder, out_dir=tmp_path / "b", jobs=1)
+    result = process_session(folder, out_dir=tmp_path / "b", jobs=jobs)
     assert (result.n_measured, result.n_cached) == (20 - 9, 9)
     assert len(resumed.measured) == 11 and len(full.measured) == 19
     assert result.measurements_path.read_bytes() == reference.read_bytes()
+
+
+@pytest.mark.parametrize("jobs", [1, 3])
+def test_an_image_removed_after_validation_fails_alone(session, core, monkeypatch, jobs):
+    folder, plan, _ = session
+    gone = plan.rows[5]["image"]
+    load = process_module.load_session
+
+    def load_then_remove(path):
+        loaded = load(path)
+        (folder / gone).unlink()
+        return loaded
+
+    monkeypatch.setattr(process_module, "load_session", load_then_remove)
+    result = process_session(folder, jobs=jobs)
+    assert (result.n_ok, result.n_failed) == (19, 1)
+    row = read(result.measurements_path).set_index("image").loc[gone]
+    assert row["message"] == f"{gone}: cannot be read (No such file or directory)"
+    assert count_entries(folder / "results" / ".cache") == 19  # not cached: tried again next run
+
+
+@pytest.mark.parametrize("jobs", [1, 3])
+def test_an_unexpected_error_fails_its_image_and_is_not_cached(session, monkeypatch, jobs):
+    folder, plan, _ = session
+    broken = plan.rows[6]["image"]
+    core = FakeCore()
+    measure = core.measure_pair
+
+    def measure_pair(image, *, settings, name=None):
+        if name.endswith(broken):
+            raise RuntimeError("a bug")
+        return measure(image, settings=settings, name=name)
+
+    core.measure_pair = measure_pair
+    install_fake_core(monkeypatch, core)
+    result = process_session(folder, jobs=jobs)
+    assert result.failures == ((broken, "internal error: RuntimeError: a bug"),)
+    assert count_entries(folder / "results" / ".cache") == 19
 
 
 def test_rerun_measures_only_new_or_changed_images(session, core, tmp_path):

@@ -1,7 +1,7 @@
 """The results cache of ``process``: append-only logs of one line per measured image.
 
 Layout, in ``OUT_DIR/.cache/``: files ``*.jsonl``, each line ``KEY ENTRY`` where KEY
-is the 64-hex-digit cache key (SHA-256 of the image bytes' hash, the measurement
+is the 64-hex-digit cache key (SHA-256 of the image bytes' XXH3-128 hash, the measurement
 settings and the measuring code) and ENTRY the JSON of the image's result or of why it
 failed. A worker appends each result to its own log with one ``write`` as soon as it
 is measured; a line cut short (a killed run, a power cut) fails to parse and is
