@@ -1,9 +1,10 @@
 """The worker side of ``process``: measure one image, or take it from the cache.
 
-In two halves: :func:`read_task` reads, hashes and decodes (C code that lets other
-threads run), :func:`finish_task` measures and logs the result (Python and numpy,
-holding the GIL), so ``process`` can run several readers beside one measuring
-thread; :func:`measure_task` does both, in a worker process.
+In two halves: :func:`read_task` reads, hashes and decodes (almost all of it C code
+that releases the GIL: the file read and the PNG decoding), :func:`finish_task`
+measures and logs the result (Python and numpy, holding the GIL for most of it), so
+``process`` can run several readers beside one measuring thread; :func:`measure_task`
+does both, in a worker process.
 
 Kept apart from :mod:`.process` so that a worker process imports only the
 measuring code (numpy, OpenCV): neither pandas nor scipy nor the rest of the
@@ -19,18 +20,15 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import cv2
 import xxhash
 from threadpoolctl import threadpool_limits
 
 from ..errors import VisionTorsionError
+from ..images import GreyImage, decode_image
 from ..settings import MeasureSettings
 from .cache import CacheLog
-
-if TYPE_CHECKING:
-    from ..images import GreyImage
 
 __all__ = ["measure_task", "read_task", "finish_task", "ReadImage", "digest", "content_hash", "start_worker", "in_process", "one_thread", "one_thread_here"]
 
@@ -50,7 +48,7 @@ def content_hash(data: bytes) -> str:
     It tells a changed file from an unchanged one (two different files share a
     hash with probability 2⁻¹²⁸); it does not guard against a file crafted to
     collide, which no one measuring their own images needs. It hashes a 634 kB
-    PNG in 0.03 ms where SHA-256 took 0.36 ms, a thirtieth of decoding it.
+    PNG in 0.03 ms; SHA-256 took 0.36 ms, a thirtieth of the time to decode it.
     """
     return xxhash.xxh3_128_hexdigest(data)
 
@@ -97,21 +95,20 @@ class ReadImage:
 def read_task(task: tuple[str, str, str]) -> ReadImage:
     """Read an image, hash it and, unless its result is cached, decode it.
 
-    The first half of :func:`measure_task`, and nearly all of its time in C code
-    that lets other threads run (reading, hashing, PNG decoding): ``process`` runs
-    it in several threads while one thread measures (:func:`finish_task`).
+    The first half of :func:`measure_task`, nearly all of its time spent in C code
+    that releases the GIL (the file read and the PNG decoding): ``process`` runs it
+    in several threads while one thread measures (:func:`finish_task`).
     """
     path, _, settings_key = task
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
-        return ReadImage("", result=("", json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"}), "unread"))
+        why = json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"})
+        return ReadImage("", result=("", why, "unread"))
     image_hash = content_hash(data)
     key = digest(f"{image_hash}\n{settings_key}".encode())
     if key in _Cache.known:
         return ReadImage(key, image_hash, result=(key, None, "cached"))
-    from ..images import decode_image  # looked up here: tests replace the measuring code
-
     try:
         return ReadImage(key, image_hash, image=decode_image(data, name=path, keep_integers=True))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
@@ -127,7 +124,7 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         return read.result
     path, settings_json, _ = task
     key = read.key
-    from ..pair import measure_pair
+    from ..pair import measure_pair  # looked up here: tests replace the measuring code
 
     try:
         if read.error is not None:
