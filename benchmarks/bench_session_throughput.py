@@ -13,7 +13,7 @@ measures, each ``process`` run in a fresh child process with an empty cache:
 - decode-only time: reading and decoding every file (``cv2.imdecode``), one core;
 - ``process`` wall time with 1 job (measured in the calling process), 2 jobs (the
   default on two cores: two threads read and decode, the calling thread measures)
-  and 2 jobs forced into 2 worker processes (the path ``process`` takes above four
+  and 2 jobs forced into 2 worker processes (the path ``process`` takes above three
   jobs), each run between two decode-only runs with as many processes (this VM's
   speed drifts by tens of percent over minutes, and its two vCPUs do not give two
   processes twice the speed of one), and the ratios ``process / (decode with as

@@ -8,7 +8,7 @@ Steps
 2. Every image is read, hashed (XXH3-128 of its bytes) and, unless the cache
    (``OUT_DIR/.cache/``, :mod:`.cache`) held a result for that image hash and those
    measurement settings when the run started, decoded and measured by
-   :func:`vision_torsion.pair.measure_pair`. With up to four jobs this happens in
+   :func:`vision_torsion.pair.measure_pair`. With up to three jobs this happens in
    this process: `jobs` threads read and decode at most two images each ahead of
    this thread, which measures (measuring holds the GIL, reading and decoding do
    not); with more, in a pool of worker processes. Images are never all in memory.
@@ -65,9 +65,10 @@ OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_
 _CACHE_FORMAT = 4
 #: Up to this many jobs run as threads of the calling process (jobs threads read
 #: and decode, the calling thread measures); more run as worker processes. One
-#: measuring thread (~2-3 ms per image, holding the GIL) keeps up with about four
-#: threads decoding (~10 ms per image each, without it).
-_MAX_THREAD_JOBS = 4
+#: measuring thread (2.6-3.2 ms per image, holding the GIL) keeps up with three
+#: threads decoding (10-11 ms per image each, without it), but not surely with
+#: four. Measured on two cores only.
+_MAX_THREAD_JOBS = 3
 
 
 @dataclass(frozen=True)
