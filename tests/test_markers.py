@@ -177,3 +177,19 @@ def test_integer_and_float_images_give_the_same_markers(small_scene):
     np.testing.assert_allclose(a[["x_px", "y_px"]].to_numpy(), b[["x_px", "y_px"]].to_numpy(), atol=1e-9)
     c = find_markers(img.astype(np.uint16) * 16)
     np.testing.assert_allclose(a[["x_px", "y_px"]].to_numpy(), c[["x_px", "y_px"]].to_numpy(), atol=1e-6)
+
+
+def test_candidates_found_beforehand_give_the_same_pair(scene_file):
+    """measure_pair with the candidates of find_candidates (as a session's reading
+    threads find them) measures exactly what it measures alone, for the default
+    radius range and a given one, among bolt holes and dust."""
+    from vision_torsion.markers import find_candidates
+
+    image = render(load_scene(scene_file("distractors")), 0.0, seed=2).image
+    assert len(find_candidates(image, MeasureSettings())) == 10  # with the bolt holes
+    for settings in (MeasureSettings(), MeasureSettings(radius_range=(20, 60))):
+        candidates = find_candidates(image, settings)
+        alone = measure_pair(image, settings=settings)
+        assert measure_pair(image, settings=settings, candidates=candidates) == alone
+        with pytest.raises(MarkerError):  # they are what is used: none given, none found
+            measure_pair(image, settings=settings, candidates=[])

@@ -198,7 +198,7 @@ def test_an_unexpected_error_fails_its_image_and_is_not_cached(session, monkeypa
     core = FakeCore()
     measure = core.measure_pair
 
-    def measure_pair(image, *, settings, name=None):
+    def measure_pair(image, *, settings, name=None, candidates=None):
         if name.endswith(broken):
             raise RuntimeError("a bug")
         return measure(image, settings=settings, name=name)

@@ -125,7 +125,7 @@ class FakeCore:
         self.corrections: list = []
         self.interrupt_after = interrupt_after
 
-    def measure_pair(self, image, *, settings, name=None):
+    def measure_pair(self, image, *, settings, name=None, candidates=None):
         if self.interrupt_after is not None and len(self.measured) >= self.interrupt_after:
             raise KeyboardInterrupt
         data = np.asarray(image.data if hasattr(image, "data") else load_image(image).data, dtype=np.float64)

@@ -42,7 +42,7 @@ from .settings import MeasureSettings
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["Marker", "find_markers", "find_marker_list", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
+__all__ = ["Marker", "find_markers", "find_marker_list", "find_candidates", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
 
 logger = logging.getLogger(__name__)
 
@@ -368,7 +368,16 @@ def find_markers(
     return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
 
 
-def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None) -> list[Marker]:
+def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
+    """Coarse marker candidates of a validated image, largest first:
+    :func:`~vision_torsion.detect.detect_blobs` with the polarity and radius range of
+    `settings` (the default range for the image's size when it has none)."""
+    radius_range = settings.radius_range or default_radius_range(img.shape)
+    return detect_blobs(img, polarity=settings.polarity, radius_range=radius_range)
+
+
+def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None,
+                     candidates: list[Blob] | None = None) -> list[Marker]:
     """The work of :func:`find_markers` on a validated image, as a list of :class:`Marker`.
 
     Parameters
@@ -381,12 +390,14 @@ def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None)
         ``enough(markers, blob) -> bool``, asked before each further candidate
         (largest first): True stops, leaving the smaller candidates unfitted. Used
         when only the target pair is wanted (bolt holes need no sub-pixel fit).
+    candidates : list of Blob, optional
+        :func:`find_candidates` of this image and these settings, when already found.
     """
-    polarity, radius_range, fit = settings.polarity, settings.radius_range, settings.fit
-    r_min, r_max = radius_range if radius_range is not None else default_radius_range(img.shape)
+    r_min, r_max = settings.radius_range or default_radius_range(img.shape)
+    fit = settings.fit
     markers = []
     width = 1.2  # the optics are the same for every marker: pass the fitted width on
-    for blob in detect_blobs(img, polarity=polarity, radius_range=(r_min, r_max)):
+    for blob in find_candidates(img, settings) if candidates is None else candidates:
         if enough is not None and enough(markers, blob):
             break
         marker = _judge(blob, img.shape, r_min, r_max, fit)

@@ -153,7 +153,8 @@ def select_pair(markers, *, pair="largest", name: str = "image") -> PairMeasurem
     return PairMeasurement(first=chosen[0], second=chosen[1], n_candidates=len(ms))
 
 
-def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | None = None) -> PairMeasurement:
+def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | None = None,
+                 candidates=None) -> PairMeasurement:
     """Find the target's two markers in one image.
 
     Parameters
@@ -164,6 +165,10 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
         Polarity, radius range, fit method and pair choice; defaults otherwise.
     name : str, optional
         What to call the image in messages (the file name by default).
+    candidates : list of Blob, optional
+        The image's coarse candidates, :func:`~vision_torsion.markers.find_candidates`
+        with these settings, when already found (a session's reading threads find
+        them while the image is still in their caches).
 
     Returns
     -------
@@ -180,7 +185,8 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     if name is None:
         name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
     enough = _pair_settled if settings.pair == "largest" else None
-    markers = find_marker_list(as_grey_array(image, name=name, keep_integers=True), settings, enough=enough)
+    markers = find_marker_list(as_grey_array(image, name=name, keep_integers=True), settings, enough=enough,
+                               candidates=candidates)
     return select_pair(markers, pair=settings.pair, name=name)
 
 
