@@ -64,11 +64,11 @@ OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_
                   "angle_deg", "angle_std_deg", "status", "message")
 #: Bump when the cache entry layout changes; part of every cache key.
 _CACHE_FORMAT = 4
-#: Up to this many jobs run as threads of the calling process (jobs threads read
-#: and decode, the calling thread measures); more run as worker processes. One
-#: measuring thread (2.6-3.2 ms per image, holding the GIL) keeps up with three
-#: threads decoding (10-11 ms per image each, without it), but not surely with
-#: four. Measured on two cores only.
+#: Up to this many jobs run as threads of the calling process (jobs threads read,
+#: decode and find candidates, the calling thread measures); more run as worker
+#: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
+#: up with about five reading threads (~10.5 ms per image each, mostly without
+#: it); three leaves room for slower measuring. Measured on two cores only.
 _MAX_THREAD_JOBS = 3
 
 
