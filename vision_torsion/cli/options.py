@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..settings import FIT_METHODS, POLARITIES, MeasureSettings
 
-__all__ = ["add_marker_options", "settings_from_args"]
+__all__ = ["add_marker_options", "add_jobs_option", "settings_from_args"]
 
 
 def add_marker_options(parser) -> None:
@@ -20,6 +20,13 @@ def add_marker_options(parser) -> None:
     g.add_argument(
         "--correction", metavar="FILE", help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres"
     )
+
+
+def add_jobs_option(parser) -> None:
+    """-j/--jobs: how many images are read and decoded at once."""
+    parser.add_argument("-j", "--jobs", type=int, metavar="N",
+                        help="images read and decoded at once (default: all cores); up to 3 "
+                             "as threads of this process, more as worker processes")
 
 
 def settings_from_args(args) -> MeasureSettings:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 from . import add_common_options, failure_line, progress_enabled
+from .options import add_jobs_option
 
 __all__ = ["register", "run"]
 
@@ -23,8 +24,7 @@ def register(subparsers) -> None:
     p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
     p.add_argument("-o", "--out-dir", metavar="OUT_DIR",
                    help="output folder (default: SESSION_DIR/results)")
-    p.add_argument("-j", "--jobs", type=int, metavar="N",
-                   help="worker processes (default: all cores)")
+    add_jobs_option(p)
     add_common_options(p)
     p.set_defaults(func=run)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from . import add_common_options, progress_enabled
+from .options import add_jobs_option
 
 
 def register(sub) -> None:
@@ -16,7 +17,7 @@ def register(sub) -> None:
     )
     p.add_argument("session_dir", metavar="SESSION_DIR")
     p.add_argument("-o", "--out-dir", metavar="OUT_DIR", help="output folder (default SESSION_DIR/results)")
-    p.add_argument("--jobs", type=int, metavar="N", help="worker processes (default: all cores)")
+    add_jobs_option(p)
     add_common_options(p)
     p.set_defaults(func=run)
 

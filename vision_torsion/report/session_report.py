@@ -118,7 +118,8 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         Output folder; ``SESSION_DIR/results`` by default. It receives
         measurements.csv, summary.json, stiffness_table.csv, figures/ and report.html.
     jobs : int, optional
-        Worker processes for measuring (all cores by default).
+        Images measured at once (all cores by default; see
+        :func:`~vision_torsion.session.process_session`).
     progress : bool
         Show progress bars.
 
@@ -194,7 +195,7 @@ def run_demo(out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None =
     seed : int
         Seed of the synthetic session.
     jobs : int, optional
-        Worker processes for measuring.
+        Images measured at once (see :func:`~vision_torsion.session.process_session`).
     progress : bool
         Show progress bars.
 

@@ -292,8 +292,10 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         Output folder; ``SESSION_DIR/results`` by default. It holds
         ``measurements.csv`` and the cache ``.cache/``.
     jobs : int, optional
-        Worker processes; all available cores by default; 1 measures in this
-        process.
+        Images read and decoded at once; all available cores by default. 1
+        measures in this process alone; up to 3 (``_MAX_THREAD_JOBS``) run as
+        reading threads of this process beside the measuring one; more run as
+        worker processes.
     progress : bool
         Show a progress bar (on stderr).
 
