@@ -62,17 +62,18 @@ def test_angles_match_the_rendered_truth_in_parallel(rendered, tmp_path, monkeyp
 
 
 _RUN = ("import sys; from vision_torsion.session import process_session; "
-        "process_session(sys.argv[1], out_dir=sys.argv[2], jobs=1)")
+        "process_session(sys.argv[1], out_dir=sys.argv[2], jobs=int(sys.argv[3]))")
 
 
-def test_killed_run_resumes_to_the_same_file(tmp_path):
+@pytest.mark.parametrize("jobs", [1, 2])  # measured alone; beside two reading threads
+def test_killed_run_resumes_to_the_same_file(tmp_path, jobs):
     folder = tmp_path / "session"
     plan, _ = make_session(folder, orientations=(0, 60, 120), steps=4, draw=draw)
     n = len(plan.rows)
     reference = process_session(folder, out_dir=tmp_path / "a", jobs=1).measurements_path
     out = tmp_path / "b"
     cache = out / ".cache"
-    proc = subprocess.Popen([sys.executable, "-c", _RUN, str(folder), str(out)],
+    proc = subprocess.Popen([sys.executable, "-c", _RUN, str(folder), str(out), str(jobs)],
                             env={**os.environ, "PYTHONWARNINGS": "error"})
     try:
         deadline = time.monotonic() + 60
@@ -86,6 +87,6 @@ def test_killed_run_resumes_to_the_same_file(tmp_path):
     done = count_entries(cache)
     assert not (out / "measurements.csv").exists(), "the run finished before it was killed"
     assert 5 <= done < n
-    result = process_session(folder, out_dir=out, jobs=1)
+    result = process_session(folder, out_dir=out, jobs=jobs)
     assert (result.n_measured, result.n_cached) == (n - done, done)
     assert result.measurements_path.read_bytes() == reference.read_bytes()
