@@ -68,7 +68,8 @@ _RUN = ("import sys; from vision_torsion.session import process_session; "
 @pytest.mark.parametrize("jobs", [1, 2])  # measured alone; beside two reading threads
 def test_killed_run_resumes_to_the_same_file(tmp_path, jobs):
     folder = tmp_path / "session"
-    plan, _ = make_session(folder, orientations=(0, 60, 120), steps=4, draw=draw)
+    # ~100 images: two reading threads measure them in ~0.3 s, time enough to kill
+    plan, _ = make_session(folder, orientations=(0, 60, 120), steps=8, draw=draw)
     n = len(plan.rows)
     reference = process_session(folder, out_dir=tmp_path / "a", jobs=1).measurements_path
     out = tmp_path / "b"
