@@ -368,12 +368,16 @@ def find_markers(
     return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
 
 
+def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, float]:
+    """The settings' marker radius range (px), or the default for the image's size."""
+    return settings.radius_range or default_radius_range(img.shape)
+
+
 def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
     """Coarse marker candidates of a validated image, largest first:
     :func:`~vision_torsion.detect.detect_blobs` with the polarity and radius range of
     `settings` (the default range for the image's size when it has none)."""
-    radius_range = settings.radius_range or default_radius_range(img.shape)
-    return detect_blobs(img, polarity=settings.polarity, radius_range=radius_range)
+    return detect_blobs(img, polarity=settings.polarity, radius_range=_radius_range(img, settings))
 
 
 def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None,
@@ -393,7 +397,7 @@ def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None,
     candidates : list of Blob, optional
         :func:`find_candidates` of this image and these settings, when already found.
     """
-    r_min, r_max = settings.radius_range or default_radius_range(img.shape)
+    r_min, r_max = _radius_range(img, settings)
     fit = settings.fit
     markers = []
     width = 1.2  # the optics are the same for every marker: pass the fitted width on
