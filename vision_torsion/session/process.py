@@ -314,7 +314,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     """
     if jobs is not None and jobs < 1:
         raise SessionError(f"jobs must be >= 1, got {jobs}")
-    if (jobs or _default_jobs()) > _MAX_THREAD_JOBS:
+    jobs = jobs or _default_jobs()
+    if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir)
     out = Path(out_dir) if out_dir is not None else session.folder / "results"
@@ -334,7 +335,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     tasks = [(str(session.manifest.image_path(row)), settings_json, key)
              for row in session.manifest.rows]
     entries, sources = [], []
-    jobs = min(jobs or _default_jobs(), len(tasks))
+    jobs = min(jobs, len(tasks))
     for image_key, text, source in _run_tasks(tasks, jobs=jobs, progress=progress,
                                               cache_dir=str(cache_dir), run=run,
                                               known=frozenset(cached)):
