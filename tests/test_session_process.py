@@ -130,8 +130,9 @@ def test_cli_help(capsys):
 
 def test_validation_happens_before_measuring(session, core):
     folder, plan, _ = session
-    os.remove(folder / plan.rows[7]["image"])
-    with pytest.raises(ManifestError, match=r"line 9: image '.*': no such file"):
+    (folder / plan.rows[7]["image"]).unlink()
+    (folder / plan.rows[7]["image"]).mkdir()  # not a file: a problem (a missing one is pending)
+    with pytest.raises(ManifestError, match=r"line 9: image '.*' is not a regular file"):
         process_session(folder, jobs=1)
     assert core.measured == [] and not (folder / "results").exists()
 
@@ -178,8 +179,8 @@ def test_an_image_removed_after_validation_fails_alone(session, core, monkeypatc
     gone = plan.rows[5]["image"]
     load = process_module.load_session
 
-    def load_then_remove(path):
-        loaded = load(path)
+    def load_then_remove(path, **kw):
+        loaded = load(path, **kw)
         (folder / gone).unlink()
         return loaded
 

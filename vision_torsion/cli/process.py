@@ -19,7 +19,10 @@ def register(subparsers) -> None:
         "files) and stop with every problem listed if anything is wrong; then measure "
         "every image in parallel and write measurements.csv to the output folder. "
         "Re-running measures only new or changed images (cache in OUT_DIR/.cache). "
-        "Exit status: 0 all images measured, 1 some image failed, 2 unusable session.",
+        "A partly shot session is not an error: rows whose image does not exist yet "
+        "are written with status 'pending' and listed, as are image files no row "
+        "names. Exit status: 0 no image failed (pending rows included), 1 some image "
+        "failed, 2 unusable session.",
     )
     p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
     p.add_argument("-o", "--out-dir", metavar="OUT_DIR",
@@ -37,8 +40,19 @@ def run(args) -> int:
                              progress=progress_enabled(args))
     for image, message in result.failures:
         print(failure_line(image, message), file=sys.stderr)
+    print_pending(result, quiet=args.quiet)
     if not args.quiet:
-        print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed "
-              f"of {result.n_images} images ({result.n_measured} measured, "
-              f"{result.n_cached} from the cache)")
+        print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed, "
+              f"{result.n_pending} pending of {result.n_images} images ({result.n_measured} "
+              f"measured, {result.n_cached} from the cache)")
     return 0 if result.ok else 1
+
+
+def print_pending(result, *, quiet: bool = False, limit: int = 10) -> None:
+    """List the rows still to photograph and the image files no row names."""
+    if result.pending and not quiet:
+        print(f"{result.n_pending} row(s) pending (not photographed yet), first: "
+              + ", ".join(image for image, _ in result.pending[:limit])
+              + (" ..." if result.n_pending > limit else ""))
+    for name in result.unlisted:
+        print(f"not in the manifest: {name}", file=sys.stderr)

@@ -12,7 +12,9 @@ def register(sub) -> None:
         help="process a session (if needed) and write its hysteresis report",
         description=(
             "Measure what is new in SESSION_DIR, analyse the torque-angle data and write summary.json, "
-            "stiffness_table.csv, figures and a self-contained report.html. Exit status 1 if any image failed."
+            "stiffness_table.csv, figures and a self-contained report.html. A partly shot session is "
+            "reported from the images that exist, the rest listed as pending. Exit status 0 when no "
+            "image failed (pending rows included), 1 if any image failed, 2 unusable session."
         ),
     )
     p.add_argument("session_dir", metavar="SESSION_DIR")
@@ -24,7 +26,11 @@ def register(sub) -> None:
 
 def print_summary(rep) -> None:
     """What a user needs after a report: where it is and what went wrong."""
-    print(f"{rep.n_images - rep.n_failed} of {rep.n_images} images measured; {rep.n_issues} figure(s) not computable (reasons in the report)")
+    pending = f", {rep.n_pending} pending (not photographed yet)" if rep.n_pending else ""
+    print(f"{rep.n_images - rep.n_failed - rep.n_pending} of {rep.n_images} images measured{pending}; "
+          f"{rep.n_issues} figure(s) not computable (reasons in the report)")
+    for name in rep.unlisted:
+        print(f"not in the manifest: {name}")
     print(f"report: {rep.files.report_html}")
 
 

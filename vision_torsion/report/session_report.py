@@ -35,6 +35,11 @@ class SessionReport:
         Images in the manifest, and images that could not be measured.
     n_issues : int
         Figures the analysis could not compute (each with its reason in the report).
+    n_pending : int
+        Rows not photographed yet (a partly shot session); they are listed in the
+        report and left out of the analysis.
+    unlisted : tuple of str
+        Image files no manifest row names.
     """
 
     files: ReportFiles
@@ -42,6 +47,8 @@ class SessionReport:
     n_images: int
     n_failed: int
     n_issues: int
+    n_pending: int = 0
+    unlisted: tuple = ()
 
 
 def _g6(x: float) -> float:
@@ -107,6 +114,25 @@ def _stiffness_section(measurements: pd.DataFrame):
     return _STIFFNESS_TITLE, "\n".join(parts)
 
 
+def _pending_section(waiting: pd.DataFrame, unlisted) -> tuple[str, str]:
+    """A partly shot session: the rows still to photograph, and stray files."""
+    import html
+
+    parts = []
+    if len(waiting):
+        parts.append(f"<p>{len(waiting)} planned image(s) are not photographed yet; the "
+                     "figures above use the images that exist.</p><table><tr><th>image</th>"
+                     "<th>orientation (°)</th><th>cycle</th><th>phase</th><th>step</th><th>why</th></tr>")
+        for r in waiting.itertuples():
+            parts.append("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in
+                         (r.image, r.orientation_deg, r.cycle, r.phase, r.step, r.message)) + "</tr>")
+        parts.append("</table>")
+    if unlisted:
+        parts.append("<p>Image files that no manifest row names (not analysed):</p><ul>"
+                     + "".join(f"<li>{html.escape(n)}</li>" for n in unlisted) + "</ul>")
+    return "Pending images", "\n".join(parts)
+
+
 def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progress: bool = False) -> SessionReport:
     """Process a session (if needed), analyse it and write the report.
 
@@ -135,10 +161,12 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     from ..analysis import analyze_session
     from ..session import load_session, process_session
 
-    session = load_session(session_dir)
+    session = load_session(session_dir, missing="pending")
     out = Path(out_dir) if out_dir is not None else session.folder / "results"
     result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
     measurements = pd.read_csv(result.measurements_path, keep_default_na=False, na_values=[""])
+    waiting = measurements[measurements["status"] == "pending"]
+    measurements = measurements[measurements["status"] != "pending"].reset_index(drop=True)
     logger.info("analysing %d measurements", len(measurements))
     rig, proto = session.config.rig, session.config.protocol
     analysis = analyze_session(
@@ -149,6 +177,8 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
                  arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
     )
     extra = [_stiffness_section(measurements)]
+    if len(waiting) or result.unlisted:
+        extra.append(_pending_section(waiting, result.unlisted))
     files = write_report(
         measurements,
         analysis,
@@ -162,6 +192,8 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         n_images=result.n_images,
         n_failed=result.n_failed,
         n_issues=len(analysis.issues),
+        n_pending=len(waiting),
+        unlisted=result.unlisted,
     )
 
 

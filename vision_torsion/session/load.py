@@ -12,12 +12,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..errors import SessionError
+from ..images import IMAGE_SUFFIXES
 from ..settings import MeasureSettings
 from .config import CONFIG_NAME, SessionConfig, load_config
 from .manifest import MANIFEST_NAME, Manifest, ManifestRow, load_manifest
 from .torque import TorqueValue, couple_torque
 
-__all__ = ["Session", "load_session"]
+__all__ = ["Session", "load_session", "unlisted_images"]
 
 
 @dataclass(frozen=True)
@@ -55,7 +56,7 @@ class Session:
                              step_mass_kg=self.config.protocol.step_mass_kg)
 
 
-def load_session(session_dir, *, check_files: bool = True) -> Session:
+def load_session(session_dir, *, check_files: bool = True, missing: str = "error") -> Session:
     """Read and validate a session folder.
 
     Parameters
@@ -64,6 +65,9 @@ def load_session(session_dir, *, check_files: bool = True) -> Session:
         Folder holding ``session.toml``, ``manifest.csv`` and the images.
     check_files : bool
         Check that every image exists and can be opened (see :func:`load_manifest`).
+    missing : {"error", "pending"}
+        Whether an image that does not exist yet is a problem or a pending row
+        (see :func:`load_manifest`).
 
     Returns
     -------
@@ -88,5 +92,45 @@ def load_session(session_dir, *, check_files: bool = True) -> Session:
         if not corr.is_file():
             raise SessionError(f"{folder / CONFIG_NAME}: markers.correction: no such file "
                                f"{corr}")
-    manifest = load_manifest(folder / MANIFEST_NAME, check_files=check_files)
+    manifest = load_manifest(folder / MANIFEST_NAME, check_files=check_files, missing=missing)
     return Session(folder=folder, config=config, manifest=manifest)
+
+
+def unlisted_images(session: Session, *, exclude=()) -> list[str]:
+    """Image files in the session folder (and a bound camera folder) that no
+    manifest row names: a shot saved under a wrong name, an extra shot.
+
+    Parameters
+    ----------
+    session : Session
+    exclude : sequence of path-like
+        Folders not to look into (the output folder); hidden folders are skipped.
+
+    Returns
+    -------
+    list of str
+        Paths relative to the session folder (``/`` separators), then absolute
+        paths of unbound files of the camera folder, each in name order.
+    """
+    skip = {Path(p).resolve() for p in exclude}
+    named = {row.image for row in session.manifest.rows}
+    bound = {Path(p).resolve() for p in session.manifest.sources.values()}
+    out = []
+    for path in sorted(session.folder.rglob("*")):
+        rel = path.relative_to(session.folder)
+        if any(part.startswith(".") for part in rel.parts) or path.suffix.lower() not in IMAGE_SUFFIXES:
+            continue
+        if any(p == path.resolve() or p in path.resolve().parents for p in skip):
+            continue
+        if path.is_file() and rel.as_posix() not in named and path.resolve() not in bound:
+            out.append(rel.as_posix())
+    from .binding import load_binding
+
+    binding = load_binding(session.folder)
+    if binding is not None and binding.camera_dir.is_dir():
+        used = set(binding.images.values()) | set(binding.skipped)
+        inside = {(session.folder / r).resolve() for r in out}
+        out += [str(p) for p in sorted(binding.camera_dir.iterdir())
+                if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and p.name not in used
+                and p.resolve() not in inside]
+    return out

@@ -19,11 +19,12 @@ import csv
 import io
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 from ..errors import ManifestError
 from ..images import IMAGE_SUFFIXES
+from .binding import load_binding
 from .torque import PHASES
 
 __all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
@@ -73,11 +74,26 @@ class ManifestRow:
 
 @dataclass(frozen=True)
 class Manifest:
-    """A validated manifest: the columns as written and the rows in file order."""
+    """A validated manifest: the columns as written and the rows in file order.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    columns : tuple of str
+    rows : tuple of ManifestRow
+    sources : dict of str to pathlib.Path
+        Images bound to a camera's files (``binding.json``, :mod:`.binding`):
+        manifest image path -> the camera file that is its photograph.
+    pending : tuple of int
+        CSV lines whose image does not exist yet (a partly shot session, loaded
+        with ``missing="pending"``).
+    """
 
     path: Path
     columns: tuple[str, ...]
     rows: tuple[ManifestRow, ...]
+    sources: dict = field(default_factory=dict)
+    pending: tuple[int, ...] = ()
 
     @property
     def session_dir(self) -> Path:
@@ -85,8 +101,9 @@ class Manifest:
         return self.path.parent
 
     def image_path(self, row: ManifestRow) -> Path:
-        """Absolute path of `row`'s image."""
-        return self.session_dir / row.image
+        """Absolute path of `row`'s image (the bound camera file, if any)."""
+        source = self.sources.get(row.image)
+        return source if source is not None else self.session_dir / row.image
 
 
 def _number(text: str) -> float | None:
@@ -107,10 +124,13 @@ def _whole(text: str) -> int | None:
 class _RowChecker:
     """Parses rows, collecting "line N: problem" messages."""
 
-    def __init__(self, session_dir: Path):
+    def __init__(self, session_dir: Path, *, binding=None, missing: str = "error"):
         self.session_dir = session_dir
         self.root = session_dir.resolve()
         self.problems: list[str] = []
+        self.binding = binding
+        self.missing = missing
+        self.pending: list[int] = []
 
     def add(self, line: int, what: str) -> None:
         self.problems.append(f"line {line}: {what}")
@@ -135,23 +155,31 @@ class _RowChecker:
         return norm
 
     def image_file(self, line: int, rel: str) -> None:
-        path = self.session_dir / rel
+        source = self.binding.source(rel) if self.binding is not None else None
+        if source is not None:
+            # the user named the camera folder (bind); a link out of it is refused
+            path, root, shown = source, self.binding.camera_dir.resolve(), f"{rel!r} (bound to {source})"
+            where = f"the camera folder {self.binding.camera_dir}"
+        else:
+            path, root, shown, where = self.session_dir / rel, self.root, repr(rel), "the session folder"
         try:
-            path.resolve().relative_to(self.root)
+            path.resolve().relative_to(root)
         except ValueError:
-            self.add(line, f"image {rel!r} leaves the session folder (through a symbolic "
-                           "link)")
+            self.add(line, f"image {shown} leaves {where} (through a symbolic link)")
             return
         if not path.exists():
-            self.add(line, f"image {rel!r}: no such file")
+            if self.missing == "pending":
+                self.pending.append(line)
+            else:
+                self.add(line, f"image {shown}: no such file")
         elif not path.is_file():
-            self.add(line, f"image {rel!r} is not a regular file")
+            self.add(line, f"image {shown} is not a regular file")
         else:
             try:
                 with open(path, "rb") as fh:
                     fh.read(1)
             except OSError as exc:
-                self.add(line, f"image {rel!r} cannot be read ({exc.strerror or exc})")
+                self.add(line, f"image {shown} cannot be read ({exc.strerror or exc})")
 
     def number(self, line, column, text, *, expected, blank_ok=False, nonnegative=False):
         if text == "" and blank_ok:
@@ -265,7 +293,7 @@ def _read_records(path: Path):
     return columns, records
 
 
-def load_manifest(path, *, check_files: bool = True) -> Manifest:
+def load_manifest(path, *, check_files: bool = True, missing: str = "error") -> Manifest:
     """Read and validate a ``manifest.csv`` and the image files it names.
 
     Parameters
@@ -275,6 +303,13 @@ def load_manifest(path, *, check_files: bool = True) -> Manifest:
     check_files : bool
         Also check that every image exists inside the session folder and can be
         opened (True for processing; False to check only the table).
+    missing : {"error", "pending"}
+        What an image that does not exist is: a problem (the default), or a row
+        not photographed yet, listed in :attr:`Manifest.pending` (a partly shot
+        session; used by ``process``).
+
+    Images bound to a camera's files by ``binding.json`` (:mod:`.binding`) in the
+    manifest's folder are read from the camera folder it names.
 
     Returns
     -------
@@ -293,9 +328,12 @@ def load_manifest(path, *, check_files: bool = True) -> Manifest:
         orientation, or no rows at all. Every problem is listed, one line each,
         with its CSV line number.
     """
+    if missing not in ("error", "pending"):
+        raise ValueError(f"missing must be 'error' or 'pending', got {missing!r}")
     path = Path(path)
     columns, records = _read_records(path)
-    check = _RowChecker(path.parent)
+    binding = load_binding(path.parent)  # SessionError when binding.json is unusable
+    check = _RowChecker(path.parent, binding=binding, missing=missing)
     has = set(columns)
     rows: list[ManifestRow] = []
     for line, fields in records:
@@ -316,7 +354,10 @@ def load_manifest(path, *, check_files: bool = True) -> Manifest:
         listing = "\n  ".join(check.problems)
         raise ManifestError(f"{path}: {len(check.problems)} problem(s) (line numbers are "
                             f"CSV lines, the header is line 1)\n  {listing}")
-    return Manifest(path=path, columns=columns, rows=tuple(rows))
+    sources = {} if binding is None else {row.image: binding.source(row.image) for row in rows
+                                          if row.image in binding.images}
+    return Manifest(path=path, columns=columns, rows=tuple(rows), sources=sources,
+                    pending=tuple(check.pending))
 
 
 def manifest_text(columns, rows) -> str:

@@ -49,7 +49,7 @@ from tqdm import tqdm
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import write_csv
 from ..settings import MeasureSettings
-from .load import Session, load_session
+from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
@@ -86,6 +86,11 @@ class ProcessResult:
         Images measured in this run, and images whose result came from the cache.
     failures : tuple of (str, str)
         (image, message) of every failed row, in manifest order.
+    pending : tuple of (str, str)
+        (image, message) of every row not photographed yet (status ``pending``),
+        or whose orientation's reference image is not: a partly shot session.
+    unlisted : tuple of str
+        Image files in the session (or bound camera) folder that no row names.
     """
 
     measurements_path: Path
@@ -95,10 +100,22 @@ class ProcessResult:
     n_measured: int
     n_cached: int
     failures: tuple[tuple[str, str], ...]
+    pending: tuple[tuple[str, str], ...] = ()
+    unlisted: tuple[str, ...] = ()
+
+    @property
+    def n_pending(self) -> int:
+        """Rows not photographed yet (or waiting for their reference image)."""
+        return len(self.pending)
+
+    @property
+    def complete(self) -> bool:
+        """True when no row is pending."""
+        return not self.pending
 
     @property
     def ok(self) -> bool:
-        """True when every image was measured."""
+        """True when no image failed (pending rows are not failures)."""
         return self.n_failed == 0
 
 
@@ -223,17 +240,18 @@ def _relative_message(message: str, absolute: Path, relative: str) -> str:
     return message.replace(str(absolute), relative)
 
 
-def _angles(session: Session, entries: list[dict], correction=None) -> list[tuple[float, float, str]]:
-    """Per row: (angle_deg, angle_std_deg, failure message or "").
+def _angles(session: Session, entries: list[dict], correction=None) -> list[tuple[float, float, str, str]]:
+    """Per row: (angle_deg, angle_std_deg, message or "", status).
 
     The cache holds image-space marker pairs; the plane correction (if any) is
-    applied here, so changing it re-measures nothing.
+    applied here, so changing it re-measures nothing. A row whose image does not
+    exist yet, or whose orientation's reference image does not, is ``pending``.
     """
     from ..angle import sequence_angles
     from ..pair import PairMeasurement
 
     rows = session.manifest.rows
-    out: list[tuple[float, float, str]] = [(math.nan, math.nan, "")] * len(rows)
+    out: list[tuple[float, float, str, str]] = [(math.nan, math.nan, "", "ok")] * len(rows)
     groups: dict[float, list[int]] = defaultdict(list)
     for i, row in enumerate(rows):
         groups[row.orientation_deg].append(i)
@@ -242,11 +260,20 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
         ref = next((i for i in idx if rows[i].phase == "reference"), idx[0])
         pairs = [PairMeasurement.from_dict(entries[i]["pair"])
                  if entries[i]["status"] == "ok" else None for i in idx]
+        if entries[ref]["status"] == "pending":
+            why = (f"waiting for the reference image {rows[ref].image} (line {rows[ref].line}) "
+                   f"of orientation {orientation:g}: no angle can be measured without it")
+            for i in idx:
+                out[i] = (math.nan, math.nan, entries[i].get("message") if entries[i]["status"] == "pending"
+                          else why, "pending")
+            continue
         if pairs[idx.index(ref)] is None:
             why = (f"reference image {rows[ref].image} (line {rows[ref].line}) of "
                    f"orientation {orientation:g} failed, so no angle can be measured")
             for i in idx:
-                out[i] = (math.nan, math.nan, entries[i].get("message") or why)
+                pending = entries[i]["status"] == "pending"
+                out[i] = (math.nan, math.nan, entries[i].get("message") or why,
+                          "pending" if pending else "failed")
             continue
         try:
             angles = sequence_angles(pairs[idx.index(ref)], pairs, correction=correction)
@@ -257,9 +284,11 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
             reason = "no angle relative to the reference (marker identity lost)"
         for i, angle in zip(idx, angles):
             if angle is not None:
-                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, "")
+                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, "", "ok")
+            elif entries[i]["status"] == "pending":
+                out[i] = (math.nan, math.nan, entries[i]["message"], "pending")
             else:
-                out[i] = (math.nan, math.nan, entries[i].get("message") or reason)
+                out[i] = (math.nan, math.nan, entries[i].get("message") or reason, "failed")
     return out
 
 
@@ -267,14 +296,14 @@ def _table(session: Session, entries: list[dict], correction=None) -> pd.DataFra
     manifest = session.manifest
     keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
     records = []
-    for row, (angle, angle_std, why) in zip(manifest.rows, _angles(session, entries, correction)):
+    for row, (angle, angle_std, why, status) in zip(manifest.rows, _angles(session, entries, correction)):
         torque = session.torque(row)
         rec = {c: v for c, v in row.fields if c in keep}
         rec.update(torque_nm=torque.torque_nm, torque_std_nm=torque.torque_std_nm,
                    torque_common_std_nm=torque.torque_common_std_nm,
                    torque_source="weights" if row.torque_nm is None else "measured",
                    angle_deg=angle, angle_std_deg=angle_std,
-                   status="failed" if why else "ok",
+                   status=status,
                    message=_relative_message(why, manifest.image_path(row), row.image))
         records.append(rec)
     return pd.DataFrame.from_records(records, columns=keep + list(OUTPUT_COLUMNS))
@@ -303,21 +332,26 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     -------
     ProcessResult
         Counts of ok/failed rows and of measured/cached images. One image failing
-        does not stop the run; it gets status ``failed`` and a message.
+        does not stop the run; it gets status ``failed`` and a message. A partly
+        shot session is not an error: a row whose image does not exist yet gets
+        status ``pending`` (so do the rows of an orientation whose reference image
+        does not exist yet), and image files no row names are listed
+        (:attr:`ProcessResult.unlisted`).
 
     Raises
     ------
     SessionError
         Invalid session folder or session.toml, or `out_dir` is the session folder.
     ManifestError
-        Any problem with manifest.csv or the image files it names (all listed).
+        Any problem with manifest.csv or the image files it names (all listed);
+        an image that does not exist is not a problem but a pending row.
     """
     if jobs is not None and jobs < 1:
         raise SessionError(f"jobs must be >= 1, got {jobs}")
     jobs = jobs or _default_jobs()
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
-    session = load_session(session_dir)
+    session = load_session(session_dir, missing="pending")
     out = Path(out_dir) if out_dir is not None else session.folder / "results"
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
@@ -332,15 +366,19 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     cache_dir = out / CACHE_DIRNAME
     cached, logs = read_cache(cache_dir)
     run = CacheLog.new_run()
-    tasks = [(str(session.manifest.image_path(row)), settings_json, key)
-             for row in session.manifest.rows]
-    entries, sources = [], []
-    jobs = min(jobs, len(tasks))
+    pending = set(session.manifest.pending)
+    present = [row for row in session.manifest.rows if row.line not in pending]
+    tasks = [(str(session.manifest.image_path(row)), settings_json, key) for row in present]
+    measured, sources = [], []
+    jobs = max(1, min(jobs, len(tasks)))
     for image_key, text, source in _run_tasks(tasks, jobs=jobs, progress=progress,
                                               cache_dir=str(cache_dir), run=run,
                                               known=frozenset(cached)):
-        entries.append(cached[image_key] if text is None else json.loads(text))
+        measured.append(cached[image_key] if text is None else json.loads(text))
         sources.append(source)
+    found = iter(measured)
+    entries = [{"status": "pending", "message": f"not photographed yet ({row.image}: no such file)"}
+               if row.line in pending else next(found) for row in session.manifest.rows]
     table = _table(session, entries, correction)
     path = write_csv(out / MEASUREMENTS_NAME, table)
     new_logs = CacheLog(cache_dir, run).files()
@@ -348,12 +386,17 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         # one log for the next run; the old logs' entries were read at the start
         merge_cache(cache_dir, {**cached, **read_logs(new_logs)}, logs + new_logs)
     failed = table[table["status"] == "failed"]
+    waiting = table[table["status"] == "pending"]
     failures = tuple(zip(failed["image"], failed["message"]))
-    logger.info("%s: %d images, %d ok, %d failed (%d measured, %d from the cache)", path,
-                len(table), len(table) - len(failed), len(failed),
+    unlisted = tuple(unlisted_images(session, exclude=[out]))
+    n_ok = len(table) - len(failed) - len(waiting)
+    logger.info("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
+                path, len(table), n_ok, len(failed), len(waiting),
                 sources.count("measured"), sources.count("cached"))
     return ProcessResult(measurements_path=path, n_images=len(table),
-                         n_ok=len(table) - len(failed), n_failed=len(failed),
+                         n_ok=n_ok, n_failed=len(failed),
                          n_measured=sources.count("measured"),
                          n_cached=sources.count("cached"),
-                         failures=failures)
+                         failures=failures,
+                         pending=tuple(zip(waiting["image"], waiting["message"])),
+                         unlisted=unlisted)

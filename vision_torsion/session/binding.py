@@ -1,0 +1,115 @@
+"""``binding.json``: which camera file is the photograph of which manifest row.
+
+A camera writes ``IMG_0001.JPG, IMG_0002.JPG, ...``; the manifest names every image
+it expects (``images/o000_c1_01_positive_unloading_s00.png``). Rather than
+renaming or copying the camera's files (the camera folder is an input and is never
+written), ``vision-torsion bind`` (:mod:`.bind`) and ``vision-torsion watch``
+(:mod:`.watch`) write this small file into the session folder, and
+:func:`~vision_torsion.session.manifest.load_manifest` reads the rows' images
+through it. Its layout (JSON, written atomically)::
+
+    {"format": 1,
+     "camera_dir": "/absolute/path/of/the/camera/folder",
+     "by": "time",                       # how the files were ordered
+     "images": {"images/o000_..._s00.png": "IMG_0002.JPG", ...},
+     "skipped": ["IMG_0017.JPG"],        # camera files left out on purpose
+     "missing": [31]}                    # manifest lines with no photograph
+
+Only ``camera_dir`` and ``images`` change what is measured; a row not in
+``images`` is looked for under its planned name in the session folder.
+
+Images may live outside the session folder only in the folder the user named
+(``camera_dir``); a file there that is a symbolic link leading out of it is refused,
+as a link leading out of the session folder is.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+
+from ..errors import SessionError
+from ..fileio import atomic_write_text
+
+__all__ = ["Binding", "load_binding", "write_binding", "BINDING_NAME"]
+
+#: File name of the binding inside a session folder.
+BINDING_NAME = "binding.json"
+_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class Binding:
+    """Camera files bound to manifest rows.
+
+    Attributes
+    ----------
+    camera_dir : pathlib.Path
+        The camera's folder (absolute), named by the user.
+    images : dict of str to str
+        Manifest image path -> file name relative to `camera_dir`.
+    by : str
+        How the camera files were ordered: "time", "name" or "watch".
+    skipped : tuple of str
+        Camera files deliberately left unbound (extra shots).
+    missing : tuple of int
+        Manifest CSV lines with no photograph (missed shots).
+    """
+
+    camera_dir: Path
+    images: dict = field(default_factory=dict)
+    by: str = "time"
+    skipped: tuple = ()
+    missing: tuple = ()
+
+    def source(self, image: str) -> Path | None:
+        """Absolute path of the camera file bound to manifest image `image`, or None."""
+        name = self.images.get(image)
+        return None if name is None else self.camera_dir / name
+
+    def to_dict(self) -> dict:
+        return {"format": _FORMAT, "camera_dir": str(self.camera_dir), "by": self.by,
+                "images": dict(self.images), "skipped": list(self.skipped),
+                "missing": list(self.missing)}
+
+
+def load_binding(session_dir) -> Binding | None:
+    """The binding of a session folder, or None when it has none.
+
+    Raises
+    ------
+    SessionError
+        binding.json is not valid JSON or lacks ``camera_dir``/``images``, or a bound
+        name is absolute or leaves the camera folder ('..').
+    """
+    path = Path(session_dir) / BINDING_NAME
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
+        raise SessionError(f"{path}: not valid JSON ({exc}); run `vision-torsion bind` "
+                           "again to rewrite it") from exc
+    if not isinstance(doc, dict) or not isinstance(doc.get("camera_dir"), str) \
+            or not isinstance(doc.get("images"), dict):
+        raise SessionError(f"{path}: expected a JSON object with 'camera_dir' (a folder) and "
+                           "'images' (manifest image -> camera file)")
+    for image, name in doc["images"].items():
+        posix = PurePosixPath(str(name))
+        if not isinstance(name, str) or posix.is_absolute() or ".." in posix.parts:
+            raise SessionError(f"{path}: {image!r} is bound to {name!r}; expected a file name "
+                               "inside the camera folder")
+    return Binding(camera_dir=Path(doc["camera_dir"]), images=dict(doc["images"]),
+                   by=str(doc.get("by", "time")), skipped=tuple(doc.get("skipped", ())),
+                   missing=tuple(int(x) for x in doc.get("missing", ())))
+
+
+def write_binding(session_dir, binding: Binding) -> Path:
+    """Write `binding` to ``SESSION_DIR/binding.json`` atomically; return its path."""
+    text = json.dumps(binding.to_dict(), indent=1, ensure_ascii=False)
+    return atomic_write_text(Path(session_dir) / BINDING_NAME, text + "\n")
