@@ -71,9 +71,9 @@ def test_check_passes_and_writes_outputs_only_in_results(folder):
 
 
 def test_cli_exit_codes(folder, tmp_path, capsys):
-    assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "a"), "-q"]) == 0
+    assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "a")]) == 0
     assert "PASSED" in capsys.readouterr().out
-    assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "b"), "--tolerance", "1e-7", "-q"]) == 1
+    assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "b"), "--tolerance", "1e-7"]) == 1
     assert "FAILED" in capsys.readouterr().out
     assert json.loads((tmp_path / "b" / "accuracy.json").read_text())["passed"] is False
     bad = _copy(folder, tmp_path)

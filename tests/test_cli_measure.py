@@ -72,7 +72,7 @@ def test_measure_writes_angles_and_continues_past_a_bad_image(accuracy_dir, tmp_
     assert err.max() < 0.01  # small scene: std ~0.001°
     assert (good["angle_std_deg"] > 0).all()
     assert _tree_digest(images) == before  # the input folder is never modified
-    assert "failed: " in (out := capsys.readouterr().out) and "img_002.png: truncated PNG" in out and out.count("img_002.png") == 1
+    assert "failed: " in (out := capsys.readouterr().err) and "img_002.png: truncated PNG" in out and out.count("img_002.png") == 1
 
 
 def test_measure_unusable_reference_exits_2(tmp_path, capsys):

@@ -25,7 +25,7 @@ def small_session(tmp_path_factory, small_scene):
 
 
 def test_report_command_writes_everything(small_session, capsys):
-    code = main(["report", str(small_session), "--jobs", "1", "-q"])
+    code = main(["report", str(small_session), "--jobs", "1"])
     assert code == 0
     out = small_session / "results"
     for name in ("measurements.csv", "summary.json", "stiffness_table.csv", "report.html"):

@@ -20,6 +20,7 @@ __all__ = [
     "AnalysisError",
     "RigError",
     "RecordError",
+    "OutputError",
 ]
 
 
@@ -69,3 +70,8 @@ class RigError(VisionTorsionError):
 
 class RecordError(VisionTorsionError):
     """A torque/angle record (encoder rig CSV or measurements table) is invalid."""
+
+
+class OutputError(VisionTorsionError):
+    """Results cannot be written: the output folder is read-only, not a folder, or
+    the disk is full; the message names the path and the reason."""

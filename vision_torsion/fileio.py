@@ -1,20 +1,80 @@
-"""Atomic result writing: every result file appears whole or not at all.
+"""Writing results: atomically, following the umask, as a set, with errors that name the file.
 
-A result is written to a temporary file in the destination folder and renamed over
-the destination (``os.replace`` is atomic on POSIX and Windows), so an interrupted
-run never leaves a half-written CSV or JSON behind.
+- Every result file is written to a temporary file in the destination folder and
+  renamed over the destination (``os.replace`` is atomic on POSIX and Windows), so an
+  interrupted run never leaves a half-written CSV or JSON behind. The file gets the
+  mode a plain ``open()`` would give it (``0o666`` less the umask), not ``mkstemp``'s
+  private ``0o600``, so colleagues can read results.
+- Inside :func:`output_set`, the files written are staged and renamed into place
+  together at the end: either every file of the set is replaced, or (when one cannot
+  be) none is, and the error says so. Commands that write several files that belong
+  together (``stiffness``, ``report``, ``check-accuracy``) use it.
+- :func:`check_output_dir` is called by every command before it measures anything:
+  the output folder is created, a file is written into it and removed, so a
+  read-only folder, a file where the folder should be, or a full disk are reported
+  at once (naming the path and the reason) instead of after the work.
+- Every ``OSError`` while writing becomes an :class:`~vision_torsion.errors.OutputError`
+  naming the file and the reason in words.
 """
 
 from __future__ import annotations
 
+import errno
 import json
+import math
 import os
+import shutil
 import tempfile
+from contextlib import contextmanager
+from contextvars import ContextVar
+from functools import lru_cache
 from pathlib import Path
 
-import numpy as np
+from .errors import OutputError
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "write_json", "write_csv"]
+__all__ = [
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "write_json",
+    "write_csv",
+    "output_set",
+    "check_output_dir",
+    "os_reason",
+    "format_float",
+    "MIN_FREE_BYTES",
+]
+
+#: An output folder with less free space than this is refused before any work.
+MIN_FREE_BYTES = 1 << 20
+
+_REASONS = {
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.ENOSPC: "no space left on the device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.ENOTDIR: "a file is in the way where a folder should be",
+    errno.EISDIR: "a folder is in the way where the file should be",
+    errno.EEXIST: "a file is in the way where a folder should be",
+    errno.ENAMETOOLONG: "file name too long",
+    errno.ETXTBSY: "the file is in use",
+}
+
+
+def os_reason(exc: OSError) -> str:
+    """The reason of an ``OSError`` in words (``"read-only file system"``, ...)."""
+    return _REASONS.get(exc.errno, exc.strerror or str(exc))
+
+
+@lru_cache(maxsize=1)
+def _file_mode() -> int:
+    """``0o666`` less the process's umask (read once: setting it is the only way)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_staged: ContextVar[list | None] = ContextVar("vision_torsion_staged_outputs", default=None)
 
 
 def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
@@ -23,37 +83,199 @@ def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
     With `durable` (the default) the data is flushed to the disk (fsync) before
     the rename, so that after a power cut the file holds either the old or the new
     content. Without it, a power cut may leave it empty; for files whose reader
-    checks them anyway (cache entries) that saves a disk flush per file.
+    checks them anyway (cache entries) that saves a disk flush per file. Inside
+    :func:`output_set` the file is only staged; it is renamed into place with the
+    rest of the set.
+
+    Raises
+    ------
+    OutputError
+        The file or its folder cannot be written; the message names the path and
+        the reason (read-only, permission, no space, a file or folder in the way).
     """
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot write ({os_reason(exc)})") from exc
     try:
         with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), _file_mode())
             fh.write(data)
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
+        staged = _staged.get()
+        if staged is not None:
+            staged.append((Path(tmp), p))
+            return p
         os.replace(tmp, p)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+    except BaseException as exc:
+        _unlink(tmp)
+        if isinstance(exc, OSError):
+            raise OutputError(f"{p}: cannot write ({os_reason(exc)})") from exc
         raise
     return p
 
 
-def atomic_write_text(path, text: str, *, durable: bool = True) -> Path:
-    """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`)."""
-    return atomic_write_bytes(path, text.encode("utf-8"), durable=durable)
+def _unlink(path) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+@contextmanager
+def output_set():
+    """Files written inside are replaced together at the end, or none of them is.
+
+    Every :func:`atomic_write_bytes` (and the writers built on it) inside the block
+    writes its temporary file as usual but defers the rename. When the block ends
+    without error, every destination is checked (a folder in the way), the files
+    already there are kept as hard-linked backups, and the temporary files are
+    renamed into place; if one rename fails, the ones done are undone from the
+    backups. When the block raises, no file is replaced. Nested blocks join the
+    outermost one.
+
+    Raises
+    ------
+    OutputError
+        A file of the set cannot be written; the message names it and says that
+        no file of the set was replaced.
+    """
+    if _staged.get() is not None:
+        yield
+        return
+    staged: list[tuple[Path, Path]] = []
+    token = _staged.set(staged)
+    try:
+        yield
+    except BaseException:
+        for tmp, _ in staged:
+            _unlink(tmp)
+        raise
+    finally:
+        _staged.reset(token)
+    _commit(staged)
+
+
+def _commit(staged: list[tuple[Path, Path]]) -> None:
+    n = len(staged)
+
+    def fail(dest: Path, why: str, cause=None):
+        for tmp, _ in staged:
+            _unlink(tmp)
+        raise OutputError(f"{dest}: cannot write ({why}); none of the {n} result files of "
+                          "this set was replaced") from cause
+
+    for _, dest in staged:
+        if dest.is_dir():
+            fail(dest, "a folder is in the way where the file should be")
+    backups: dict[Path, Path | None] = {}
+    done: list[Path] = []
+    try:
+        for tmp, dest in staged:
+            backup = None
+            if dest.exists():
+                backup = dest.with_name(f".{dest.name}.{os.getpid()}.bak")
+                _unlink(backup)
+                try:
+                    os.link(dest, backup)
+                except OSError:
+                    shutil.copy2(dest, backup)
+            backups[dest] = backup
+        for tmp, dest in staged:
+            os.replace(tmp, dest)
+            done.append(dest)
+    except OSError as exc:
+        for dest in done:  # undo: the old file back, or no file where there was none
+            backup = backups.get(dest)
+            try:
+                if backup is not None:
+                    os.replace(backup, dest)
+                else:
+                    os.unlink(dest)
+            except OSError:
+                pass
+        failed = staged[len(done)][1] if len(done) < n else staged[-1][1]
+        for backup in backups.values():
+            if backup is not None:
+                _unlink(backup)
+        fail(failed, os_reason(exc), exc)
+    for backup in backups.values():
+        if backup is not None:
+            _unlink(backup)
+
+
+def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES) -> Path:
+    """Create the output folder `path` if needed and make sure results can be written there.
+
+    Called before any measuring, so that a run never does its work and then fails
+    to write it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output folder.
+    need_bytes : int
+        Free space required (bytes); less is refused as "no space".
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    OutputError
+        The path is a file (or lies under one), the folder cannot be created or
+        written (read-only file system, permission denied), or the disk has less
+        than `need_bytes` free. The message names the path and the reason.
+    """
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: cannot write results there: it is a file, not a folder")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot create the output folder ({os_reason(exc)})") from exc
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".write-test.", dir=p)
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot write into the output folder ({os_reason(exc)})") from exc
+    try:
+        os.write(fd, b"\0")
+    except OSError as exc:
+        raise OutputError(f"{p}: cannot write into the output folder ({os_reason(exc)})") from exc
+    finally:
+        os.close(fd)
+        _unlink(probe)
+    free = shutil.disk_usage(p).free
+    if free < need_bytes:
+        raise OutputError(f"{p}: no space left on the device for the results "
+                          f"({free // 1024} kB free, {need_bytes // 1024} kB needed)")
+    return p
+
+
+def format_float(x: float) -> str:
+    """The shortest text that reads back as `x` rounded to 15 significant digits.
+
+    ``0.36 * 0.981`` is ``0.35316000000000003`` in binary floating point; written as
+    ``0.35316``. 15 digits keep everything a double holds reliably (the 16th and
+    17th digits only carry the rounding of the arithmetic). NaN is written empty.
+    """
+    if not math.isfinite(x):
+        return "" if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    return repr(float(f"{x:.15g}"))
 
 
 def _json_default(obj):
+    import numpy as np
+
     if isinstance(obj, (np.integer,)):
         return int(obj)
     if isinstance(obj, (np.floating,)):
-        return None if not np.isfinite(obj) else float(obj)
+        return None if not np.isfinite(obj) else float(f"{float(obj):.15g}")
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, Path):
@@ -62,14 +284,20 @@ def _json_default(obj):
 
 
 def _finite(obj):
-    """Replace non-finite floats by None (JSON has no NaN); never by 0."""
+    """Non-finite floats become None (JSON has no NaN; never 0); finite ones are
+    rounded to 15 significant digits (:func:`format_float`)."""
     if isinstance(obj, float):
-        return obj if np.isfinite(obj) else None
+        return float(f"{obj:.15g}") if math.isfinite(obj) else None
     if isinstance(obj, dict):
         return {k: _finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     return obj
+
+
+def atomic_write_text(path, text: str, *, durable: bool = True) -> Path:
+    """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`)."""
+    return atomic_write_bytes(path, text.encode("utf-8"), durable=durable)
 
 
 def write_json(path, obj) -> Path:
@@ -79,5 +307,7 @@ def write_json(path, obj) -> Path:
 
 
 def write_csv(path, frame) -> Path:
-    """Write a pandas DataFrame as CSV (no index) atomically."""
-    return atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n"))
+    """Write a pandas DataFrame as CSV (no index) atomically; floats by
+    :func:`format_float` (shortest text, 15 significant digits), NaN empty."""
+    return atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n",
+                                                float_format=format_float))

@@ -19,8 +19,8 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from .angle import sequence_angles
-from .errors import ImageReadError, VisionTorsionError
-from .fileio import write_csv
+from .errors import ImageReadError, OutputError, VisionTorsionError
+from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
 from .pair import measure_pair
 from .settings import MeasureSettings
@@ -104,7 +104,7 @@ def measure_sequence(reference_pair, images, *, settings, correction=None, progr
             pairs.append(measure_pair(path, settings=settings, name=name))
             messages.append("")
         except VisionTorsionError as exc:
-            logger.warning("%s", exc)
+            logger.info("%s", exc)
             pairs.append(None)
             messages.append(str(exc))
     return pairs, sequence_angles(reference_pair, pairs, correction=correction), messages
@@ -154,6 +154,10 @@ def measure_folder(
     correction = load_correction(settings.correction)
     files = list_images(image_dir)
     out = Path(out_dir) if out_dir is not None else Path(image_dir) / "results"
+    if out.resolve() == Path(image_dir).resolve():
+        raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
+                          "subfolder such as results/")
+    check_output_dir(out)
     ref_pair = measure_pair(reference, settings=settings, name=f"reference {reference}")
     pairs, angles, messages = measure_sequence(
         ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress

@@ -8,8 +8,9 @@ table order (marker identity tracked and the angle unwrapped along the table, as
 ``reference_angle_deg[0] + rotation``. One bad image gets status ``failed`` and the
 run goes on.
 
-Outputs (written atomically to the output folder, ``DIR/results`` by default;
-nothing else in DIR is touched):
+Outputs (written atomically and as a set to the output folder, ``DIR/results`` by
+default; nothing else in DIR is touched, and ``DIR`` itself is refused as the output
+folder, since a result written among the images would be taken for an image):
 
 - ``accuracy.csv``: ``image,reference_angle_deg,measured_angle_deg,error_deg,
   angle_std_deg,status`` (status ``reference``, ``ok`` or ``failed: reason``);
@@ -53,8 +54,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from ..errors import ReferenceTableError, VisionTorsionError
-from ..fileio import atomic_write_bytes, write_csv, write_json
+from ..errors import OutputError, ReferenceTableError, VisionTorsionError
+from ..fileio import atomic_write_bytes, check_output_dir, output_set, write_csv, write_json
 from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
@@ -344,6 +345,11 @@ def check_accuracy(
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)
     out = Path(out_dir) if out_dir is not None else folder / "results"
+    if out.resolve() == folder.resolve():
+        raise OutputError(f"{out}: the output folder cannot be the image folder itself (results "
+                          "written among the images would be taken for images); use a subfolder "
+                          "such as results/")
+    check_output_dir(out)
     names, refs = list(table["image"]), table["reference_angle_deg"].to_numpy()
     ref_pair = measure_pair(folder / names[0], settings=settings, name=f"reference {names[0]}")
     _, angles, reasons = measure_sequence(
@@ -366,9 +372,10 @@ def check_accuracy(
         )
     figures = _statistics(ok["reference_angle_deg"].to_numpy(), ok["measured_angle_deg"].to_numpy(), n_failed, tol, spec.reference_std_deg)
     result = AccuracyResult(table=frame, out_dir=out, **figures)
-    write_csv(out / "accuracy.csv", frame)
     summary = result.summary()
     summary.update(folder=str(folder), correction=None if corr is None else corr.method, description=spec.description)
-    write_json(out / "accuracy.json", summary)
-    _plot(out / "accuracy.png", frame, tol)
+    with output_set():
+        write_csv(out / "accuracy.csv", frame)
+        write_json(out / "accuracy.json", summary)
+        _plot(out / "accuracy.png", frame, tol)
     return result

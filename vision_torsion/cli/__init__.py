@@ -2,21 +2,46 @@
 
 Each subcommand lives in its own module of this package and provides
 ``register(subparsers)``, which adds its parser and sets ``func`` to a function
-taking the parsed arguments and returning the exit status. Exit status: 0 when
-everything succeeded, 1 when some item failed (or a check did not pass), 2 for
-unusable input.
+taking the parsed arguments and returning the exit status. A subcommand module
+imports only argparse-level things at the top; everything it needs to do its work
+(numpy, pandas, matplotlib, scipy, ...) is imported inside its ``run`` function,
+so ``vision-torsion --help`` and ``--version`` start in a fraction of a second.
+
+Exit status
+-----------
+0
+    everything succeeded;
+1
+    some item failed (an image, a check that did not pass);
+2
+    unusable input or output: a :class:`~vision_torsion.errors.VisionTorsionError`
+    (bad file, bad manifest, an output folder that cannot be written, ...), or an
+    operating-system error on a named file;
+3
+    an internal error (a bug): one line "internal error in COMMAND: ...; please
+    report it", the traceback only with ``--debug``;
+130
+    interrupted (Ctrl-C).
+
+Options every command has, before or after the subcommand's name: ``-q/--quiet``
+(nothing on stdout, no progress bar; warnings and errors still go to stderr),
+``-v/--verbose`` (the tool's own debug messages; other libraries stay quiet) and
+``--debug`` (``-v``, and the traceback of an internal error). A new subcommand
+gets them by calling :func:`add_common_options` on its parser.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import contextlib
 import logging
+import os
 import sys
 
-from ..errors import VisionTorsionError
+__all__ = ["main", "build_parser", "failure_line", "add_common_options", "progress_enabled",
+           "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL"]
 
-__all__ = ["main", "build_parser", "failure_line"]
+EXIT_OK, EXIT_FAILED, EXIT_UNUSABLE, EXIT_INTERNAL = 0, 1, 2, 3
 
 # Subcommand modules, in the order `--help` lists them.
 _COMMAND_MODULES = [
@@ -32,13 +57,37 @@ _COMMAND_MODULES = [
 ]
 
 
+def _add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:
+    # On subcommands the defaults are SUPPRESS, so "-v process" is not undone by
+    # the subcommand's own (unset) -v.
+    default = (lambda v: v) if top else (lambda v: argparse.SUPPRESS)
+    g = parser.add_argument_group("output") if not top else parser
+    g.add_argument("-q", "--quiet", action="store_true", default=default(False),
+                   help="nothing on stdout and no progress bar; warnings and errors still go to stderr")
+    g.add_argument("-v", "--verbose", action="store_true", default=default(False),
+                   help="show the tool's own debug messages")
+    g.add_argument("--debug", action="store_true", default=default(False),
+                   help="like -v, and show the traceback of an internal error")
+
+
+def add_common_options(parser: argparse.ArgumentParser) -> None:
+    """Options every subcommand has: -q/--quiet, -v/--verbose, --debug (also accepted
+    before the subcommand)."""
+    _add_common(parser, top=False)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand registered."""
+    import importlib
+
     parser = argparse.ArgumentParser(
         prog="vision-torsion",
         description="Torsional stiffness and hysteresis of precision gears from camera images.",
+        epilog="Exit status: 0 success, 1 some item failed or a check did not pass, "
+               "2 unusable input or output, 3 internal error.",
     )
     parser.add_argument("--version", action="version", version=_version())
+    _add_common(parser, top=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in _COMMAND_MODULES:
@@ -53,14 +102,6 @@ def _version() -> str:
     return f"vision-torsion {__version__}"
 
 
-def add_common_options(parser: argparse.ArgumentParser) -> None:
-    """Options every subcommand has: --quiet and --verbose."""
-    parser.add_argument(
-        "-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors"
-    )
-    parser.add_argument("-v", "--verbose", action="store_true", help="log details")
-
-
 def progress_enabled(args) -> bool:
     """Progress bars show on a terminal unless --quiet was given."""
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
@@ -71,20 +112,98 @@ def failure_line(image: str, message: str) -> str:
     return f"failed: {message}" if image in message else f"failed: {image}: {message}"
 
 
+def _configure_logging(args) -> None:
+    """The tool's own messages at the level asked for, on stderr; every other
+    library's at WARNING (so -v does not bring matplotlib's font debugging)."""
+    level = (logging.WARNING if args.quiet
+             else logging.DEBUG if (args.verbose or args.debug) else logging.INFO)
+    own = logging.getLogger("vision_torsion")
+    for handler in list(own.handlers):
+        if getattr(handler, "_vision_torsion_cli", False):
+            own.removeHandler(handler)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+    handler._vision_torsion_cli = True
+    own.addHandler(handler)
+    own.setLevel(level)
+    logging.captureWarnings(True)
+    logging.getLogger("py.warnings").setLevel(logging.ERROR if args.quiet else logging.WARNING)
+
+
+def _command_name(args) -> str:
+    parts = [getattr(args, "command", None) or "vision-torsion"]
+    for kind in ("kind",):
+        if getattr(args, kind, None):
+            parts.append(args.kind)
+    return " ".join(parts)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status."""
+    """Run the command line; returns the exit status (see the module docstring).
+
+    No Python traceback reaches the user: errors about input and output are one
+    line naming the file and the reason (status 2); anything else is an internal
+    error, one line and status 3 (the traceback with ``--debug``).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
-    level = logging.WARNING if args.quiet else (logging.DEBUG if args.verbose else logging.INFO)
-    logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
+    _configure_logging(args)
+    command = _command_name(args)
     try:
-        return int(args.func(args) or 0)
-    except VisionTorsionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        with contextlib.ExitStack() as stack:
+            if args.quiet:
+                devnull = stack.enter_context(open(os.devnull, "w", encoding="utf-8"))
+                stack.enter_context(contextlib.redirect_stdout(devnull))
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `vision-torsion ... | head`
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w", encoding="utf-8")
+        return EXIT_OK
+    except Exception as exc:  # noqa: BLE001 - the one place every failure ends up
+        return _report_error(exc, command=command, debug=args.debug)
+
+
+def _report_error(exc: BaseException, *, command: str, debug: bool) -> int:
+    from ..errors import VisionTorsionError
+
+    if isinstance(exc, VisionTorsionError):
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_UNUSABLE
+    if isinstance(exc, OSError) and exc.filename is not None:
+        from ..fileio import os_reason
+
+        name = os.fsdecode(exc.filename)
+        print(f"error: {name}: {os_reason(exc)}", file=sys.stderr)
+        return EXIT_UNUSABLE
+    if isinstance(exc, MemoryError):
+        print(f"error: {command}: out of memory", file=sys.stderr)
+        return EXIT_UNUSABLE
+    if debug:
+        import traceback
+
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+    where = _origin(exc)
+    print(f"internal error in {command}{where}: {type(exc).__name__}: {_one_line(exc)}; "
+          "please report it (run again with --debug for the traceback)", file=sys.stderr)
+    return EXIT_INTERNAL
+
+
+def _origin(exc: BaseException) -> str:
+    """" (module.function)" of the innermost frame of vision_torsion's own code."""
+    tb, where = exc.__traceback__, ""
+    while tb is not None:
+        module = tb.tb_frame.f_globals.get("__name__", "")
+        if module.startswith("vision_torsion"):
+            where = f" ({module}.{tb.tb_frame.f_code.co_name})"
+        tb = tb.tb_next
+    return where
 
 
 if __name__ == "__main__":  # pragma: no cover

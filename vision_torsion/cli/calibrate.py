@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from . import add_common_options, progress_enabled
-from .options import add_marker_options, settings_from_args
+from .options import add_marker_options, add_output_option, settings_from_args
 
 
 def register(sub) -> None:
@@ -25,7 +25,7 @@ def register(sub) -> None:
     )
     plane.add_argument("image_dir", metavar="IMAGE_DIR", help="folder of the rotation sequence")
     plane.add_argument("--reference", required=True, metavar="FILE", help="the reference image (first of the sequence)")
-    plane.add_argument("-o", "--output", required=True, metavar="CORRECTION", help="file to write (.toml or .json)")
+    _add_output(plane, "plane_correction.toml")
     plane.add_argument("--fit-k1", action="store_true", help="also fit radial distortion k1 (weakly determined)")
     plane.add_argument("--k1", type=float, default=0.0, help="known radial distortion k1 (default 0)")
     plane.add_argument("--focal-length", type=float, metavar="PX", help="f of the distortion model (default max(width, height))")
@@ -41,9 +41,31 @@ def register(sub) -> None:
     target.add_argument("--pattern", choices=("chessboard", "circles"), default="chessboard")
     target.add_argument("--pattern-size", nargs=2, type=int, required=True, metavar=("COLS", "ROWS"), help="inner corners or circles")
     target.add_argument("--square-mm", type=float, default=1.0, help="pattern pitch in mm (does not affect angles)")
-    target.add_argument("-o", "--output", required=True, metavar="CORRECTION", help="file to write (.toml or .json)")
+    _add_output(target, "target_correction.toml")
     add_common_options(target)
     target.set_defaults(func=run_target)
+
+
+def _add_output(parser, default_name: str) -> None:
+    add_output_option(parser, "the current folder")
+    parser.add_argument("--name", default=default_name, metavar="FILE",
+                        help=f"file name of the correction in OUT_DIR; .toml or .json (default {default_name})")
+
+
+def _destination(args):
+    """OUT_DIR/NAME, its suffix checked and the folder writable, before any work."""
+    from pathlib import Path
+
+    from ..calibration.correction import check_suffix
+    from ..errors import CalibrationError
+    from ..fileio import check_output_dir
+
+    name = Path(args.name)
+    if name.name != args.name:
+        raise CalibrationError(f"--name {args.name}: a file name, not a path (the folder is -o OUT_DIR)")
+    check_suffix(name)
+    out = check_output_dir(Path(args.out_dir) if args.out_dir else Path.cwd())
+    return out / name
 
 
 def _report(corr, path) -> int:
@@ -55,11 +77,10 @@ def _report(corr, path) -> int:
 def run_plane(args) -> int:
     from pathlib import Path
 
-    from ..calibration.correction import check_suffix
     from ..calibration.selfcal import calibrate_plane
     from ..measure import list_images
 
-    check_suffix(Path(args.output))  # refuse a bad suffix before the work
+    destination = _destination(args)  # refuse a bad name or folder before the work
     ref = Path(args.reference)
     files = [f for f in list_images(args.image_dir) if f.resolve() != ref.resolve()]
     corr = calibrate_plane(
@@ -70,17 +91,16 @@ def run_plane(args) -> int:
         focal_length_px=args.focal_length,
         progress=progress_enabled(args),
     )
-    return _report(corr, corr.save(args.output))
+    return _report(corr, corr.save(destination))
 
 
 def run_target(args) -> int:
     from pathlib import Path
 
-    from ..calibration.correction import check_suffix
     from ..calibration.target import calibrate_from_target
 
-    check_suffix(Path(args.output))
+    destination = _destination(args)
     corr = calibrate_from_target(
         args.images, pattern=args.pattern, pattern_size=tuple(args.pattern_size), square_mm=args.square_mm
     )
-    return _report(corr, corr.save(args.output))
+    return _report(corr, corr.save(destination))

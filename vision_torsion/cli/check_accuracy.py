@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import sys
 from dataclasses import replace
 
 from . import add_common_options, progress_enabled
-from .options import add_marker_options
+from .options import add_marker_options, add_output_option
 
 
 def register(sub) -> None:
@@ -20,7 +21,7 @@ def register(sub) -> None:
         ),
     )
     p.add_argument("folder", metavar="DIR", help="folder with the images and reference.csv")
-    p.add_argument("-o", "--out-dir", metavar="OUT_DIR", help="output folder (default DIR/results)")
+    add_output_option(p, "DIR/results; DIR itself is refused: nothing is written among the images")
     p.add_argument("--tolerance", type=float, metavar="DEG", help="pass band ±DEG (default: the spec's, else 0.02)")
     p.add_argument("--spec", metavar="FILE", help="a ready check (TOML), e.g. calibration/rotary_stage.toml")
     add_marker_options(p)
@@ -55,5 +56,5 @@ def run(args) -> int:
     )
     for row in res.table.itertuples():
         if row.status.startswith("failed"):
-            print(f"  {row.image}: {row.status}")
+            print(f"  {row.image}: {row.status}", file=sys.stderr)
     return 0 if res.passed else 1

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import sys
+
 from . import add_common_options, failure_line, progress_enabled
-from .options import add_marker_options, settings_from_args
+from .options import add_marker_options, add_output_option, settings_from_args
 
 
 def register(sub) -> None:
@@ -18,7 +20,7 @@ def register(sub) -> None:
     )
     p.add_argument("image_dir", metavar="IMAGE_DIR", help="folder of images")
     p.add_argument("--reference", required=True, metavar="FILE", help="the reference image (angle 0)")
-    p.add_argument("-o", "--out-dir", metavar="OUT_DIR", help="output folder (default IMAGE_DIR/results)")
+    add_output_option(p, "IMAGE_DIR/results; not IMAGE_DIR itself")
     add_marker_options(p)
     add_common_options(p)
     p.set_defaults(func=run)
@@ -37,5 +39,5 @@ def run(args) -> int:
     print(f"{res.n_ok} of {res.n_ok + res.n_failed} images measured; wrote {res.path}")
     for row in res.table.itertuples():
         if row.status != "ok":
-            print(f"  {failure_line(row.image, row.message)}")
+            print(f"  {failure_line(row.image, row.message)}", file=sys.stderr)
     return 1 if res.n_failed else 0

@@ -1,10 +1,18 @@
-"""Command-line options shared by the commands that measure images."""
+"""Command-line options shared by several commands (markers, jobs, -o, --force).
+
+``--force`` is consistent: commands that create a new folder (``plan``, ``synth
+accuracy``, ``synth session``, ``demo``) refuse an existing non-empty one without it;
+commands that write results into an output folder (``measure``, ``process``,
+``report``, ``check-accuracy``, ``stiffness``, ``calibrate``) replace their own result
+files there and need no ``--force``.
+"""
 
 from __future__ import annotations
 
 from ..settings import FIT_METHODS, POLARITIES, MeasureSettings
 
-__all__ = ["add_marker_options", "add_jobs_option", "settings_from_args"]
+__all__ = ["add_marker_options", "add_jobs_option", "settings_from_args", "add_output_option",
+           "add_force_option", "check_new_folder"]
 
 
 def add_marker_options(parser) -> None:
@@ -37,3 +45,33 @@ def settings_from_args(args) -> MeasureSettings:
         fit=args.fit,
         correction=getattr(args, "correction", None),
     )
+
+
+def add_output_option(parser, default: str) -> None:
+    """-o/--out-dir OUT_DIR: the output folder; one meaning in every command."""
+    parser.add_argument("-o", "--out-dir", metavar="OUT_DIR", help=f"output folder (default: {default})")
+
+
+def add_force_option(parser, what: str = "the folder") -> None:
+    """--force: a command that creates a new folder refuses a non-empty one without it."""
+    parser.add_argument("--force", action="store_true",
+                        help=f"write into {what} even if it exists and is not empty")
+
+
+def check_new_folder(path, *, force: bool) -> None:
+    """Refuse a non-empty existing folder (a command that creates one) unless `force`.
+
+    Raises
+    ------
+    OutputError
+        The folder exists and holds files, and `force` is false; or it is a file.
+    """
+    from pathlib import Path
+
+    from ..errors import OutputError
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{p}: cannot write there: it is a file, not a folder")
+    if not force and p.is_dir() and any(p.iterdir()):
+        raise OutputError(f"{p}: folder exists and is not empty; use --force to write into it")

@@ -69,12 +69,11 @@ def run(args) -> int:
         mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
         polarity=args.polarity, radius_range=args.radius_range,
         angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force)
-    if not args.quiet:
-        print(f"{plan.folder}: {len(plan.rows)} images in "
-              f"{len(plan.config.protocol.orientations_deg)} orientations, "
-              f"{plan.steps_per_phase} steps per phase, max torque "
-              f"{plan.max_torque_nm:.5f} N·m"
-              + ("" if plan.exact else f" (requested {plan.requested_max_torque_nm:g})"))
-        print(f"print {plan.folder / 'capture_sheet.md'} and save each image under the "
-              "name it gives")
+    print(f"{plan.folder}: {len(plan.rows)} images in "
+          f"{len(plan.config.protocol.orientations_deg)} orientations, "
+          f"{plan.steps_per_phase} steps per phase, max torque "
+          f"{plan.max_torque_nm:.5f} N·m"
+          + ("" if plan.exact else f" (requested {plan.requested_max_torque_nm:g})"))
+    print(f"print {plan.folder / 'capture_sheet.md'} and save each image under the "
+          "name it gives")
     return 0

@@ -41,10 +41,9 @@ def run(args) -> int:
     for image, message in result.failures:
         print(failure_line(image, message), file=sys.stderr)
     print_pending(result, quiet=args.quiet)
-    if not args.quiet:
-        print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed, "
-              f"{result.n_pending} pending of {result.n_images} images ({result.n_measured} "
-              f"measured, {result.n_cached} from the cache)")
+    print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed, "
+          f"{result.n_pending} pending of {result.n_images} images ({result.n_measured} "
+          f"measured, {result.n_cached} from the cache)")
     return 0 if result.ok else 1
 
 

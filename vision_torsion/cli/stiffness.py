@@ -8,10 +8,6 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from ..fileio import write_csv, write_json
-from ..stiffness.analysis import analyze_stiffness_curve
-from ..stiffness.plots import plot_meshing, plot_stiffness, plot_torque_angle, save_figure
-from ..stiffness.rig import load_rig
 from . import add_common_options
 
 __all__ = ["register", "run", "default_output_dir"]
@@ -39,7 +35,7 @@ def register(subparsers) -> None:
     parser.add_argument("data", metavar="DATA", help="record CSV or measurements.csv")
     parser.add_argument("--rig", metavar="FILE",
                         help="rig constants TOML ([rig] and [meshing] tables)")
-    parser.add_argument("-o", "--output", metavar="OUT_DIR",
+    parser.add_argument("-o", "--out-dir", "--output", dest="out_dir", metavar="OUT_DIR",
                         help="output folder (default: <DATA stem>_stiffness/ beside DATA)")
     parser.add_argument("--method", choices=("polynomial", "spline"), default="polynomial",
                         help="loading-branch fit (default: polynomial)")
@@ -55,35 +51,46 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    """Run the analysis and write the results; returns the exit status."""
+    """Run the analysis and write the results (replaced as a set or not at all);
+    returns the exit status."""
+    from ..fileio import check_output_dir, output_set, write_csv, write_json
+    from ..stiffness.analysis import analyze_stiffness_curve
+    from ..stiffness.plots import plot_meshing, plot_stiffness, plot_torque_angle, save_figure
+    from ..stiffness.rig import load_rig
+
     rig = load_rig(args.rig) if args.rig else None
+    out = Path(args.out_dir) if args.out_dir else default_output_dir(args.data)
+    if not Path(args.data).is_file():
+        from ..errors import RecordError
+
+        raise RecordError(f"{args.data}: no such file")
+    check_output_dir(out)
     result = analyze_stiffness_curve(
         args.data, rig=rig, method=args.method, order=args.order, cutoff_hz=args.cutoff_hz,
         filter_order=args.filter_order, threshold_nm=args.threshold_nm,
     )
-    out = Path(args.output) if args.output else default_output_dir(args.data)
-    written = [
-        write_csv(out / "stiffness_curve.csv", result.to_frame()),
-        write_json(out / "stiffness_summary.json", result.to_dict()),
-        save_figure(plot_torque_angle(result), out / "torque_angle.png"),
-        save_figure(plot_stiffness(result), out / "stiffness_torque.png"),
-    ]
-    if result.meshing is not None:
-        written.append(save_figure(plot_meshing(result), out / "meshing_pairs.png"))
-    if not args.quiet:
-        for c in result.curves:
-            print(f"{c.kind}: K {c.stiffness_nm_per_rad.min():.4g} .. "
-                  f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad over "
-                  f"{c.torque_nm[0]:.3g} .. {c.torque_nm[-1]:.3g} N·m")
-        if result.backlash is not None:
-            b = result.backlash
-            print(f"dead zone: {b.width_deg:.4g} ± {b.width_std_deg:.2g} deg "
-                  f"({b.width_arcmin:.3g} arcmin), centre {b.centre_deg:.4g} deg")
+    with output_set():
+        written = [
+            write_csv(out / "stiffness_curve.csv", result.to_frame()),
+            write_json(out / "stiffness_summary.json", result.to_dict()),
+            save_figure(plot_torque_angle(result), out / "torque_angle.png"),
+            save_figure(plot_stiffness(result), out / "stiffness_torque.png"),
+        ]
         if result.meshing is not None:
-            m = result.meshing
-            wrap = "" if m.max_wrap_angle_rad is None else f", wrap angle {m.max_wrap_angle_rad / 3.141592653589793:.4f}π rad"
-            print(f"meshing pairs: max {m.max_pairs:.1f} at {m.torque_at_max_nm:.3g} N·m{wrap}")
-        for note in result.notes:
-            print(f"note: {note}")
-        print(f"wrote {len(written)} files to {out}")
+            written.append(save_figure(plot_meshing(result), out / "meshing_pairs.png"))
+    for c in result.curves:
+        print(f"{c.kind}: K {c.stiffness_nm_per_rad.min():.4g} .. "
+              f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad over "
+              f"{c.torque_nm[0]:.3g} .. {c.torque_nm[-1]:.3g} N·m")
+    if result.backlash is not None:
+        b = result.backlash
+        print(f"dead zone: {b.width_deg:.4g} ± {b.width_std_deg:.2g} deg "
+              f"({b.width_arcmin:.3g} arcmin), centre {b.centre_deg:.4g} deg")
+    if result.meshing is not None:
+        m = result.meshing
+        wrap = "" if m.max_wrap_angle_rad is None else f", wrap angle {m.max_wrap_angle_rad / 3.141592653589793:.4f}π rad"
+        print(f"meshing pairs: max {m.max_pairs:.1f} at {m.torque_at_max_nm:.3g} N·m{wrap}")
+    for note in result.notes:
+        print(f"note: {note}")
+    print(f"wrote {len(written)} files to {out}")
     return 0

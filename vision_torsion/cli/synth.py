@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from . import add_common_options, progress_enabled
+from .options import add_force_option, check_new_folder
 
 
 def register(sub) -> None:
@@ -22,6 +23,7 @@ def register(sub) -> None:
     a.add_argument("--scene", required=True, metavar="FILE", help="scene TOML (see synthetic/)")
     a.add_argument("--angles", nargs="+", type=float, metavar="DEG", help="rotation angles in degrees (CCW)")
     a.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    add_force_option(a, "OUT_DIR")
     add_common_options(a)
     a.set_defaults(func=run_accuracy)
     s = kinds.add_parser(
@@ -35,6 +37,7 @@ def register(sub) -> None:
     s.add_argument("out_dir", metavar="OUT_DIR")
     s.add_argument("--scene", required=True, metavar="FILE", help="scene TOML with a [session] table (see synthetic/paper_session.toml)")
     s.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    add_force_option(s, "OUT_DIR")
     add_common_options(s)
     s.set_defaults(func=run_session)
 
@@ -42,6 +45,8 @@ def register(sub) -> None:
 def run_accuracy(args) -> int:
     from ..synthetic import load_scene
     from ..synthetic.folders import write_accuracy_folder
+
+    check_new_folder(args.out_dir, force=args.force)
 
     out = write_accuracy_folder(load_scene(args.scene), args.out_dir, angles_deg=args.angles, seed=args.seed, progress=progress_enabled(args))
     print(f"wrote accuracy folder {out}")
@@ -51,7 +56,9 @@ def run_accuracy(args) -> int:
 def run_session(args) -> int:
     from ..synthetic.session import load_session_scene, write_session_folder
 
+    check_new_folder(args.out_dir, force=args.force)
     scene, spec = load_session_scene(args.scene)
-    out = write_session_folder(scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args))
+    out = write_session_folder(scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args),
+                               overwrite=args.force)
     print(f"wrote session folder {out}")
     return 0

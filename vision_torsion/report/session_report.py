@@ -179,13 +179,16 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     extra = [_stiffness_section(measurements)]
     if len(waiting) or result.unlisted:
         extra.append(_pending_section(waiting, result.unlisted))
-    files = write_report(
-        measurements,
-        analysis,
-        conditions=_conditions(session, result.n_images, result.n_failed),
-        out_dir=out,
-        extra_sections=extra,
-    )
+    from ..fileio import output_set
+
+    with output_set():  # the report's files are replaced together or not at all
+        files = write_report(
+            measurements,
+            analysis,
+            conditions=_conditions(session, result.n_images, result.n_failed),
+            out_dir=out,
+            extra_sections=extra,
+        )
     return SessionReport(
         files=files,
         measurements_path=result.measurements_path,

@@ -47,7 +47,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ..errors import SessionError, VisionTorsionError
-from ..fileio import write_csv
+from ..fileio import check_output_dir, write_csv
 from ..settings import MeasureSettings
 from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
@@ -356,6 +356,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
+    check_output_dir(out)  # before measuring: a run must not do its work and then fail to write it
     settings = session.settings
     # a bad correction file is unusable input: say so before measuring anything
     from ..calibration.correction import load_correction
