@@ -12,6 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from vision_torsion.errors import OutputError
+
 from test_session_support import (FakeCore, draw_target, install_fake_core, make_session,
                                   tree_digest)
 from vision_torsion import fileio
@@ -259,7 +261,7 @@ def test_results_are_written_atomically(session, core, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(fileio.os, "replace", fail)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(OutputError, match=r"measurements\.csv: cannot write \(no space left on the device\)"):
         process_session(folder, jobs=1)
     assert first.read_bytes() == before
     assert [p.name for p in first.parent.iterdir() if p.name.endswith(".tmp")] == []
