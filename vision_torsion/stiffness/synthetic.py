@@ -32,6 +32,7 @@ __all__ = [
     "SaturatingStiffness",
     "SyntheticRecord",
     "synthetic_encoder_record",
+    "realistic_encoder_record",
     "synthetic_measurements",
 ]
 
@@ -115,7 +116,12 @@ class SyntheticRecord:
     true_angle_deg, true_torque_nm : ndarray
         Noise-free output twist (deg) and torque (N·m) at each sample.
     true_phase : ndarray of str
-        ``dead_zone`` or one of the four branch kinds, per sample.
+        ``dead_zone``, ``hold`` (drive at rest, :func:`realistic_encoder_record`) or
+        one of the four branch kinds, per sample.
+    true_cycle : ndarray of int or None
+        Per sample: 0 during the virgin (first) loading and its dwell, then the
+        cycle number 1, 2, ... counted by loading branches after it, two per cycle
+        (:func:`realistic_encoder_record` only).
     """
 
     frame: pd.DataFrame
@@ -127,6 +133,7 @@ class SyntheticRecord:
     true_angle_deg: np.ndarray
     true_torque_nm: np.ndarray
     true_phase: np.ndarray
+    true_cycle: np.ndarray | None = None
 
 
 def _cycle_path(law, *, max_torque, backlash_rad, centre_rad, hysteresis_rad, dense):
@@ -251,6 +258,214 @@ def synthetic_encoder_record(
         frame=frame, rig=rig, law=law, backlash_deg=float(backlash_deg),
         backlash_centre_deg=float(backlash_centre_deg), max_torque_nm=float(max_torque_nm),
         true_angle_deg=np.rad2deg(true_twist), true_torque_nm=true_torque, true_phase=true_phase,
+    )
+
+
+def stiffening_law(*, stiffness_at_zero_nm_per_rad: float = 2000.0,
+                   stiffness_at_max_nm_per_rad: float = 16000.0, max_torque_nm: float = 30.0,
+                   torque_scale_nm: float = 7.5,
+                   tooth_stiffness_nm_per_rad: float = 320.0) -> SaturatingStiffness:
+    """A :class:`SaturatingStiffness` law going from K(0) to K(max_torque) exactly.
+
+    Parameters
+    ----------
+    stiffness_at_zero_nm_per_rad, stiffness_at_max_nm_per_rad : float
+        K at first contact and at `max_torque_nm`, N·m/rad (0 < first < second).
+    max_torque_nm, torque_scale_nm : float
+        The torque where K reaches the second value, and T0, N·m.
+    tooth_stiffness_nm_per_rad : float
+        Ks, N·m/rad per pair (sets n = K/Ks).
+
+    Examples
+    --------
+    >>> law = stiffening_law()
+    >>> round(float(law.stiffness(0.0))), round(float(law.stiffness(30.0)))
+    (2000, 16000)
+    """
+    ks = float(tooth_stiffness_nm_per_rad)
+    n0 = stiffness_at_zero_nm_per_rad / ks
+    n_top = stiffness_at_max_nm_per_rad / ks
+    if not 0 < n0 < n_top:
+        raise SceneError("need 0 < stiffness_at_zero_nm_per_rad < stiffness_at_max_nm_per_rad")
+    n_max = n0 + (n_top - n0) / -np.expm1(-max_torque_nm / torque_scale_nm)
+    return SaturatingStiffness(tooth_stiffness_nm_per_rad=ks, pairs_at_zero=n0, pairs_max=n_max,
+                               torque_scale_nm=torque_scale_nm)
+
+
+def realistic_encoder_record(
+    *,
+    law: SaturatingStiffness | None = None,
+    samples: int = 20000,
+    sampling_rate_hz: float = 500.0,
+    max_torque_nm: float = 30.0,
+    backlash_deg: float = 0.2,
+    backlash_centre_deg: float = 0.0,
+    friction_ratio: float = 0.05,
+    bedding_in_deg: float = 0.02,
+    cycles: int = 3,
+    dwell_s: float = 1.0,
+    torque_noise_nm: float = 0.03,
+    hum_nm: float = 0.05,
+    hum_hz: float = 50.0,
+    seed: int = 0,
+) -> SyntheticRecord:
+    """An encoder/torque-sensor test as a real rig records it (issue 14's realistic case).
+
+    The drive first loads the gear from the middle of its dead zone (the *virgin*
+    loading, which beds the teeth in), dwells, then runs `cycles` full cycles
+    (unloading, through the dead zone, negative loading, dwell, negative unloading,
+    back through the dead zone, positive loading, dwell) and finally unloads to the
+    middle of the dead zone. Samples are spread evenly over the moving part at a
+    constant drive speed; each dwell holds the drive still for `dwell_s`.
+
+    The truth is built here from the stiffness law alone (no analysis code):
+
+    - loading branches follow `law` exactly: K(T) = dT/dθ along them is the truth;
+    - friction opposes the motion and scales with the load (mesh friction): the
+      unloading branch at twist θ carries (1 − μ)/(1 + μ) of the loading torque,
+      and at a reversal the torque first drops by that ratio at constant twist
+      (stick) before the teeth slide back;
+    - the virgin loading starts `bedding_in_deg` further out (first contact
+      earlier) and takes up that extra twist linearly in torque, so it is softer
+      than the cyclic loadings; after it the dead zone is `backlash_deg` wide;
+    - torque noise: white Gaussian (`torque_noise_nm`) plus mains hum
+      `hum_nm`·sin(2π·`hum_hz`·t + φ) with a random phase; input pulses quantised.
+
+    Parameters
+    ----------
+    law : SaturatingStiffness, optional
+        Loading-branch stiffness law; default :func:`stiffening_law` (2000 to
+        16 000 N·m/rad over 0 to 30 N·m).
+    samples : int
+        Number of samples (>= 1000).
+    sampling_rate_hz : float
+        Sampling rate, Hz (above 2·`hum_hz`, so the hum is not aliased).
+    max_torque_nm : float
+        Turning torque, N·m.
+    backlash_deg, backlash_centre_deg : float
+        Dead-zone width after bedding-in (> 0) and centre, output degrees.
+    friction_ratio : float
+        μ in [0, 0.5).
+    bedding_in_deg : float
+        Extra twist taken up by the virgin loading, output degrees (>= 0, < width).
+    cycles : int
+        Full cycles after the virgin loading (>= 1).
+    dwell_s : float
+        Dwell at each reversal, s (>= 0).
+    torque_noise_nm, hum_nm, hum_hz : float
+        White-noise std (N·m), hum amplitude (N·m) and frequency (Hz).
+    seed : int
+        Seed of ``np.random.default_rng``.
+
+    Returns
+    -------
+    SyntheticRecord
+        With ``true_cycle`` (0 = virgin loading) and ``hold`` labels in ``true_phase``.
+
+    Raises
+    ------
+    SceneError
+        A parameter is out of range.
+
+    Examples
+    --------
+    >>> rec = realistic_encoder_record(seed=1)
+    >>> len(rec.frame), sorted(set(rec.true_cycle.tolist()))
+    (20000, [0, 1, 2, 3])
+    """
+    law = stiffening_law(max_torque_nm=max_torque_nm) if law is None else law
+    if not (samples >= 1000 and sampling_rate_hz > 2 * hum_hz > 0 and max_torque_nm > 0
+            and backlash_deg > 0 and 0 <= friction_ratio < 0.5 and 0 <= bedding_in_deg < backlash_deg
+            and cycles >= 1 and dwell_s >= 0 and torque_noise_nm >= 0 and hum_nm >= 0):
+        raise SceneError("realistic_encoder_record: a parameter is out of range (see the docstring)")
+    rig = RigConstants(pulses_per_rev=51200, transmission_ratio=100, sensor_stiffness_nm_per_rad=2.0e4,
+                       teeth=160, tooth_stiffness_nm_per_rad=law.tooth_stiffness_nm_per_rad)
+    dense = 3000
+    ratio = (1.0 - friction_ratio) / (1.0 + friction_ratio)
+    centre = np.deg2rad(backlash_centre_deg)
+    up, down = centre + np.deg2rad(backlash_deg) / 2, centre - np.deg2rad(backlash_deg) / 2
+    t_up = np.linspace(0.0, max_torque_nm, dense)
+    twist = law.twist_rad(t_up)
+    top = float(twist[-1])
+    zero = np.zeros(dense)
+    set_rad = np.deg2rad(bedding_in_deg)
+
+    def line(a, b):
+        return np.linspace(a, b, dense)
+
+    # (twist rad, torque N·m, label, cycle); "hold" pieces are a single state.
+    pieces = [(line(centre, up - set_rad), zero, "dead_zone", 0),
+              (up - set_rad + twist + set_rad * t_up / max_torque_nm, t_up, "positive_loading", 0),
+              ("hold", max_torque_nm, up + top, 0)]
+    for k in range(1, cycles + 1):
+        pieces += [
+            (np.full(dense, up + top), line(max_torque_nm, ratio * max_torque_nm), "positive_unloading", k),
+            ((up + twist)[::-1], (ratio * t_up)[::-1], "positive_unloading", k),
+            (line(up, down), zero, "dead_zone", k),
+            (down - twist, -t_up, "negative_loading", k),
+            ("hold", -max_torque_nm, down - top, k),
+            (np.full(dense, down - top), line(-max_torque_nm, -ratio * max_torque_nm), "negative_unloading", k),
+            ((down - twist)[::-1], (-ratio * t_up)[::-1], "negative_unloading", k),
+            (line(down, up), zero, "dead_zone", k),
+            (up + twist, t_up, "positive_loading", k),
+            ("hold", max_torque_nm, up + top, k),
+        ]
+    pieces += [(np.full(dense, up + top), line(max_torque_nm, ratio * max_torque_nm), "positive_unloading", cycles),
+               ((up + twist)[::-1], (ratio * t_up)[::-1], "positive_unloading", cycles),
+               (line(up, centre), zero, "dead_zone", cycles)]
+
+    sensor = rig.sensor_stiffness_nm_per_rad
+    moving = [p for p in pieces if not isinstance(p[0], str)]
+    tw = np.concatenate([p[0] for p in moving])
+    tq = np.concatenate([p[1] for p in moving])
+    lab = np.concatenate([np.full(dense, p[2], dtype=object) for p in moving])
+    cyc = np.concatenate([np.full(dense, p[3]) for p in moving])
+    drive = tw + tq / sensor
+    path = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(drive)))])
+    # Path position of each hold: the end of the moving piece before it.
+    ends = np.cumsum([dense for _ in moving]) - 1
+    hold_at, n_moving_before = [], 0
+    for p in pieces:
+        if isinstance(p[0], str):
+            hold_at.append((path[ends[n_moving_before - 1]], p))
+        else:
+            n_moving_before += 1
+    per_hold = int(round(dwell_s * sampling_rate_hz))
+    n_move = samples - per_hold * len(hold_at)
+    if n_move < 500:
+        raise SceneError("realistic_encoder_record: the dwells leave fewer than 500 moving samples")
+    s = np.linspace(0.0, path[-1], n_move)
+    idx = np.clip(np.searchsorted(path, s, side="right") - 1, 0, path.size - 1)
+    parts = {"twist": [], "torque": [], "drive": [], "label": [], "cycle": []}
+    start = 0
+    for position, (_, hold_torque, hold_twist, hold_cycle) in hold_at + [(np.inf, (None, None, None, None))]:
+        stop = int(np.searchsorted(s, position, side="right"))
+        seg = slice(start, stop)
+        parts["twist"].append(np.interp(s[seg], path, tw))
+        parts["torque"].append(np.interp(s[seg], path, tq))
+        parts["drive"].append(np.interp(s[seg], path, drive))
+        parts["label"].append(lab[idx[seg]])
+        parts["cycle"].append(cyc[idx[seg]])
+        if hold_torque is not None:
+            parts["twist"].append(np.full(per_hold, hold_twist))
+            parts["torque"].append(np.full(per_hold, hold_torque))
+            parts["drive"].append(np.full(per_hold, hold_twist + hold_torque / sensor))
+            parts["label"].append(np.full(per_hold, "hold", dtype=object))
+            parts["cycle"].append(np.full(per_hold, hold_cycle))
+        start = stop
+    true_twist, true_torque, true_drive = (np.concatenate(parts[k]) for k in ("twist", "torque", "drive"))
+    rng = np.random.default_rng(seed)
+    time_s = np.arange(samples) / sampling_rate_hz
+    noise = rng.normal(0.0, torque_noise_nm, samples) if torque_noise_nm > 0 else 0.0
+    hum = hum_nm * np.sin(2 * np.pi * hum_hz * time_s + rng.uniform(0, 2 * np.pi))
+    pulses = np.round(true_drive * rig.transmission_ratio * rig.pulses_per_rev / (2 * np.pi))
+    frame = pd.DataFrame({"time_s": time_s, "input_pulses": pulses.astype(np.int64),
+                          "torque_nm": true_torque + noise + hum})
+    return SyntheticRecord(
+        frame=frame, rig=rig, law=law, backlash_deg=float(backlash_deg),
+        backlash_centre_deg=float(backlash_centre_deg), max_torque_nm=float(max_torque_nm),
+        true_angle_deg=np.rad2deg(true_twist), true_torque_nm=true_torque,
+        true_phase=np.concatenate(parts["label"]), true_cycle=np.concatenate(parts["cycle"]).astype(int),
     )
 
 
