@@ -68,8 +68,9 @@ def test_meshing_pairs_within_one_pair(analysed):
     frame = result.to_frame()
     m = (frame["torque_nm"].abs() >= 0.1 * syn.max_torque_nm) & (frame["torque_nm"].abs() <= 0.9 * syn.max_torque_nm)
     truth = syn.law.pairs(frame.loc[m, "torque_nm"].to_numpy())
-    assert np.max(np.abs(frame.loc[m, "meshing_pairs"].to_numpy() - truth)) < 1.0
-    assert result.meshing.max_pairs == pytest.approx(syn.law.pairs(syn.max_torque_nm), abs=1.0)
+    assert np.max(np.abs(frame.loc[m, "meshing_pairs_per_zone"].to_numpy() - truth)) < 1.0
+    assert np.allclose(frame["meshing_pairs_total"], 2 * frame["meshing_pairs_per_zone"])
+    assert result.meshing.max_pairs_per_zone == pytest.approx(syn.law.pairs(syn.max_torque_nm), abs=1.0)
 
 
 def test_band_matches_scatter():
@@ -121,15 +122,25 @@ def test_linearity_check_rejects_a_curve():
         check_linearity([1.0, 2.0], [1.0, 2.0])
 
 
-def test_session_section_from_camera_steps():
-    # 20 load steps of 1.5 N·m per phase, order-5 fit: within 3 % over the middle
-    # 80 % as for the encoder rig (steps noise-free here; 10 steps with a cubic
-    # reach only ~4 % at the low end, where the curve bends most).
-    section = stiffness_section(synthetic_measurements(steps=20), order=5)
+def test_session_section_smooth_fit_per_loop_when_asked():
+    # 20 load steps of 1.5 N·m per phase, order-5 fit per loop: within 3 % over the
+    # middle 80 % as for the encoder rig (steps noise-free here; 10 steps with a
+    # cubic reach only ~4 % at the low end, where the curve bends most). Two loops
+    # with different zero offsets are fitted apart, never pooled.
+    table = synthetic_measurements(steps=20, cycles=2)
+    table.loc[table["cycle"] == 1, "angle_deg"] += 0.7  # loop 2's own reference: another zero
+    section = stiffness_section(table, order=5, method="polynomial")
     curve = section.result.curve("positive_loading")
+    assert curve.n_cycles == 2
     m = _middle(curve, 30.0)
     truth = SaturatingStiffness().stiffness(curve.torque_nm[m])
     assert np.max(np.abs(curve.stiffness_nm_per_rad[m] / truth - 1)) < 0.03
-    assert "## Stiffness curve" in section.markdown
-    with pytest.raises(AnalysisError, match="the session has 4 usable positive_loading steps"):
-        stiffness_section(synthetic_measurements(steps=4))
+    assert "## Stiffness per load step" in section.markdown
+
+
+def test_session_section_fit_failure_is_a_note_per_loop():
+    # A cubic through 5 steps cannot be fitted (needs 6): said per loop, then an
+    # error naming the loops when no loop could be fitted.
+    with pytest.raises(AnalysisError, match=r"no loading branch could be fitted: loop 1: the positive_loading "
+                                            r"branch has 4 usable points"):
+        stiffness_section(synthetic_measurements(steps=4), method="polynomial")

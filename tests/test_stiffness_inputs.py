@@ -94,10 +94,38 @@ def test_missing_and_bad_columns_are_named():
         record_from_encoder(_encoder_frame(), rig=RigConstants())
 
 
+def test_torque_that_never_changes_is_a_sensor_not_read():
+    # The drive moves, the torque column is one constant value (issue 16: this
+    # was "the polynomial fit is not monotonic; try a lower --order").
+    frame = _encoder_frame()
+    frame["torque_nm"] = 2.5
+    with pytest.raises(RecordError, match=r"column 'torque_nm' never changes \(every value is 2.5 N·m\)"):
+        analyze_stiffness_curve(frame, rig=RigConstants(pulses_per_rev=100))
+
+
+def test_torque_within_its_noise_is_not_a_load():
+    frame = _encoder_frame(400)
+    frame["torque_nm"] = np.random.default_rng(3).normal(0.0, 0.01, len(frame))
+    with pytest.raises(RecordError, match="changes by only .* N·m, within its noise"):
+        analyze_stiffness_curve(frame, rig=RigConstants(pulses_per_rev=100))
+
+
+def test_inverted_transmission_ratio_has_its_own_message():
+    # A ratio of the wrong sign makes the torque fall as the output angle rises
+    # (issue 16: this too was "not monotonic; try a lower --order").
+    syn = synthetic_encoder_record(seed=2)
+    rig = RigConstants(pulses_per_rev=51200, transmission_ratio=-100, sensor_stiffness_nm_per_rad=2e4)
+    with pytest.raises(AnalysisError, match=r"the sign of transmission_ratio = -100 or of the torque "
+                                            r"sensor is inverted"):
+        analyze_stiffness_curve(syn.frame, rig=rig)
+
+
 def test_no_loading_branch():
-    # The drive moves but the torque never leaves zero: all dead zone.
-    with pytest.raises(AnalysisError, match="no loading branch: column 'torque_nm' never leaves"):
-        analyze_stiffness_curve(_encoder_frame(), rig=RigConstants(pulses_per_rev=100))
+    # A camera table with unloading phases only.
+    table = synthetic_measurements(steps=6)
+    table = table[~table["phase"].isin(["positive_loading", "negative_loading"])]
+    with pytest.raises(AnalysisError, match="no loading branch"):
+        analyze_stiffness_curve(table, method="polynomial")
 
 
 def test_cutoff_at_or_above_nyquist():

@@ -36,7 +36,7 @@ from ..errors import AnalysisError
 from .branches import BranchSplit
 from .records import TorqueAngleRecord
 
-__all__ = ["Backlash", "contact_edge", "detect_backlash"]
+__all__ = ["Backlash", "contact_edge", "detect_backlash", "summarise_backlash"]
 
 #: Upper end of the hinge-fit window, as a fraction of the largest |T|: the
 #: linear-K(T) model of the first contact holds to ~0.3 % of the width there on the
@@ -58,6 +58,8 @@ class Backlash:
         upper − lower and its standard uncertainty.
     centre_deg : float
         Midpoint of the dead zone (where it sits relative to the angle zero).
+    n_cycles : int
+        Cycles behind the figures (1 for one cycle's dead zone).
     """
 
     lower_deg: float
@@ -67,6 +69,7 @@ class Backlash:
     width_deg: float
     width_std_deg: float
     centre_deg: float
+    n_cycles: int = 1
 
     @property
     def width_arcmin(self) -> float:
@@ -228,3 +231,42 @@ def detect_backlash(record: TorqueAngleRecord, filtered: TorqueAngleRecord, spli
         width_deg=float(deg(upper - lower)), width_std_deg=float(deg(np.hypot(upper_std, lower_std))),
         centre_deg=float(deg(0.5 * (upper + lower))),
     )
+
+
+def summarise_backlash(per_cycle) -> Backlash:
+    """Mean dead zone over cycles, each found on its own cycle's samples.
+
+    The standard uncertainty of each mean combines the scatter between cycles
+    (Type A, sd/sqrt(n)) with the edge fits' own (Type B, sqrt(sum std²)/n). With
+    one cycle it is that cycle's dead zone.
+
+    Raises
+    ------
+    AnalysisError
+        No dead zone to summarise.
+
+    Examples
+    --------
+    >>> a = Backlash(-0.1, 0.001, 0.1, 0.001, 0.2, 0.0014, 0.0)
+    >>> b = Backlash(-0.1, 0.001, 0.104, 0.001, 0.204, 0.0014, 0.002)
+    >>> s = summarise_backlash([a, b])
+    >>> round(s.width_deg, 4), s.n_cycles
+    (0.202, 2)
+    """
+    items = list(per_cycle)
+    if not items:
+        raise AnalysisError("no dead zone to summarise")
+    if len(items) == 1:
+        return items[0]
+    n = len(items)
+
+    def mean_std(value, std):
+        v = np.array([getattr(b, value) for b in items])
+        s = np.array([getattr(b, std) for b in items])
+        return float(v.mean()), float(np.sqrt(np.var(v, ddof=1) / n + np.sum(s**2) / n**2))
+
+    lower, lower_std = mean_std("lower_deg", "lower_std_deg")
+    upper, upper_std = mean_std("upper_deg", "upper_std_deg")
+    width, width_std = mean_std("width_deg", "width_std_deg")
+    return Backlash(lower_deg=lower, lower_std_deg=lower_std, upper_deg=upper, upper_std_deg=upper_std,
+                    width_deg=width, width_std_deg=width_std, centre_deg=0.5 * (lower + upper), n_cycles=n)

@@ -30,7 +30,7 @@ the band too narrow).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.polynomial import chebyshev as cheb
@@ -38,7 +38,8 @@ from scipy.interpolate import BSpline
 
 from ..errors import AnalysisError
 
-__all__ = ["FIT_METHODS", "BranchFit", "StiffnessCurve", "fit_loading_branch", "stiffness_curve"]
+__all__ = ["FIT_METHODS", "BranchFit", "StiffnessCurve", "fit_loading_branch", "stiffness_curve",
+           "summarise_curves"]
 
 FIT_METHODS = ("polynomial", "spline")
 
@@ -141,6 +142,8 @@ class BranchFit:
         Number of fitted samples.
     residual_std_nm : float
         Standard deviation of the residuals, N·m.
+    cycle : int or None
+        The cycle of the record the branch is of (0 = virgin loading), if known.
     """
 
     kind: str
@@ -150,7 +153,8 @@ class BranchFit:
     angle_max_rad: float
     n_points: int
     residual_std_nm: float
-    _model: object
+    _model: object = field(repr=False)
+    cycle: int | None = None
 
     @property
     def sign(self) -> int:
@@ -251,6 +255,11 @@ class StiffnessCurve:
         Fitted torque, N·m, ordered by rising |T|.
     stiffness_nm_per_rad, stiffness_std_nm_per_rad : ndarray
         K = dT/dtheta and its standard uncertainty, N·m/rad.
+    cycle : int or None
+        The cycle (0 = virgin loading; a camera record's loop) this curve is of;
+        None for a summary over cycles (:func:`summarise_curves`).
+    n_cycles : int
+        Cycles behind the curve (1 for one cycle's curve).
     """
 
     kind: str
@@ -258,6 +267,8 @@ class StiffnessCurve:
     torque_nm: np.ndarray
     stiffness_nm_per_rad: np.ndarray
     stiffness_std_nm_per_rad: np.ndarray
+    cycle: int | None = None
+    n_cycles: int = 1
 
     def at_torque(self, torque_nm):
         """K and its std (N·m/rad) interpolated at torque(s) on this branch (N·m).
@@ -279,7 +290,7 @@ class StiffnessCurve:
                 np.interp(np.abs(t), mag, self.stiffness_std_nm_per_rad))
 
 
-def stiffness_curve(fit: BranchFit, *, points: int = 200) -> StiffnessCurve:
+def stiffness_curve(fit: BranchFit, *, points: int = 200, cycle: int | None = None) -> StiffnessCurve:
     """Sample the stiffness curve of a fit over its data span.
 
     Parameters
@@ -287,6 +298,8 @@ def stiffness_curve(fit: BranchFit, *, points: int = 200) -> StiffnessCurve:
     fit : BranchFit
     points : int
         Number of samples, evenly spaced in angle.
+    cycle : int, optional
+        The cycle the fit is of (stored on the curve).
 
     Returns
     -------
@@ -299,4 +312,64 @@ def stiffness_curve(fit: BranchFit, *, points: int = 200) -> StiffnessCurve:
     torque = fit.torque(angle)[0]
     k, k_std = fit.stiffness(angle)
     return StiffnessCurve(kind=fit.kind, angle_deg=np.rad2deg(angle), torque_nm=torque,
-                          stiffness_nm_per_rad=k, stiffness_std_nm_per_rad=k_std)
+                          stiffness_nm_per_rad=k, stiffness_std_nm_per_rad=k_std, cycle=cycle)
+
+
+def summarise_curves(curves, *, points: int = 200) -> StiffnessCurve:
+    """The mean stiffness curve of one loading branch over cycles, at common torques.
+
+    Each cycle is fitted on its own (its zero offset and its contact angle stay its
+    own), so the curves are compared at equal torque, never pooled in angle.
+
+    Parameters
+    ----------
+    curves : sequence of StiffnessCurve
+        Curves of one kind, one per cycle.
+    points : int
+        Torques, evenly spaced over the |T| range all curves cover.
+
+    Returns
+    -------
+    StiffnessCurve
+        ``cycle = None``, ``n_cycles = len(curves)``; K is the mean over cycles and
+        its standard uncertainty combines the scatter between cycles (Type A,
+        sd/sqrt(n)) with the fits' own (Type B, sqrt(sum std²)/n):
+        u = sqrt(u_A² + u_B²). With one cycle it is that cycle's curve and band.
+        ``angle_deg`` is the mean angle of the cycles at each torque.
+
+    Raises
+    ------
+    AnalysisError
+        No curves, curves of different kinds, or no torque range common to all.
+
+    Examples
+    --------
+    >>> t = np.linspace(1.0, 10.0, 50)
+    >>> a = StiffnessCurve("positive_loading", t / 100, t, 100 * t, np.ones(50), cycle=1)
+    >>> b = StiffnessCurve("positive_loading", t / 100, t, 100 * t + 2, np.ones(50), cycle=2)
+    >>> s = summarise_curves([a, b], points=3)
+    >>> s.stiffness_nm_per_rad.tolist(), s.n_cycles
+    ([101.0, 551.0, 1001.0], 2)
+    """
+    curves = list(curves)
+    if not curves:
+        raise AnalysisError("no stiffness curves to summarise")
+    kinds = {c.kind for c in curves}
+    if len(kinds) != 1:
+        raise AnalysisError(f"cannot summarise curves of different branches {sorted(kinds)}")
+    kind = curves[0].kind
+    lo = max(float(np.min(np.abs(c.torque_nm))) for c in curves)
+    hi = min(float(np.max(np.abs(c.torque_nm))) for c in curves)
+    if not hi > lo:
+        raise AnalysisError(f"the {kind} curves of the cycles have no torque range in common")
+    sign = 1.0 if kind.startswith("positive") else -1.0
+    mag = np.linspace(lo, hi, int(points))
+    k = np.array([np.interp(mag, np.abs(c.torque_nm), c.stiffness_nm_per_rad) for c in curves])
+    k_std = np.array([np.interp(mag, np.abs(c.torque_nm), c.stiffness_std_nm_per_rad) for c in curves])
+    angle = np.array([np.interp(mag, np.abs(c.torque_nm), c.angle_deg) for c in curves])
+    n = len(curves)
+    u_b2 = np.sum(k_std**2, axis=0) / n**2
+    u_a2 = np.var(k, axis=0, ddof=1) / n if n > 1 else 0.0
+    return StiffnessCurve(kind=kind, angle_deg=angle.mean(axis=0), torque_nm=sign * mag,
+                          stiffness_nm_per_rad=k.mean(axis=0), stiffness_std_nm_per_rad=np.sqrt(u_a2 + u_b2),
+                          cycle=None, n_cycles=n)

@@ -12,6 +12,14 @@ meshing zone of n pairs on a flexspline of z teeth spans the wrap angle
     phi = 2·pi·n / z   [rad]
 
 (the paper's example: 35 and 50 pairs of 160 teeth give 0.4375·pi and 0.625·pi).
+
+**n is per meshing zone.** A harmonic drive meshes in :data:`MESHING_ZONES` zones,
+at both ends of the wave generator's major axis. The paper's pair counts (35 at
+10 N·m, 50 at 30 N·m) and its wrap angles are those of a *single* zone, with
+K = n·Ks; so Ks is the stiffness one pair in each zone adds together, n = K/Ks is
+the count per zone, and both zones together hold 2·n pairs (each pair Ks/2).
+Columns and keys say so: ``meshing_pairs_per_zone``, ``meshing_pairs_total``,
+``wrap_angle_per_zone_rad``.
 Ks comes from the rig file or is calibrated from a reference point (T_ref, n_ref):
 Ks = K(T_ref) / n_ref.
 
@@ -29,6 +37,7 @@ import numpy as np
 from ..errors import AnalysisError, RigError
 
 __all__ = [
+    "MESHING_ZONES",
     "meshing_pairs",
     "wrap_angle_rad",
     "calibrate_tooth_stiffness",
@@ -37,8 +46,12 @@ __all__ = [
 ]
 
 
+#: Meshing zones of a harmonic drive (two ends of the wave generator's major axis).
+MESHING_ZONES = 2
+
+
 def meshing_pairs(stiffness_nm_per_rad, *, tooth_stiffness_nm_per_rad: float):
-    """Effective meshing tooth pairs n = K / Ks.
+    """Effective meshing tooth pairs of one meshing zone, n = K / Ks.
 
     Parameters
     ----------
