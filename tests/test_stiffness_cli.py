@@ -30,7 +30,7 @@ def test_writes_curve_summary_and_plots_beside_data(tmp_path, capsys):
         "stiffness_torque.png", "torque_angle.png",
     ]
     curve = pd.read_csv(out / "stiffness_curve.csv")
-    for column in ("torque_nm", "stiffness_nm_per_rad", "stiffness_std_nm_per_rad", "meshing_pairs"):
+    for column in ("torque_nm", "stiffness_nm_per_rad", "stiffness_std_nm_per_rad", "meshing_pairs_per_zone"):
         assert curve[column].notna().all()
     summary = json.loads((out / "stiffness_summary.json").read_text())
     assert abs(summary["backlash"]["width_deg"] / syn.backlash_deg - 1) < 0.05
@@ -42,10 +42,13 @@ def test_camera_measurements_without_rig_and_output_option(tmp_path):
     data = tmp_path / "measurements.csv"
     synthetic_measurements(steps=12).to_csv(data, index=False)
     out = tmp_path / "elsewhere"
-    assert main(["stiffness", str(data), "-o", str(out), "--order", "4", "--quiet"]) == 0
+    assert main(["stiffness", str(data), "-o", str(out), "--method", "polynomial", "--order", "4",
+                 "--quiet"]) == 0
     curve = pd.read_csv(out / "stiffness_curve.csv")
-    assert curve["meshing_pairs"].isna().all()  # no Ks: unknown, not 0
+    assert curve["meshing_pairs_per_zone"].isna().all()  # no Ks: unknown, not 0
     assert not (out / "meshing_pairs.png").exists()
+    steps = pd.read_csv(out / "stiffness_steps.csv")
+    assert len(steps) == 4 * 12 and (out / "step_stiffness.png").exists()
 
 
 def test_bad_input_exit_status_2(tmp_path, capsys):

@@ -6,6 +6,7 @@ A thin layer over :func:`vision_torsion.stiffness.analyze_stiffness_curve`.
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
 from . import add_common_options
@@ -29,6 +30,9 @@ def register(subparsers) -> None:
         description=(
             "Analyse a torque-angle record: an encoder/torque-sensor CSV (time_s, torque_nm, "
             "input_pulses or input_angle_deg; needs --rig) or a camera-rig measurements.csv. "
+            "Each cycle (camera: each loop) is analysed on its own, the virgin first loading "
+            "apart, then summarised; a measurements.csv also gets stiffness_steps.csv "
+            "(delta-torque/delta-angle per load step of every loop). "
             "Writes stiffness_curve.csv, stiffness_summary.json and three PNG plots."
         ),
     )
@@ -37,8 +41,9 @@ def register(subparsers) -> None:
                         help="rig constants TOML ([rig] and [meshing] tables)")
     parser.add_argument("-o", "--out-dir", "--output", dest="out_dir", metavar="OUT_DIR",
                         help="output folder (default: <DATA stem>_stiffness/ beside DATA)")
-    parser.add_argument("--method", choices=("polynomial", "spline"), default="polynomial",
-                        help="loading-branch fit (default: polynomial)")
+    parser.add_argument("--method", choices=("polynomial", "spline"), default=None,
+                        help="loading-branch fit (default: polynomial for an encoder record; "
+                             "none for a measurements.csv, whose stiffness is given per load step)")
     parser.add_argument("--order", type=int, default=7, help="polynomial order (default: 7)")
     parser.add_argument("--cutoff-hz", type=float, default=None,
                         help="low-pass cut-off in Hz (default: 5%% of the sampling rate)")
@@ -46,6 +51,9 @@ def register(subparsers) -> None:
                         help="Butterworth order (default: 4)")
     parser.add_argument("--threshold-nm", type=float, default=None,
                         help="half-width of the zero-torque band in N·m (default: 5 noise stds)")
+    parser.add_argument("--hold-speed", type=float, default=None, metavar="DEG_PER_S",
+                        help="drive-speed dead-band in output deg/s: slower samples are holds "
+                             "(default: a tenth of the typical drive speed)")
     add_common_options(parser)
     parser.set_defaults(func=run)
 
@@ -55,8 +63,15 @@ def run(args) -> int:
     returns the exit status."""
     from ..fileio import check_output_dir, output_set, write_csv, write_json
     from ..stiffness.analysis import analyze_stiffness_curve
-    from ..stiffness.plots import plot_meshing, plot_stiffness, plot_torque_angle, save_figure
+    from ..stiffness.plots import (
+        plot_meshing,
+        plot_step_stiffness,
+        plot_stiffness,
+        plot_torque_angle,
+        save_figure,
+    )
     from ..stiffness.rig import load_rig
+    from ..stiffness.steps import step_stiffness, summarise_steps
 
     rig = load_rig(args.rig) if args.rig else None
     out = Path(args.out_dir) if args.out_dir else default_output_dir(args.data)
@@ -68,28 +83,40 @@ def run(args) -> int:
     result = analyze_stiffness_curve(
         args.data, rig=rig, method=args.method, order=args.order, cutoff_hz=args.cutoff_hz,
         filter_order=args.filter_order, threshold_nm=args.threshold_nm,
+        hold_speed_deg_per_s=args.hold_speed,
     )
     with output_set():
         written = [
             write_csv(out / "stiffness_curve.csv", result.to_frame()),
             write_json(out / "stiffness_summary.json", result.to_dict()),
             save_figure(plot_torque_angle(result), out / "torque_angle.png"),
-            save_figure(plot_stiffness(result), out / "stiffness_torque.png"),
         ]
+        if result.curves:
+            written.append(save_figure(plot_stiffness(result), out / "stiffness_torque.png"))
         if result.meshing is not None:
             written.append(save_figure(plot_meshing(result), out / "meshing_pairs.png"))
+        if result.source == "camera":
+            steps = step_stiffness(args.data)
+            written.append(write_csv(out / "stiffness_steps.csv", steps))
+            written.append(save_figure(plot_step_stiffness(steps, summarise_steps(steps)),
+                                       out / "step_stiffness.png"))
     for c in result.curves:
         print(f"{c.kind}: K {c.stiffness_nm_per_rad.min():.4g} .. "
               f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad over "
-              f"{c.torque_nm[0]:.3g} .. {c.torque_nm[-1]:.3g} N·m")
+              f"{c.torque_nm[0]:.3g} .. {c.torque_nm[-1]:.3g} N·m (mean of {c.n_cycles} cycle(s))")
+    for c in result.virgin:
+        print(f"virgin loading ({c.kind}, not in the mean): K {c.stiffness_nm_per_rad.min():.4g} .. "
+              f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad")
     if result.backlash is not None:
         b = result.backlash
         print(f"dead zone: {b.width_deg:.4g} ± {b.width_std_deg:.2g} deg "
-              f"({b.width_arcmin:.3g} arcmin), centre {b.centre_deg:.4g} deg")
+              f"({b.width_arcmin:.3g} arcmin), centre {b.centre_deg:.4g} deg, {b.n_cycles} cycle(s)")
     if result.meshing is not None:
         m = result.meshing
-        wrap = "" if m.max_wrap_angle_rad is None else f", wrap angle {m.max_wrap_angle_rad / 3.141592653589793:.4f}π rad"
-        print(f"meshing pairs: max {m.max_pairs:.1f} at {m.torque_at_max_nm:.3g} N·m{wrap}")
+        wrap = ("" if m.max_wrap_angle_per_zone_rad is None
+                else f", wrap angle of one zone {m.max_wrap_angle_per_zone_rad / math.pi:.4f}π rad")
+        print(f"meshing pairs per zone: max {m.max_pairs_per_zone:.1f} "
+              f"({2 * m.max_pairs_per_zone:.1f} in both zones) at {m.torque_at_max_nm:.3g} N·m{wrap}")
     for note in result.notes:
         print(f"note: {note}")
     print(f"wrote {len(written)} files to {out}")

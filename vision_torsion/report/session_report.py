@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from ..fileio import write_csv
 from . import ReportFiles, write_report
 
 __all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
@@ -77,41 +78,55 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
     }
 
 
-_STIFFNESS_TITLE = "Stiffness curve (loading branches)"
+_STIFFNESS_TITLE = "Stiffness per load step (Δτ/Δθ, each loop on its own)"
+
+
+def _step_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """One row per step of the loop, one column per phase: mean Δτ/Δθ ± u over loops."""
+    from .html import fmt_value
+
+    phases = list(dict.fromkeys(summary["phase"]))
+    rows = {}
+    for r in summary.itertuples(index=False):
+        key = (int(r.step_from), int(r.step_to))
+        row = rows.setdefault(key, {"step": f"{r.step_from}→{r.step_to}"})
+        if r.n_loops:
+            row[r.phase.replace("_", " ")] = (f"{fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)} "
+                                              f"@ {r.torque_mid_nm:+.3g}")
+        else:
+            row[r.phase.replace("_", " ")] = "flagged*"
+    columns = ["step"] + [p.replace("_", " ") for p in phases]
+    return pd.DataFrame([rows[k] for k in sorted(rows)], columns=columns).fillna("—")
 
 
 def _stiffness_section(measurements: pd.DataFrame):
-    """The stiffness-curve section (K(T) = dT/dθ of the loading branches) as (title, html).
+    """The stiffness section (Δτ/Δθ per load step, per loop) as (title, html).
 
-    When the session cannot give it (too few steps per loading phase), the section
-    says why instead of failing the report.
+    When the session cannot give it (no two consecutive steps measured), the
+    section says why instead of failing the report.
     """
     import html
-    import io
-
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     from ..errors import VisionTorsionError
     from ..stiffness.report import stiffness_section
-    from .html import _img
+    from .figures import png_bytes
+    from .html import _img, _table
 
     try:
         section = stiffness_section(measurements)
     except VisionTorsionError as exc:
-        why = f"<p>Not computed: {html.escape(str(exc))}.</p>"
-        if "not monotonic" in str(exc):
-            why += (
-                "<p>A smooth stiffness curve K(T) describes a gear that stiffens gradually as "
-                "more tooth pairs come into mesh; loading branches with a sharp stiffness switch "
-                "are described by the bilinear model fit above instead.</p>"
-            )
-        return _STIFFNESS_TITLE, why
-    parts = [f"<p>{html.escape(p)}</p>" for p in section.markdown.split("\n\n") if p.strip()]
+        return _STIFFNESS_TITLE, f"<p>Not computed: {html.escape(str(exc))}.</p>"
+    lines = [ln[2:] for ln in section.markdown.splitlines() if ln.startswith("- ")]
+    parts = ["<ul>" + "".join(f"<li>{html.escape(ln)}</li>" for ln in lines) + "</ul>",
+             '<p class="muted">Each cell: mean over loops of Δτ/Δθ (N·m/rad) ± its standard uncertainty '
+             "(scatter between loops, Type A, combined with the propagated angle and torque uncertainty), "
+             "@ the mid-step torque (N·m). *flagged: the step starts or ends at zero torque (it may cross the "
+             "backlash dead zone) or its angle change is not measurable; per-loop values and reasons are in "
+             "<code>stiffness_steps.csv</code>.</p>",
+             _table(_step_table(section.summary), left=("step",))]
     for name, fig in section.figures.items():
-        buf = io.BytesIO()
-        FigureCanvasAgg(fig).print_png(buf)
-        parts.append(_img(buf.getvalue(), name.replace("_", " ")))
-    return _STIFFNESS_TITLE, "\n".join(parts)
+        parts.append(f"<figure>{_img(png_bytes(fig), name.replace('_', ' '))}</figure>")
+    return _STIFFNESS_TITLE, "\n".join(parts), section.steps
 
 
 def _pending_section(waiting: pd.DataFrame, unlisted) -> tuple[str, str]:
@@ -176,12 +191,15 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
                  arm_radius_m=rig.arm_radius_m, friction_torque_std_nm=rig.friction_torque_std_nm,
                  arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
     )
-    extra = [_stiffness_section(measurements)]
+    title, section_html, *steps = _stiffness_section(measurements)
+    extra = [(title, section_html)]
     if len(waiting) or result.unlisted:
         extra.append(_pending_section(waiting, result.unlisted))
     from ..fileio import output_set
 
     with output_set():  # the report's files are replaced together or not at all
+        if steps:
+            write_csv(out / "stiffness_steps.csv", steps[0])
         files = write_report(
             measurements,
             analysis,

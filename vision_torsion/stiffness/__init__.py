@@ -9,7 +9,8 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.records` — reading and validating records;
 - :mod:`.filtering` — zero-phase Butterworth low-pass;
 - :mod:`.branches` — loading/unloading branches;
-- :mod:`.curve` — loading-branch fits and the stiffness curve;
+- :mod:`.curve` — loading-branch fits, the stiffness curve per cycle and its summary;
+- :mod:`.steps` — camera-rig stiffness per load step, Δτ/Δθ, per loop;
 - :mod:`.backlash` — the dead zone;
 - :mod:`.meshing` — meshing pairs, wrap angle, Ks calibration, linearity check;
 - :mod:`.analysis` — :func:`analyze_stiffness_curve`, the whole chain;
@@ -20,7 +21,7 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 from .analysis import MeshingSummary, StiffnessResult, analyze_stiffness_curve
 from .backlash import Backlash, detect_backlash
 from .branches import split_branches
-from .curve import BranchFit, StiffnessCurve, fit_loading_branch, stiffness_curve
+from .curve import BranchFit, StiffnessCurve, fit_loading_branch, stiffness_curve, summarise_curves
 from .filtering import filter_record, lowpass
 from .meshing import (
     LinearityCheck,
@@ -29,22 +30,31 @@ from .meshing import (
     meshing_pairs,
     wrap_angle_rad,
 )
-from .plots import plot_meshing, plot_stiffness, plot_torque_angle
+from .plots import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
 from .records import TorqueAngleRecord, read_record
 from .report import StiffnessSection, stiffness_section
 from .rig import RigConstants, load_rig, output_angle_deg
-from .synthetic import SaturatingStiffness, synthetic_encoder_record, synthetic_measurements
+from .steps import step_stiffness, summarise_steps
+from .synthetic import (
+    SaturatingStiffness,
+    realistic_encoder_record,
+    stiffening_law,
+    synthetic_encoder_record,
+    synthetic_measurements,
+)
 
 __all__ = [
     "analyze_stiffness_curve", "StiffnessResult", "MeshingSummary",
     "RigConstants", "load_rig", "output_angle_deg",
     "TorqueAngleRecord", "read_record",
     "lowpass", "filter_record", "split_branches",
-    "fit_loading_branch", "stiffness_curve", "BranchFit", "StiffnessCurve",
+    "fit_loading_branch", "stiffness_curve", "summarise_curves", "BranchFit", "StiffnessCurve",
+    "step_stiffness", "summarise_steps",
     "detect_backlash", "Backlash",
     "meshing_pairs", "wrap_angle_rad", "calibrate_tooth_stiffness", "check_linearity",
     "LinearityCheck",
-    "plot_torque_angle", "plot_stiffness", "plot_meshing",
+    "plot_torque_angle", "plot_stiffness", "plot_meshing", "plot_step_stiffness",
     "stiffness_section", "StiffnessSection",
-    "SaturatingStiffness", "synthetic_encoder_record", "synthetic_measurements",
+    "SaturatingStiffness", "stiffening_law", "synthetic_encoder_record", "realistic_encoder_record",
+    "synthetic_measurements",
 ]

@@ -1,61 +1,77 @@
 """The stiffness section of a camera-rig session report.
 
-A session's ``measurements.csv`` holds a few load steps per phase; this turns them
-into the stiffness curve of the loading phases, when there are enough steps.
+A session's ``measurements.csv`` holds a few load steps per phase and one loop per
+orientation and cycle, each against its own reference image (its own zero offset).
+The section gives the stiffness of every load step, Δτ/Δθ, within each loop
+(:func:`~.steps.step_stiffness`), compared over loops at equal step
+(:func:`~.steps.summarise_steps`). Loops are never pooled into one curve, and no
+smooth fit is made unless one is asked for (then one per loop, whose failures are
+notes, not a failed section).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
+import pandas as pd
 
-from ..errors import AnalysisError
+from ..errors import AnalysisError, RecordError
 from .analysis import StiffnessResult, analyze_stiffness_curve, as_record
-from .branches import LOADING_KINDS
-from .plots import plot_meshing, plot_stiffness, plot_torque_angle
+from .plots import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
 from .rig import RigConstants
+from .steps import step_stiffness, summarise_steps
 
 __all__ = ["StiffnessSection", "stiffness_section"]
 
 
 @dataclass(frozen=True)
 class StiffnessSection:
-    """Stiffness result, figures and a markdown summary for a session report.
+    """Step stiffness, optional per-loop curves, figures and a markdown summary.
 
     Attributes
     ----------
-    result : StiffnessResult
+    steps : pandas.DataFrame
+        Every step of every loop (:func:`~.steps.step_stiffness`).
+    summary : pandas.DataFrame
+        Per phase and step over the loops (:func:`~.steps.summarise_steps`).
+    result : StiffnessResult or None
+        Per-loop smooth curves, when a fit method was asked for.
     figures : dict of str to matplotlib.figure.Figure
-        ``torque_angle``, ``stiffness`` and (with Ks) ``meshing_pairs``.
+        ``step_stiffness``; with a fit also ``torque_angle``, ``stiffness`` and
+        (with Ks) ``meshing_pairs``.
     markdown : str
-        A short summary paragraph.
+        A short summary.
     """
 
-    result: StiffnessResult
+    steps: pd.DataFrame = field(repr=False)
+    summary: pd.DataFrame = field(repr=False)
+    result: StiffnessResult | None
     figures: dict = field(repr=False)
     markdown: str
 
 
-def _summary(result: StiffnessResult) -> str:
-    lines = ["## Stiffness curve", ""]
-    for c in result.curves:
-        lines.append(f"- {c.kind}: K from {c.stiffness_nm_per_rad.min():.4g} to "
-                     f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad over "
-                     f"{c.torque_nm[0]:.3g} to {c.torque_nm[-1]:.3g} N·m")
-    if result.backlash is not None:
-        b = result.backlash
-        lines.append(f"- dead zone: {b.width_deg:.4g}° ± {b.width_std_deg:.2g}° wide, "
-                     f"centred at {b.centre_deg:.4g}°")
-    if result.meshing is not None:
-        lines.append(f"- effective meshing pairs: max {result.meshing.max_pairs:.1f} at "
-                     f"{result.meshing.torque_at_max_nm:.3g} N·m")
-    lines.extend(f"- note: {n}" for n in result.notes)
+def _summary_text(steps: pd.DataFrame, summary: pd.DataFrame, result) -> str:
+    loops = steps[["orientation_deg", "cycle"]].drop_duplicates()
+    lines = ["## Stiffness per load step", "",
+             f"- {len(steps)} steps in {len(loops)} loop(s); each loop on its own (own zero offset)"]
+    for phase, part in summary.groupby("phase", sort=False):
+        ok = part[part["n_loops"] > 0]
+        if len(ok):
+            lines.append(f"- {phase.replace('_', ' ')}: Δτ/Δθ from {ok['stiffness_nm_per_rad'].min():.4g} to "
+                         f"{ok['stiffness_nm_per_rad'].max():.4g} N·m/rad")
+    flagged = int((steps["flag"] != "").sum())
+    if flagged:
+        lines.append(f"- {flagged} step(s) flagged and left out of the means (reason per step in the table)")
+    if result is not None:
+        for c in result.curves:
+            lines.append(f"- smooth fit, {c.kind}: K from {c.stiffness_nm_per_rad.min():.4g} to "
+                         f"{c.stiffness_nm_per_rad.max():.4g} N·m/rad, mean of {c.n_cycles} loop(s)")
+        lines.extend(f"- note: {n}" for n in result.notes)
     return "\n".join(lines) + "\n"
 
 
 def stiffness_section(measurements, *, rig: RigConstants | None = None, order: int = 3,
-                      method: str = "polynomial") -> StiffnessSection:
+                      method: str | None = None) -> StiffnessSection:
     """Stiffness section for a session report from its measurements table.
 
     Parameters
@@ -63,10 +79,11 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
     measurements : pandas.DataFrame or str or Path
         The session's ``measurements.csv`` (camera rig).
     rig : RigConstants, optional
-        Ks (or a reference point) and z for the meshing figures.
+        Ks (or a reference point) and z for the meshing figures of a smooth fit.
     order : int
-        Polynomial order of the loading-branch fits (a session has few steps).
-    method : {"polynomial", "spline"}
+        Polynomial order of a smooth fit (``method="polynomial"``).
+    method : {None, "polynomial", "spline"}
+        None (default): step stiffness only. Otherwise also a smooth fit per loop.
 
     Returns
     -------
@@ -74,35 +91,38 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
 
     Raises
     ------
-    AnalysisError
-        A loading phase has fewer usable steps (``status == "ok"``, non-zero
-        torque) than the fit needs (order + 3), naming the phase and the count.
     RecordError
         The table is invalid.
+    AnalysisError
+        No pair of consecutive measured steps in any phase; or, with a fit, no
+        loop's loading branch could be fitted (each loop's reason given).
 
     Examples
     --------
     >>> from vision_torsion.stiffness.synthetic import synthetic_measurements
     >>> section = stiffness_section(synthetic_measurements(steps=10))
-    >>> sorted(section.figures)
-    ['stiffness', 'torque_angle']
-    >>> stiffness_section(synthetic_measurements(steps=4))
-    Traceback (most recent call last):
-    ...
-    vision_torsion.errors.AnalysisError: the session has 4 usable positive_loading steps (status ok, torque not zero); the stiffness section needs at least 6 per loading phase (polynomial order 3 + 3)
+    >>> sorted(section.figures), len(section.steps)
+    (['step_stiffness'], 40)
     """
-    record = as_record(measurements)
-    needed = order + 3
-    for kind in LOADING_KINDS:
-        usable = int(np.sum((record.phase == kind) & (record.torque_nm != 0)))
-        if usable < needed:
-            raise AnalysisError(
-                f"the session has {usable} usable {kind} steps (status ok, torque not zero); "
-                f"the stiffness section needs at least {needed} per loading phase "
-                f"(polynomial order {order} + 3)"
-            )
-    result = analyze_stiffness_curve(record, rig=rig, order=order, method=method)
-    figures = {"torque_angle": plot_torque_angle(result), "stiffness": plot_stiffness(result)}
-    if result.meshing is not None:
-        figures["meshing_pairs"] = plot_meshing(result)
-    return StiffnessSection(result=result, figures=figures, markdown=_summary(result))
+    frame = measurements
+    if not isinstance(frame, pd.DataFrame):
+        try:
+            frame = pd.read_csv(frame, keep_default_na=False, na_values=[""])
+        except (OSError, ValueError) as exc:
+            raise RecordError(f"{measurements} cannot be read as CSV: {exc}") from None
+    steps = step_stiffness(frame)
+    if steps.empty:
+        raise AnalysisError("no two consecutive load steps of one phase were measured: "
+                            "no step stiffness can be computed")
+    summary = summarise_steps(steps)
+    figures = {"step_stiffness": plot_step_stiffness(steps, summary)}
+    result = None
+    if method is not None:
+        result = analyze_stiffness_curve(as_record(frame), rig=rig, order=order, method=method)
+        figures["torque_angle"] = plot_torque_angle(result)
+        if result.curves:
+            figures["stiffness"] = plot_stiffness(result)
+        if result.meshing is not None:
+            figures["meshing_pairs"] = plot_meshing(result)
+    return StiffnessSection(steps=steps, summary=summary, result=result, figures=figures,
+                            markdown=_summary_text(steps, summary, result))
