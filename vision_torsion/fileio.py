@@ -296,8 +296,10 @@ def _finite(obj):
 
 
 def atomic_write_text(path, text: str, *, durable: bool = True) -> Path:
-    """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`)."""
-    return atomic_write_bytes(path, text.encode("utf-8"), durable=durable)
+    """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`); a
+    character UTF-8 cannot hold (a non-UTF-8 file name's byte) is written as an
+    escape, never a crash."""
+    return atomic_write_bytes(path, text.encode("utf-8", "backslashreplace"), durable=durable)
 
 
 def write_json(path, obj) -> Path:

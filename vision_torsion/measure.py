@@ -68,6 +68,16 @@ def list_images(folder) -> list[Path]:
     return sorted(files, key=lambda f: _natural_key(f.name))
 
 
+def printable_name(name: str) -> str:
+    """A file name as text that can be written anywhere: bytes that are not UTF-8
+    (a file name from another system's encoding) shown as ``\\xNN`` escapes."""
+    try:
+        name.encode("utf-8")
+        return name
+    except UnicodeEncodeError:
+        return name.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def pair_columns(pair, swapped: bool) -> dict:
     """marker1_*/marker2_* columns of a pair, marker 1 being the reference's first marker."""
     if pair is None:
@@ -104,9 +114,13 @@ def measure_sequence(reference_pair, images, *, settings, correction=None, progr
             pairs.append(measure_pair(path, settings=settings, name=name))
             messages.append("")
         except VisionTorsionError as exc:
-            logger.info("%s", exc)
+            logger.debug("%s", exc)
             pairs.append(None)
             messages.append(str(exc))
+        except Exception as exc:  # noqa: BLE001 - one odd file must not stop the batch
+            logger.debug("unexpected error measuring %s", name, exc_info=exc)
+            pairs.append(None)
+            messages.append(f"{name}: internal error: {type(exc).__name__}: {exc}")
     return pairs, sequence_angles(reference_pair, pairs, correction=correction), messages
 
 
@@ -164,7 +178,7 @@ def measure_folder(
     )
     rows = []
     for f, pair, ang, msg in zip(files, pairs, angles, messages):
-        row = {"image": f.name, "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}
+        row = {"image": printable_name(f.name), "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}
         if ang is not None:
             row.update(angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg, status="ok")
             row.update(pair_columns(pair, ang.swapped))

@@ -149,6 +149,9 @@ def main(argv=None) -> int:
     line naming the file and the reason (status 2); anything else is an internal
     error, one line and status 3 (the traceback with ``--debug``).
     """
+    for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 must not crash a print
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(errors="backslashreplace")
     parser = build_parser()
     args = parser.parse_args(argv)
     _configure_logging(args)
