@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import json
 
-from vision_torsion.session.cache import CacheLog, count_entries, merge_cache, read_cache, read_logs
+from vision_torsion.session.cache import (CacheLog, cache_line, count_entries, merge_cache,
+                                         read_cache, read_logs)
 
 KEY_A, KEY_B, KEY_C = "a" * 64, "b" * 64, "c" * 64
 
@@ -26,17 +27,30 @@ def test_log_lines_are_read_back_and_a_cut_line_is_ignored(tmp_path):
     assert entries == {KEY_A: {"status": "ok", "value": 1}, KEY_B: {"status": "failed", "value": 2}}
 
 
-def test_damaged_lines_and_unfinished_entries_are_ignored(tmp_path):
+def test_damaged_lines_and_unfinished_entries_are_ignored(tmp_path, caplog):
     folder = tmp_path / "cache"
     folder.mkdir()
+    changed = cache_line(KEY_B, _entry(6)).replace("6", "7")  # one digit changed
     (folder / "run-x-1.jsonl").write_text(
-        f"{KEY_A} {{not json}}\n"            # damaged
-        f"{KEY_B[:10]} {_entry(2)}\n"        # bad key
-        f"{KEY_C} {_entry(3, 'running')}\n"  # not a result
-        f"{KEY_C}{_entry(4)}\n"              # no separator
-        f"{KEY_A} {_entry(5)}\n")
+        cache_line(KEY_A, "{not json}")            # damaged
+        + cache_line(KEY_B[:10], _entry(2))        # bad key
+        + cache_line(KEY_C, _entry(3, "running"))  # not a result
+        + f"{KEY_C}{_entry(4)}\n"                 # no separator
+        + f"{KEY_C} {_entry(4)}\n"                # no checksum (an older layout)
+        + changed                                  # checksum mismatch
+        + cache_line(KEY_A, _entry(5)))
     assert read_cache(folder)[0] == {KEY_A: {"status": "ok", "value": 5}}
+    assert "cache line(s): checksum mismatch" in caplog.text
     assert read_cache(tmp_path / "missing") == ({}, [])
+
+
+def test_entries_failing_the_schema_check_are_ignored(tmp_path, caplog):
+    folder = tmp_path / "cache"
+    folder.mkdir()
+    (folder / "merged.jsonl").write_text(cache_line(KEY_A, _entry(1)) + cache_line(KEY_B, _entry("x")))
+    entries, _ = read_cache(folder, check=lambda e: isinstance(e["value"], int))
+    assert entries == {KEY_A: {"status": "ok", "value": 1}}
+    assert "1 cache line(s): wrong shape ignored; those images are measured again" in caplog.text
 
 
 def test_merge_keeps_the_latest_entry_per_key_and_leaves_other_runs_logs(tmp_path):

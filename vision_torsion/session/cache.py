@@ -1,12 +1,19 @@
 """The results cache of ``process``: append-only logs of one line per measured image.
 
-Layout, in ``OUT_DIR/.cache/``: files ``*.jsonl``, each line ``KEY ENTRY`` where KEY
-is the 64-hex-digit cache key (SHA-256 of the image bytes' XXH3-128 hash, the measurement
-settings and the measuring code) and ENTRY the JSON of the image's result or of why it
-failed. A worker appends each result to its own log with one ``write`` as soon as it
-is measured; a line cut short (a killed run, a power cut) fails to parse and is
+Layout, in ``OUT_DIR/.cache/``: files ``*.jsonl``, each line ``KEY SUM ENTRY`` where
+KEY is the 64-hex-digit cache key (SHA-256 of the image bytes' XXH3-128 hash, the
+measurement settings and the measuring code), SUM the 16-hex-digit XXH3-64 checksum
+of ``KEY ENTRY``, and ENTRY the JSON of the image's result or of why it failed. A
+worker appends each result to its own log with one ``write`` as soon as it is
+measured; a line cut short (a killed run, a power cut) fails to parse and is
 ignored, so that image is measured again. At the end of a run the logs are merged
 into one file, written atomically, and the merged logs are removed.
+
+The cache verifies itself: a line whose checksum does not match (a changed digit,
+a bad disk block, an edit by hand), or whose entry fails the caller's schema check
+(``check``: ``process`` rebuilds the marker pair from it), is never used: it is
+ignored with a logged note and that image is measured again. A line of an older
+layout (no checksum) is ignored the same way.
 
 One small file per image cost each image half a millisecond of file creation and
 renaming, about a twentieth of decoding it.
@@ -15,49 +22,92 @@ renaming, about a twentieth of decoding it.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import secrets
 from pathlib import Path
 
+import xxhash
+
 from ..fileio import atomic_write_text
 
-__all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "CACHE_DIRNAME"]
+logger = logging.getLogger(__name__)
+
+__all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "cache_line", "CACHE_DIRNAME"]
 
 #: Name of the cache folder inside the output folder.
 CACHE_DIRNAME = ".cache"
 _KEY_CHARS = 64
+_SUM_CHARS = 16
 _MERGED = "merged.jsonl"
 _DONE = ("ok", "failed")
 
 
-def _entries(path: Path):
-    """(key, entry dict) of every complete, valid line of one log."""
+def _checksum(key: str, entry_json: str) -> str:
+    return xxhash.xxh3_64_hexdigest(f"{key} {entry_json}".encode("utf-8"))
+
+
+def cache_line(key: str, entry_json: str) -> str:
+    """One cache line, ``KEY SUM ENTRY\\n`` (see the module docstring)."""
+    return f"{key} {_checksum(key, entry_json)} {entry_json}\n"
+
+
+def _entries(path: Path, check=None, rejected=None):
+    """(key, entry dict) of every complete line of one log that passes its checksum
+    and `check`; the others are counted in `rejected` (a dict reason -> count)."""
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return
-    for line in text.split("\n")[:-1]:  # the part after the last newline is cut short
-        key, entry = line[:_KEY_CHARS], line[_KEY_CHARS + 1:]
-        if len(key) != _KEY_CHARS or line[_KEY_CHARS:_KEY_CHARS + 1] != " ":
-            continue
-        try:
-            value = json.loads(entry)
-        except ValueError:
-            continue
-        if isinstance(value, dict) and value.get("status") in _DONE:
-            yield key, value
+    lines = text.split("\n")[:-1]  # the part after the last newline is cut short
+    for line in lines:
+        key = line[:_KEY_CHARS]
+        total = line[_KEY_CHARS + 1:_KEY_CHARS + 1 + _SUM_CHARS]
+        entry = line[_KEY_CHARS + _SUM_CHARS + 2:]
+        if (len(key) != _KEY_CHARS or line[_KEY_CHARS:_KEY_CHARS + 1] != " "
+                or line[_KEY_CHARS + _SUM_CHARS + 1:_KEY_CHARS + _SUM_CHARS + 2] != " "):
+            why = "unreadable line"
+        elif _checksum(key, entry) != total:
+            why = "checksum mismatch"
+        else:
+            try:
+                value = json.loads(entry)
+            except ValueError:
+                value = None
+            if not (isinstance(value, dict) and value.get("status") in _DONE):
+                why = "not a result"
+            elif check is not None and not check(value):
+                why = "wrong shape"
+            else:
+                yield key, value
+                continue
+        if rejected is not None:
+            rejected[why] = rejected.get(why, 0) + 1
 
 
-def read_logs(files) -> dict[str, dict]:
+def read_logs(files, *, check=None) -> dict[str, dict]:
     """Every valid entry of the logs `files`, by cache key (a later line, or a later
-    file's, wins over an earlier one with the same key)."""
+    file's, wins over an earlier one with the same key).
+
+    Parameters
+    ----------
+    files : iterable of path
+        Log files.
+    check : callable, optional
+        ``check(entry) -> bool``: the entry has the shape its user needs. Entries
+        failing it, or their checksum, are ignored with one logged note per log.
+    """
     entries: dict[str, dict] = {}
     for path in files:
-        entries.update(_entries(Path(path)))
+        rejected: dict[str, int] = {}
+        entries.update(_entries(Path(path), check, rejected))
+        if rejected:
+            logger.warning("%s: %s ignored; those images are measured again", path,
+                           ", ".join(f"{n} cache line(s): {why}" for why, n in sorted(rejected.items())))
     return entries
 
 
-def read_cache(folder) -> tuple[dict[str, dict], list[Path]]:
+def read_cache(folder, *, check=None) -> tuple[dict[str, dict], list[Path]]:
     """Every valid entry of the cache in `folder`, and the log files read.
 
     Returns
@@ -69,7 +119,7 @@ def read_cache(folder) -> tuple[dict[str, dict], list[Path]]:
     """
     folder = Path(folder)
     files = sorted(folder.glob("*.jsonl")) if folder.is_dir() else []
-    return read_logs(files), files
+    return read_logs(files, check=check), files
 
 
 def count_entries(folder) -> int:
@@ -82,7 +132,7 @@ def merge_cache(folder, entries: dict[str, dict], files) -> Path:
     log of the cache `folder`, sorted by key and atomically, then remove `files`.
     Logs not listed (another run's) are left alone."""
     folder = Path(folder)
-    text = "".join(f"{key} {json.dumps(entry, sort_keys=True)}\n" for key, entry in sorted(entries.items()))
+    text = "".join(cache_line(key, json.dumps(entry, sort_keys=True)) for key, entry in sorted(entries.items()))
     merged = atomic_write_text(folder / _MERGED, text, durable=False)
     for path in files:
         if Path(path) != merged:
@@ -124,7 +174,7 @@ class CacheLog:
             self.folder.mkdir(parents=True, exist_ok=True)
             path = self.folder / f"run-{self.run}-{os.getpid()}.jsonl"
             self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
-        line = f"{key} {entry_json}\n".encode("utf-8")
+        line = cache_line(key, entry_json).encode("utf-8")
         if os.write(self._fd, line) != len(line):  # a full disk: a cut line is ignored on reading
             raise OSError(f"{self.folder}: short write to the cache log")
 

@@ -63,7 +63,7 @@ MEASUREMENTS_NAME = "measurements.csv"
 OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
                   "angle_deg", "angle_std_deg", "status", "message")
 #: Bump when the cache entry layout changes; part of every cache key.
-_CACHE_FORMAT = 4
+_CACHE_FORMAT = 5
 #: Up to this many jobs run as threads of the calling process (jobs threads read,
 #: decode and find candidates, the calling thread measures); more run as worker
 #: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
@@ -148,6 +148,22 @@ def _settings_key(settings: MeasureSettings) -> str:
         d["correction"] = digest(Path(d["correction"]).read_bytes())
     return json.dumps({"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT},
                       sort_keys=True)
+
+
+def _valid_entry(entry: dict) -> bool:
+    """The cache's schema check: a failure carries its message, a result a marker
+    pair that rebuilds (:meth:`~vision_torsion.pair.PairMeasurement.from_dict`)."""
+    from ..pair import PairMeasurement
+
+    if entry.get("status") == "failed":
+        return isinstance(entry.get("message"), str)
+    try:
+        pair = PairMeasurement.from_dict(entry["pair"])
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return False
+    markers = [m for m in (getattr(pair, "first", None), getattr(pair, "second", None)) if m is not None]
+    return all(isinstance(getattr(m, f), (int, float)) for m in markers
+               for f in ("x_px", "y_px", "radius_px"))
 
 
 def _default_jobs() -> int:
@@ -365,7 +381,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
     key = _settings_key(settings)
     cache_dir = out / CACHE_DIRNAME
-    cached, logs = read_cache(cache_dir)
+    cached, logs = read_cache(cache_dir, check=_valid_entry)
     run = CacheLog.new_run()
     pending = set(session.manifest.pending)
     present = [row for row in session.manifest.rows if row.line not in pending]
@@ -385,7 +401,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     new_logs = CacheLog(cache_dir, run).files()
     if new_logs or len(logs) > 1:
         # one log for the next run; the old logs' entries were read at the start
-        merge_cache(cache_dir, {**cached, **read_logs(new_logs)}, logs + new_logs)
+        merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=_valid_entry)}, logs + new_logs)
     failed = table[table["status"] == "failed"]
     waiting = table[table["status"] == "pending"]
     failures = tuple(zip(failed["image"], failed["message"]))
