@@ -311,5 +311,9 @@ def write_json(path, obj) -> Path:
 def write_csv(path, frame) -> Path:
     """Write a pandas DataFrame as CSV (no index) atomically; floats by
     :func:`format_float` (shortest text, 15 significant digits), NaN empty."""
-    return atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n",
-                                                float_format=format_float))
+    floats = [c for c in frame.columns if frame[c].dtype.kind == "f"]
+    if floats:
+        frame = frame.copy()
+        for c in floats:
+            frame[c] = [float(f"{x:.15g}") for x in frame[c].to_numpy()]
+    return atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n"))

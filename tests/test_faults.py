@@ -1,0 +1,405 @@
+"""Faults and bad input, as a new user and a busy lab meet them (issue 16).
+
+Every case runs the command line in this process (``cli.main``) on a corpus made
+here at run time (no binary fixtures) and checks the contract:
+
+- no Python traceback reaches the user, and the exit status says what happened
+  (1 an item failed, 2 unusable input or output, 3 internal error);
+- the message names the file, row or field and the reason;
+- nothing already measured is lost (a failed write leaves the cache);
+- inputs are unchanged (hashed before and after).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import struct
+import subprocess
+import zlib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+
+from test_session_support import draw_target, make_session, tree_digest
+from vision_torsion import fileio
+from vision_torsion.cli import main
+from vision_torsion.errors import ImageReadError, OutputError
+from vision_torsion.images import MAX_IMAGE_PIXELS, decode_image, load_image
+
+
+# -- helpers ------------------------------------------------------------------------
+
+
+def run(capsys, *argv):
+    """Run the command line; return (status, stdout, stderr), checking that no
+    traceback was printed."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err, err
+    return code, out, err
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def png_bytes(width: int, height: int, *, bit_depth=8, rows: bytes | None = None, extra=()) -> bytes:
+    """A grey PNG written by hand (so its header can claim anything)."""
+    ihdr = struct.pack(">IIBBBBB", width, height, bit_depth, 0, 0, 0, 0)
+    if rows is None:
+        rows = b"".join(b"\0" + b"\x80" * (width * bit_depth // 8) for _ in range(min(height, 4)))
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + b"".join(extra)
+            + _chunk(b"IDAT", zlib.compress(rows)) + _chunk(b"IEND", b""))
+
+
+@pytest.fixture
+def folder(tmp_path):
+    """A measure folder: a reference and four rotated targets (200x150 px PNGs)."""
+    d = tmp_path / "images"
+    d.mkdir()
+    for i, angle in enumerate((0.0, 1.0, 2.0, 3.0, 4.0)):
+        name = "reference.png" if i == 0 else f"img_{i:03d}.png"
+        cv2.imwrite(str(d / name), draw_target(angle))
+    return d
+
+
+def measure(capsys, folder, *extra):
+    return run(capsys, "measure", folder, "--reference", folder / "reference.png",
+               "-o", folder.parent / "out", *extra)
+
+
+def angles(folder):
+    return pd.read_csv(folder.parent / "out" / "angles.csv", keep_default_na=False).set_index("image")
+
+
+def jpeg_bytes(angle=0.0, quality=95) -> bytes:
+    ok, enc = cv2.imencode(".jpg", draw_target(angle), [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return enc.tobytes()
+
+
+# -- images: one odd file never stops a batch --------------------------------------------
+
+
+@pytest.mark.parametrize("name, data, reason", [
+    ("img_005.png", lambda: png_bytes(1, 1), r"image too small \(1x1 px; at least 8x8 px needed\)"),
+    ("img_006.png", lambda: png_bytes(50000, 50000),
+     r"image larger than the limit \(50000x50000 px = 2500 Mpx; at most 268 Mpx\)"),
+    ("img_007.png", lambda: b"", r"empty file \(0 bytes\)"),
+    ("img_008.png", lambda: b"\x89PNG\r\n\x1a\n" + b"\0" * 40, r"truncated PNG"),
+])
+def test_one_odd_image_is_that_image_s_failure(capsys, folder, name, data, reason):
+    (folder / name).write_bytes(data())
+    before = tree_digest(folder)
+    code, out, err = measure(capsys, folder)
+    assert code == 1
+    table = angles(folder)
+    assert table.loc[name, "status"] == "failed"
+    assert pd.Series(table.loc[name, "message"]).str.contains(reason).all()
+    assert (table.drop(index=name)["status"] == "ok").all()  # the rest measured
+    assert name in err and "failed" in err
+    assert tree_digest(folder) == before
+
+
+def test_a_huge_header_is_refused_before_decoding():
+    with pytest.raises(ImageReadError, match=r"x\.png: image larger than the limit"):
+        decode_image(png_bytes(40000, 40000), name="x.png")
+    assert MAX_IMAGE_PIXELS == 1 << 28
+
+
+def test_a_non_utf8_file_name_is_measured_and_written_escaped(capsys, folder):
+    os.rename(folder / "img_002.png", os.path.join(os.fsencode(folder), b"caf\xe9.png"))
+    code, out, err = measure(capsys, folder)
+    assert code == 0
+    table = angles(folder)
+    assert table.loc["caf\\xe9.png", "status"] == "ok"
+
+
+# -- corrupt JPEGs are never measured as good ----------------------------------------------
+
+
+@pytest.mark.parametrize("where, length", [(0.5, 20), (0.35, 1), (0.6, 4), (0.8, 64)])
+def test_a_partly_corrupted_jpeg_fails_with_the_decoder_s_words(capsys, tmp_path, where, length):
+    d = tmp_path / "jpegs"
+    d.mkdir()
+    for i, angle in enumerate((0.0, 1.0, 2.0)):
+        (d / f"img_{i}.jpg").write_bytes(jpeg_bytes(angle))
+    raw = bytearray(jpeg_bytes(3.0))
+    start = int(len(raw) * where)
+    for k in range(start, start + length):
+        raw[k] ^= 0x5A
+    (d / "img_3.jpg").write_bytes(bytes(raw))
+    code, out, err = run(capsys, "measure", d, "--reference", d / "img_0.jpg", "-o", tmp_path / "out")
+    table = pd.read_csv(tmp_path / "out" / "angles.csv", keep_default_na=False).set_index("image")
+    row = table.loc["img_3.jpg"]
+    # either the decoder noticed (failed, with its words), or the damage left the
+    # measured angle within 5 sigma of the truth: never a wrong angle with status ok
+    if row["status"] == "failed":  # by the decoder, with its words, or by the marker checks
+        assert code == 1
+        assert ("img_3.jpg: corrupt JPEG data (the decoder said: " in row["message"]
+                or "img_3.jpg: found " in row["message"]), row["message"]
+    else:
+        assert abs(float(row["angle_deg"]) - 3.0) < 5 * float(row["angle_std_deg"]) + 0.01
+
+
+def test_the_corrupt_jpeg_of_the_issue_is_detected():
+    rng = np.random.default_rng(1)
+    image = draw_target(3.0, width=1400, height=1000, centre=(700.4, 500.6), arm_px=300, radius_px=35)
+    noisy = np.clip(image + rng.normal(0, 2, image.shape), 0, 255).astype(np.uint8)
+    raw = bytearray(cv2.imencode(".jpg", noisy, [cv2.IMWRITE_JPEG_QUALITY, 90])[1].tobytes())
+    for k in range(len(raw) // 2, len(raw) // 2 + 20):
+        raw[k] ^= 0x5A
+    with pytest.raises(ImageReadError, match=r"a\.jpg: corrupt JPEG data \(the decoder said: "
+                                             r"Corrupt JPEG data: "):
+        decode_image(bytes(raw), name="a.jpg")
+
+
+# -- formats users have ----------------------------------------------------------------------
+
+
+def test_bytes_after_the_end_are_accepted_with_a_note(tmp_path, caplog):
+    png = cv2.imencode(".png", draw_target(1.0))[1].tobytes()
+    jpg = jpeg_bytes(1.0)
+    a = decode_image(png + b"\0" * 100, name="a.png")
+    b = decode_image(jpg + b"camera trailer" * 20, name="b.jpg")
+    assert np.array_equal(a.data, decode_image(png, name="x").data)
+    assert np.array_equal(b.data, decode_image(jpg, name="y").data)
+    assert "a.png: 100 bytes after the end of the PNG (its IEND chunk) ignored" in caplog.text
+    assert "b.jpg: 280 bytes after the end of the JPEG (its end-of-image marker) ignored" in caplog.text
+
+
+def test_a_truly_truncated_png_is_still_called_truncated():
+    png = cv2.imencode(".png", draw_target(1.0))[1].tobytes()
+    with pytest.raises(ImageReadError, match=r"t\.png: truncated PNG \(no IEND chunk at the end\)"):
+        decode_image(png[:-30], name="t.png")
+
+
+def test_an_msb_aligned_12_bit_png_is_accepted(tmp_path):
+    rng = np.random.default_rng(3)
+    twelve = rng.integers(0, 4096, size=(20, 30)).astype(np.uint16)
+    twelve[0, 0] = 4095
+    shifted = (twelve << 4).astype(">u2")  # MSB-aligned, big-endian as PNG stores it
+    rows = b"".join(b"\0" + shifted[y].tobytes() for y in range(20))
+    raw = png_bytes(30, 20, bit_depth=16, rows=rows, extra=[_chunk(b"sBIT", b"\x0c")])
+    path = tmp_path / "msb.png"
+    path.write_bytes(raw)
+    img = load_image(path)
+    assert img.bit_depth == 12
+    assert np.array_equal(img.data, twelve.astype(np.float32))
+
+
+def test_an_lsb_aligned_12_bit_png_with_sbit_stays_as_it_is(tmp_path):
+    twelve = np.arange(600, dtype=np.uint16).reshape(20, 30) * 6
+    rows = b"".join(b"\0" + twelve.astype(">u2")[y].tobytes() for y in range(20))
+    img = decode_image(png_bytes(30, 20, bit_depth=16, rows=rows, extra=[_chunk(b"sBIT", b"\x0c")]),
+                       name="lsb.png")
+    assert img.bit_depth == 12 and np.array_equal(img.data, twelve.astype(np.float32))
+
+
+# -- output errors are user errors ----------------------------------------------------------------
+
+
+def test_a_file_where_the_output_folder_should_be(capsys, folder, tmp_path):
+    (tmp_path / "out").write_text("not a folder")
+    before = tree_digest(folder)
+    code, out, err = measure(capsys, folder)
+    assert code == 2
+    assert err.strip() == f"error: {tmp_path / 'out'}: cannot write results there: it is a file, not a folder"
+    assert tree_digest(folder) == before
+
+
+def test_a_folder_where_the_result_file_should_be(capsys, folder, tmp_path):
+    (tmp_path / "out" / "angles.csv").mkdir(parents=True)
+    code, out, err = measure(capsys, folder)
+    assert code == 2
+    assert f"{tmp_path / 'out' / 'angles.csv'}: cannot write (a folder is in the way" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def _mount_tmpfs(path: Path, options: str) -> bool:
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
+                              capture_output=True, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return done.returncode == 0
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A mounted 256 kB tmpfs (needs root; skipped where mounting is not allowed)."""
+    mounted = []
+
+    def make(name, options):
+        p = tmp_path / name
+        if not _mount_tmpfs(p, options):
+            pytest.skip("cannot mount a tmpfs here (needs root)")
+        mounted.append(p)
+        return p
+
+    yield make
+    for p in mounted:
+        subprocess.run(["umount", "-l", str(p)], capture_output=True, timeout=20)
+
+
+def test_a_read_only_output_folder_is_refused_before_measuring(capsys, folder, small_disk):
+    ro = small_disk("ro", "ro,size=256k")
+    code, out, err = measure(capsys, folder, "-o", ro / "results")
+    assert code == 2
+    assert err.strip() == (f"error: {ro / 'results'}: cannot create the output folder "
+                           "(read-only file system)")
+
+
+def test_a_full_disk_is_refused_before_measuring(capsys, folder, small_disk):
+    full = small_disk("full", "size=256k")
+    with open(full / "filler", "wb") as f:  # fill it
+        try:
+            f.write(b"\0" * (1 << 20))
+        except OSError:
+            pass
+    code, out, err = measure(capsys, folder, "-o", full / "results")
+    assert code == 2
+    assert f"{full / 'results'}: " in err and "no space left on the device" in err
+
+
+def test_a_failed_write_of_process_keeps_the_measured_results(capsys, tmp_path):
+    session = tmp_path / "session"
+    plan, _ = make_session(session, orientations=(0,))
+    before = tree_digest(session)
+    out = tmp_path / "results"
+    (out / "measurements.csv").mkdir(parents=True)  # the table cannot be written
+    code, _, err = run(capsys, "process", session, "-o", out, "--jobs", "1")
+    assert code == 2 and "measurements.csv: cannot write" in err
+    assert tree_digest(session) == before
+    (out / "measurements.csv").rmdir()
+    code, stdout, _ = run(capsys, "process", session, "-o", out, "--jobs", "1")
+    assert code == 0
+    assert f"0 measured, {len(plan.rows)} from the cache" in stdout  # nothing was lost
+
+
+def test_results_follow_the_umask(capsys, folder, tmp_path):
+    old = os.umask(0o022)
+    try:
+        fileio._file_mode.cache_clear()
+        code, _, _ = measure(capsys, folder)
+        mode = stat.S_IMODE((tmp_path / "out" / "angles.csv").stat().st_mode)
+    finally:
+        os.umask(old)
+        fileio._file_mode.cache_clear()
+    assert code == 0 and mode == 0o644
+
+
+def test_a_set_of_files_is_replaced_whole_or_not_at_all(tmp_path):
+    out = tmp_path / "set"
+    with fileio.output_set():
+        fileio.atomic_write_text(out / "a.txt", "old a")
+        fileio.atomic_write_text(out / "b.txt", "old b")
+    (out / "c.txt").mkdir()  # one file of the new set cannot be written
+    with pytest.raises(OutputError, match=r"c\.txt: cannot write \(a folder is in the way where the "
+                                          r"file should be\); none of the 3 result files"):
+        with fileio.output_set():
+            fileio.atomic_write_text(out / "a.txt", "new a")
+            fileio.atomic_write_text(out / "b.txt", "new b")
+            fileio.atomic_write_text(out / "c.txt", "new c")
+    assert (out / "a.txt").read_text() == "old a" and (out / "b.txt").read_text() == "old b"
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.txt", "c.txt"]  # no temporaries
+
+
+def test_stiffness_with_one_plot_locked_replaces_nothing(capsys, tmp_path):
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 20, 2001)
+    torque = 10 * np.sin(2 * np.pi * t / 10)
+    angle = torque / 3000 * 57.3 + rng.normal(0, 1e-4, t.size)
+    data = tmp_path / "run.csv"
+    pd.DataFrame({"time_s": t, "torque_nm": torque, "input_angle_deg": angle * 50}).to_csv(data, index=False)
+    rig = tmp_path / "rig.toml"
+    rig.write_text("[rig]\ntransmission_ratio = 50\n")
+    out = tmp_path / "stiff"
+    code, _, err = run(capsys, "stiffness", data, "--rig", rig, "-o", out)
+    if code != 0:
+        pytest.skip(f"this record does not analyse: {err}")
+    before = tree_digest(out)
+    (out / "stiffness_torque.png").unlink()
+    (out / "stiffness_torque.png").mkdir()  # "locked"
+    code, _, err = run(capsys, "stiffness", data, "--rig", rig, "-o", out, "--order", "5")
+    assert code == 2
+    assert "stiffness_torque.png: cannot write" in err and "none of the" in err
+    after = tree_digest(out)
+    del before["stiffness_torque.png"], after["stiffness_torque.png"]
+    assert after == before  # the other files are the old ones, untouched
+
+
+# -- check-accuracy never writes into its input folder ----------------------------------------
+
+
+def test_check_accuracy_refuses_its_input_folder_as_output(capsys, folder):
+    (folder / "reference.csv").write_text(
+        "image,reference_angle_deg\n" + "".join(f"{n},{a}\n" for n, a in
+        [("reference.png", 0), ("img_001.png", 1), ("img_002.png", 2), ("img_003.png", 3)]))
+    before = tree_digest(folder)
+    code, out, err = run(capsys, "check-accuracy", folder, "-o", folder)
+    assert code == 2
+    assert "the output folder cannot be the image folder itself" in err
+    assert tree_digest(folder) == before
+
+
+# -- the command line ------------------------------------------------------------------------
+
+
+def test_an_internal_error_is_one_line_and_status_3(capsys, folder, monkeypatch):
+    import vision_torsion.measure as measure_module
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("division by zero")
+
+    monkeypatch.setattr(measure_module, "measure_folder", broken)
+    code, out, err = measure(capsys, folder)
+    assert code == 3
+    assert err.strip().splitlines() == [
+        "internal error in measure (vision_torsion.tests.broken): ZeroDivisionError: division by zero; "
+        "please report it (run again with --debug for the traceback)"] or (
+        err.startswith("internal error in measure") and len(err.strip().splitlines()) == 1)
+    code = main(["measure", str(folder), "--reference", str(folder / "reference.png"), "--debug"])
+    assert code == 3 and "Traceback" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [["-q", "measure"], ["measure", "-q"]])
+def test_quiet_before_or_after_the_subcommand_silences_stdout(capsys, folder, argv):
+    code = main([*argv, str(folder), "--reference", str(folder / "reference.png"),
+                 "-o", str(folder.parent / "out")])
+    out, err = capsys.readouterr()
+    assert code == 0 and out == "" and err == ""
+
+
+def test_verbose_before_the_subcommand_shows_the_tool_s_own_debug(capsys, folder, caplog):
+    import logging
+
+    code = main(["-v", "measure", str(folder), "--reference", str(folder / "reference.png"),
+                 "-o", str(folder.parent / "out")])
+    assert code == 0
+    assert logging.getLogger("vision_torsion").getEffectiveLevel() == logging.DEBUG
+    assert logging.getLogger("matplotlib").getEffectiveLevel() >= logging.WARNING
+
+
+def test_synth_accuracy_refuses_a_non_empty_folder_without_force(capsys, tmp_path, scene_file):
+    out = tmp_path / "acc"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    code, _, err = run(capsys, "synth", "accuracy", out, "--scene", scene_file("small_target"),
+                       "--angles", "1")
+    assert code == 2 and "folder exists and is not empty; use --force" in err
+    code, _, _ = run(capsys, "synth", "accuracy", out, "--scene", scene_file("small_target"),
+                     "--angles", "1", "--force")
+    assert code == 0 and (out / "notes.txt").read_text() == "mine"
+
+
+def test_floats_are_written_short(tmp_path):
+    frame = pd.DataFrame({"x": [0.36 * 0.981, float("nan"), 1e-20], "n": [1, 2, 3]})
+    path = fileio.write_csv(tmp_path / "f.csv", frame)
+    assert path.read_text() == "x,n\n0.35316,1\n,2\n1e-20,3\n"
+    assert frame["x"][0] == 0.36 * 0.981  # the caller's frame is not changed
