@@ -13,6 +13,7 @@ here at run time (no binary fixtures) and checks the contract:
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import stat
 import struct
@@ -403,3 +404,117 @@ def test_floats_are_written_short(tmp_path):
     path = fileio.write_csv(tmp_path / "f.csv", frame)
     assert path.read_text() == "x,n\n0.35316,1\n,2\n1e-20,3\n"
     assert frame["x"][0] == 0.36 * 0.981  # the caller's frame is not changed
+
+
+# -- text inputs: separators, byte-order marks, encodings --------------------------------
+
+
+@pytest.fixture
+def small_session(tmp_path):
+    folder = tmp_path / "session"
+    make_session(folder, orientations=(0,))
+    return folder
+
+
+def _rewrite_manifest(folder, transform):
+    path = folder / "manifest.csv"
+    path.write_bytes(transform(path.read_text()))
+
+
+def _process(capsys, folder, tmp_path):
+    return run(capsys, "process", folder, "-o", tmp_path / "results", "--jobs", "1")
+
+
+@pytest.mark.parametrize("transform", [
+    lambda t: t.replace(",", ";").encode(),
+    lambda t: t.replace(",", ";").replace("0.02", "0,02").replace("0.04", "0,04").encode(),
+    lambda t: t.replace(",", "\t").encode(),
+    lambda t: b"\xef\xbb\xbf" + t.encode(),
+], ids=["semicolon", "semicolon-decimal-comma", "tab", "bom"])
+def test_manifests_as_spreadsheets_write_them_are_accepted(capsys, small_session, tmp_path, transform):
+    reference = _process(capsys, small_session, tmp_path / "a")
+    assert reference[0] == 0
+    expected = (tmp_path / "a" / "results" / "measurements.csv").read_text()
+    _rewrite_manifest(small_session, transform)
+    before = tree_digest(small_session)
+    code, _, err = _process(capsys, small_session, tmp_path / "b")
+    assert code == 0, err
+    got = (tmp_path / "b" / "results" / "measurements.csv").read_text()
+    assert got.splitlines()[1:] == expected.splitlines()[1:]  # same rows, same numbers
+    assert tree_digest(small_session) == before
+
+
+def test_a_manifest_in_another_encoding_names_the_line(capsys, small_session, tmp_path):
+    _rewrite_manifest(small_session, lambda t: (t.rstrip("\n") + ",\n").replace(
+        "mass_kg\n", "mass_kg,remark\n", 1).replace(",\n", ",ok\n").encode()[:-4]
+        + "Gewicht geprüft\n".encode("latin-1"))
+    code, _, err = _process(capsys, small_session, tmp_path)
+    assert code == 2
+    n = len((small_session / "manifest.csv").read_bytes().splitlines())
+    assert f"manifest.csv: line {n}: not UTF-8 text (byte 0xfc at column" in err
+    assert "save the manifest as UTF-8" in err
+
+
+def test_a_reference_table_with_a_bom_and_semicolons_is_read(tmp_path):
+    from vision_torsion.calibration.accuracy import read_reference_table
+
+    d = tmp_path / "check"
+    d.mkdir()
+    for i in range(3):
+        cv2.imwrite(str(d / f"i{i}.png"), draw_target(float(i)))
+    (d / "reference.csv").write_bytes(b"\xef\xbb\xbfimage;reference_angle_deg\ni0.png;0\ni1.png;1\ni2.png;2\n")
+    table = read_reference_table(d)
+    assert list(table["image"]) == ["i0.png", "i1.png", "i2.png"]
+
+
+# -- plausibility: unit slips --------------------------------------------------------------
+
+
+def _set_row(folder, line, column, value):
+    path = folder / "manifest.csv"
+    rows = path.read_text().splitlines()
+    header = rows[0].split(",")
+    fields = rows[line - 1].split(",")
+    fields[header.index(column)] = value
+    rows[line - 1] = ",".join(fields)
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.mark.parametrize("value, message", [
+    ("40", r"line 3: mass 40 kg on each pan is 2000 pieces, more than the 2 \(0.04 kg\) the protocol "
+           r"loads for max_torque_nm 0.03924 N·m: grams\? \(write kg\)"),
+    ("0.06", r"line 3: mass 0.06 kg on each pan is 3 pieces, more than the 2 \(0.04 kg\)"),
+    ("0.025", r"line 3: mass_kg 0.025 kg is not a whole number of 0.02 kg pieces \(1.25 pieces\)"),
+])
+def test_implausible_masses_are_errors_naming_the_line(capsys, small_session, tmp_path, value, message):
+    _set_row(small_session, 3, "mass_kg", value)
+    code, _, err = _process(capsys, small_session, tmp_path)
+    assert code == 2
+    assert re.search(message, err), err
+    assert not (tmp_path / "results" / "measurements.csv").exists()
+
+
+def test_a_measured_torque_in_n_mm_is_an_error(capsys, small_session, tmp_path):
+    path = small_session / "manifest.csv"
+    lines = path.read_text().splitlines()
+    lines[0] += ",torque_nm,torque_std_nm"
+    lines = [lines[0]] + [line + ",," for line in lines[1:]]
+    lines[2] = lines[2][:-2] + ",39.2,0.1"
+    path.write_text("\n".join(lines) + "\n")
+    code, _, err = _process(capsys, small_session, tmp_path)
+    assert code == 2 and re.search(r"line 3: torque_nm 39.2 N·m is 999 times the protocol's "
+                                   r"max_torque_nm 0.03924 N·m: N·mm\? \(write N·m\)", err), err
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("arm_radius_m", "50", r"rig.arm_radius_m = 50 m is outside 0.001..2 m: millimetres\?"),
+    ("gravity_m_per_s2", "981", r"rig.gravity_m_per_s2 = 981 m/s² is outside the Earth's 9.76..9.84 m/s²: cm/s²\?"),
+])
+def test_implausible_rig_numbers_are_errors_with_the_unit(capsys, small_session, tmp_path, key, value, message):
+    path = small_session / "session.toml"
+    text = path.read_text()
+    text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text) if re.search(rf"(?m)^{key} = ", text) \
+        else text.replace("[rig]\n", f"[rig]\n{key} = {value}\n")
+    path.write_text(text)
+    code, _, err = _process(capsys, small_session, tmp_path)
+    assert code == 2 and re.search(message, err), err

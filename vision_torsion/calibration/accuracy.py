@@ -44,6 +44,7 @@ Arguments given to :func:`check_accuracy` take precedence over the spec.
 from __future__ import annotations
 
 import csv
+import io
 import logging
 import math
 import tomllib
@@ -59,6 +60,7 @@ from ..fileio import atomic_write_bytes, check_output_dir, output_set, write_csv
 from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
+from ..textfiles import csv_delimiter, decode_utf8
 from .correction import load_correction
 
 __all__ = [
@@ -161,9 +163,10 @@ def read_reference_table(folder) -> pd.DataFrame:
     if not path.is_file():
         raise ReferenceTableError(f"{path}: no reference table (expected image,reference_angle_deg)")
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        text = decode_utf8(path.read_bytes(), name=path, error=ReferenceTableError, what="the table")
+        sep = csv_delimiter(text.split("\n", 1)[0], ("image", "reference_angle_deg"))
+        rows = list(csv.reader(io.StringIO(text, newline=""), delimiter=sep))
+    except (OSError, csv.Error) as exc:
         raise ReferenceTableError(f"{path}: cannot read ({exc})") from None
     if not rows:
         raise ReferenceTableError(f"{path}: empty file")

@@ -93,6 +93,9 @@ def load_session(session_dir, *, check_files: bool = True, missing: str = "error
             raise SessionError(f"{folder / CONFIG_NAME}: markers.correction: no such file "
                                f"{corr}")
     manifest = load_manifest(folder / MANIFEST_NAME, check_files=check_files, missing=missing)
+    from .plausibility import check_session_numbers
+
+    check_session_numbers(config, manifest, config_path=folder / CONFIG_NAME)  # unit slips
     return Session(folder=folder, config=config, manifest=manifest)
 
 

@@ -7,6 +7,11 @@ before anything is measured; all problems are listed in one
 number** (the header is line 1, the first data row line 2), which is the number a
 spreadsheet or text editor shows.
 
+The file is UTF-8 (a byte-order mark is accepted; other encodings are refused
+with the line of the first byte that is not UTF-8). Fields are separated by commas,
+or by semicolons or tabs as spreadsheets export them (told from the header line;
+with semicolons, numbers may use a decimal comma).
+
 Columns: ``image,orientation_deg,cycle,phase,step,mass_kg`` are required, in any
 order; ``torque_nm`` and ``torque_std_nm`` are optional (a measured torque that
 overrides the weights, with its 1σ uncertainty); other columns are kept and passed
@@ -24,6 +29,7 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import ManifestError
 from ..images import IMAGE_SUFFIXES
+from ..textfiles import csv_delimiter, decode_utf8
 from .binding import load_binding
 from .torque import PHASES
 
@@ -268,15 +274,20 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
             reference.setdefault(row.orientation_deg, row.line)
 
 
+_NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm", "torque_std_nm")
+
+
 def _read_records(path: Path):
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ManifestError(f"{path}: no such file (a session folder needs "
                             f"{MANIFEST_NAME})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ManifestError(f"{path}: cannot be read ({exc})") from exc
-    reader = csv.reader(io.StringIO(text, newline=""))
+    except OSError as exc:
+        raise ManifestError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    text = decode_utf8(raw, name=path, error=ManifestError, what="the manifest")
+    sep = csv_delimiter(text.split("\n", 1)[0], REQUIRED_COLUMNS)
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=sep)
     header = next(reader, None)
     if not header:
         raise ManifestError(f"{path}: empty file; expected the header line "
@@ -290,6 +301,12 @@ def _read_records(path: Path):
         raise ManifestError(f"{path}: line 1: {what}; expected the header "
                             f"{','.join(REQUIRED_COLUMNS)}[,torque_nm,torque_std_nm]")
     records = [(reader.line_num, fields) for fields in reader if any(f.strip() for f in fields)]
+    if sep == ";":  # decimal commas go with semicolons: 0,02 is 0.02
+        numeric = [i for i, c in enumerate(columns) if c in _NUMERIC_COLUMNS]
+        for _, fields in records:
+            for i in numeric:
+                if i < len(fields) and fields[i].count(",") == 1 and "." not in fields[i]:
+                    fields[i] = fields[i].replace(",", ".")
     return columns, records
 
 
