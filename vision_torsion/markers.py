@@ -175,14 +175,14 @@ def _start(patch: MarkerPatch, blob: Blob):
         raise FitError("too few pixels around the marker to start the fit")
     B, F = fast_median(outside), fast_median(inside)
     if B == F:
-        raise FitError("the marker has no contrast")
+        raise FitError("the marker has no contrast", reason="low_contrast")
     w = patch.values - B
     w *= 1.0 / (F - B)
     np.clip(w, 0.0, 1.0, out=w)
     w[beyond] = 0.0
     area, x, y = patch.centroid(w) if w.any() else (0.0, 0.0, 0.0)
     if not area > 0:
-        raise FitError("the marker has no contrast")
+        raise FitError("the marker has no contrast", reason="low_contrast")
     return x, y, np.sqrt(area / np.pi), (B, F)
 
 
@@ -277,7 +277,7 @@ def fit_marker(
 
 
 def _failed(blob: Blob, exc: FitError) -> Marker:
-    status = "low_contrast" if "contrast" in str(exc) else "fit_failed"
+    status = "low_contrast" if exc.reason == "low_contrast" else "fit_failed"
     return _rejected(blob, status, str(exc))
 
 

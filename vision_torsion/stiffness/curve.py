@@ -236,7 +236,8 @@ def fit_loading_branch(angle_rad, torque_nm, *, kind: str = "positive_loading",
         where = model.evaluate(grid[np.argmax(k <= 0)], std=False)[0][0]
         raise AnalysisError(
             f"the {method} fit of the {kind} branch is not monotonic (stiffness <= 0 near "
-            f"T = {where:.3g} N·m); try a lower --order or the other method"
+            f"T = {where:.3g} N·m); try a lower --order or the other method",
+            reason="not_monotonic",
         )
     return fit
 
