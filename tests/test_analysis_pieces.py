@@ -170,8 +170,11 @@ def test_rig_is_validated():
     with pytest.raises(AnalysisError, match="torque_correlation must be one of pieces, level, independent"):
         analyze_session(df, torque_correlation="pan", **FAST)
     bad = df.astype({"mass_kg": object})
-    bad.loc[5, "mass_kg"] = "heavy"
-    with pytest.raises(AnalysisError, match="mass_kg is 'heavy'; the 'pieces' torque model needs"):
+    bad.loc[5, "mass_kg"] = "heavy"  # row 5 of the table is CSV line 7 (header = line 1)
+    with pytest.raises(AnalysisError, match=r"line 7: column mass_kg is not a number \('heavy'\)"):
+        analyze_session(bad, rig=RIG, **FAST)
+    bad.loc[5, "mass_kg"] = ""  # blank: allowed in the table, but the 'pieces' model needs it
+    with pytest.raises(AnalysisError, match="mass_kg is 'nan'; the 'pieces' torque model needs"):
         analyze_session(bad, rig=RIG, **FAST)
 
 

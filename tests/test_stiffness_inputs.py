@@ -77,7 +77,7 @@ def test_too_few_points():
 def test_non_monotonic_time_names_column_and_row():
     frame = _encoder_frame()
     frame.loc[40, "time_s"] = frame.loc[38, "time_s"]
-    with pytest.raises(RecordError, match=r"column 'time_s' must be strictly increasing; data row 41"):
+    with pytest.raises(RecordError, match=r"column 'time_s' must be strictly increasing; line 42 "):
         record_from_encoder(frame, rig=RigConstants(pulses_per_rev=100))
 
 
@@ -88,7 +88,7 @@ def test_missing_and_bad_columns_are_named():
     frame = _encoder_frame()
     frame["torque_nm"] = frame["torque_nm"].astype(object)
     frame.loc[5, "torque_nm"] = "n/a"
-    with pytest.raises(RecordError, match=r"column 'torque_nm' has a missing or non-numeric value 'n/a' in data row 6"):
+    with pytest.raises(RecordError, match=r"column 'torque_nm' has a missing or non-numeric value 'n/a' on line 7"):
         record_from_encoder(frame, rig=rig)
     with pytest.raises(RigError, match="pulses_per_rev is needed"):
         record_from_encoder(_encoder_frame(), rig=RigConstants())
@@ -173,5 +173,5 @@ def test_measurements_only_ok_rows_and_phase_check(tmp_path):
     assert record.source == "camera" and len(record) == len(table) - 1
     table.loc[5, "phase"] = "sideways"
     table.to_csv(p, index=False)
-    with pytest.raises(RecordError, match=r"column 'phase' has unknown value\(s\) 'sideways'"):
+    with pytest.raises(RecordError, match=r"line 7: unknown phase 'sideways'"):
         read_record(p)

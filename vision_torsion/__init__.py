@@ -58,7 +58,10 @@ _LAZY = {
     "SessionConfig": "session",
     "couple_torque": "session",
     "TorqueValue": "session",
-    "PHASES": "session",
+    # the measurements vocabulary
+    "PHASES": "measurements",
+    "TorqueRig": "measurements",
+    "read_measurements": "measurements",
     # hysteresis analysis and the report
     "analyze_session": "analysis",
     "SessionAnalysis": "analysis",

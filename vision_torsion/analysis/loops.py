@@ -21,20 +21,16 @@ import numpy as np
 import pandas as pd
 
 from ..errors import AnalysisError
+from ..measurements import CYCLE_PHASES, MEASUREMENT_COLUMNS, PHASES, read_measurements
 from .uncertainty import compact_sources, torque_sources
 
 __all__ = ["PHASES", "LOOP_PHASES", "REQUIRED_COLUMNS", "validate_measurements", "Loop", "build_loops"]
 
-#: Phase names of ``measurements.csv``, in acquisition order.
-PHASES = ("reference", "positive_unloading", "negative_loading", "negative_unloading", "positive_loading")
-#: The four phases of one cycle.
-LOOP_PHASES = PHASES[1:]
-#: Columns ``measurements.csv`` must have.
-REQUIRED_COLUMNS = (
-    "image", "orientation_deg", "cycle", "phase", "step", "mass_kg", "torque_nm", "torque_std_nm",
-    "angle_deg", "angle_std_deg", "status", "message",
-)
-_NUMERIC = ("orientation_deg", "cycle", "step", "torque_nm", "torque_std_nm", "angle_deg", "angle_std_deg")
+# The vocabulary is vision_torsion.measurements'; these names are kept for callers.
+#: The four phases of one cycle (:data:`vision_torsion.measurements.CYCLE_PHASES`).
+LOOP_PHASES = CYCLE_PHASES
+#: Columns ``measurements.csv`` must have (:data:`vision_torsion.measurements.MEASUREMENT_COLUMNS`).
+REQUIRED_COLUMNS = MEASUREMENT_COLUMNS
 
 
 def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -49,46 +45,25 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
     -------
     usable : pandas.DataFrame
         Rows with ``status == "ok"`` and finite numbers, loop phases only (the
-        ``reference`` rows only define the zero angle), sorted by orientation, cycle,
-        phase order, step; a copy (the input is not modified).
+        ``reference`` rows only define the zero angle; ``closing`` rows are not part
+        of a loop), sorted by orientation, cycle, phase order, step; a copy (the
+        input is not modified).
     failed : pandas.DataFrame
         ``image, orientation_deg, cycle, phase, step, message`` of every image that
         cannot be used, with the reason.
 
     Raises
     ------
-    AnalysisError
+    MeasurementsError (an AnalysisError)
         Not a DataFrame, missing columns, an unknown phase name, a non-numeric value in
-        a numeric column, a negative uncertainty, or no usable row at all.
+        a numeric column, a negative mass or uncertainty (every bad row listed by its
+        CSV line, :func:`vision_torsion.measurements.read_measurements`).
+    AnalysisError
+        No usable row at all.
     """
     if not isinstance(measurements, pd.DataFrame):
         raise AnalysisError(f"measurements must be a pandas DataFrame, got {type(measurements).__name__}")
-    missing = [c for c in REQUIRED_COLUMNS if c not in measurements.columns]
-    if missing:
-        raise AnalysisError(f"measurements table is missing column(s): {', '.join(missing)}")
-    df = measurements.loc[:, list(REQUIRED_COLUMNS)].copy()
-    df["phase"] = df["phase"].astype(str)
-    bad_phase = ~df["phase"].isin(PHASES)
-    if bad_phase.any():
-        i = int(np.flatnonzero(bad_phase.to_numpy())[0])
-        raise AnalysisError(
-            f"measurements table row {i} (image {df['image'].iloc[i]!r}): unknown phase "
-            f"{df['phase'].iloc[i]!r}, expected one of {', '.join(PHASES)}"
-        )
-    for col in _NUMERIC:
-        num = pd.to_numeric(df[col], errors="coerce")
-        bad = num.isna() & df[col].notna() & (df[col].astype(str).str.strip() != "")
-        if bad.any():
-            i = int(np.flatnonzero(bad.to_numpy())[0])
-            raise AnalysisError(f"measurements table row {i}: column {col} is not a number ({df[col].iloc[i]!r})")
-        df[col] = num.astype(float)
-    for col in ("torque_std_nm", "angle_std_deg"):
-        neg = df[col] < 0
-        if neg.any():
-            i = int(np.flatnonzero(neg.to_numpy())[0])
-            raise AnalysisError(f"measurements table row {i}: {col} is negative ({df[col].iloc[i]})")
-    df["message"] = df["message"].astype(object).where(df["message"].notna(), "").astype(str)  # an all-empty column reads as float NaN
-    df["status"] = df["status"].astype(str)
+    df = read_measurements(measurements, name="measurements table").loc[:, list(REQUIRED_COLUMNS)]
 
     reason = pd.Series("", index=df.index)
     not_ok = df["status"] != "ok"
@@ -99,7 +74,7 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
     failed_mask = reason != ""
     failed = df.loc[failed_mask, ["image", "orientation_deg", "cycle", "phase", "step"]].copy()
     failed["message"] = reason[failed_mask]
-    usable = df.loc[~failed_mask & (df["phase"] != "reference")].copy()
+    usable = df.loc[~failed_mask & df["phase"].isin(LOOP_PHASES)].copy()
     if usable.empty:
         raise AnalysisError("measurements table has no usable rows (status == 'ok' with finite torque and angle)")
     usable["_phase_order"] = usable["phase"].map({p: i for i, p in enumerate(PHASES)})

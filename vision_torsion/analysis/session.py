@@ -364,13 +364,13 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     """
     out = []
     mass = pd.to_numeric(usable["mass_kg"], errors="coerce").to_numpy(float)
-    frac = mass / rig["step_mass_kg"]
+    frac = mass / rig.step_mass_kg
     off = np.abs(frac - np.rint(frac)) > 0.01
     if off.any():
         i = int(np.flatnonzero(off)[0])
         out.append(Issue(None, None, "torque uncertainty",
                          f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
-                         f"{rig['step_mass_kg']:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
+                         f"{rig.step_mass_kg:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
                          "the 'pieces' torque model counts a partial piece as a whole one"))
     sources, _ = torque_sources(usable, correlation="pieces", rig=rig)
     model_std = np.sqrt(np.sum(sources**2, axis=1))
@@ -402,9 +402,11 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     torque_correlation : {"pieces", "level", "independent"}, optional
         Error model of the torques (see :mod:`.uncertainty`). Default: ``"pieces"``
         when ``rig`` is given, else ``"level"``.
-    rig : mapping, optional
-        Rig constants for the ``"pieces"`` model: ``step_mass_kg`` (one weight piece,
-        kg), ``mass_std_kg`` (1σ of one piece, kg), ``gravity_m_per_s2``,
+    rig : TorqueRig or mapping, optional
+        Rig constants for the ``"pieces"`` model
+        (:class:`vision_torsion.measurements.TorqueRig`, e.g. a session's
+        ``config.torque_rig``, or a mapping of its constants): ``step_mass_kg`` (one
+        weight piece, kg), ``mass_std_kg`` (1σ of one piece, kg), ``gravity_m_per_s2``,
         ``arm_radius_m`` (m) and optionally ``friction_torque_std_nm`` (1σ per image,
         N·m), ``arm_radius_std_m``, ``gravity_std_m_per_s2`` (see
         :func:`.uncertainty.check_rig`). The pieces per pan of an image are
@@ -473,7 +475,7 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
         "lost_motion_fractions": [float(f) for f in lost_motion_fractions],
         "secant_interval": [float(f) for f in secant_interval], "n_draws": int(n_draws), "seed": int(seed),
         "fit_bouc_wen": bool(fit_bouc_wen), "coverage_factor": COVERAGE_FACTOR,
-        "rig": None if rig is None else dict(rig),
+        "rig": None if rig is None else rig.to_dict(),
     }
     issues: list[Issue] = []
     if torque_correlation == "pieces":

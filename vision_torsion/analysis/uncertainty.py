@@ -75,6 +75,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import AnalysisError, RigError
+from ..measurements import PHASE_SIGN, TorqueRig, pieces_per_pan
+
 __all__ = [
     "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
     "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
@@ -86,67 +89,49 @@ COVERAGE_FACTOR = 2.0
 #: Torque error models (see the module notes).
 TORQUE_MODELS = ("pieces", "level", "independent")
 
-#: Keys of the ``rig`` mapping: required ones, then optional ones (default 0).
-RIG_KEYS = ("step_mass_kg", "mass_std_kg", "gravity_m_per_s2", "arm_radius_m")
-_RIG_OPTIONAL = ("friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2")
-
-# phases of measurements.csv and the sign of their torque (as the sessions module)
-_PHASE_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1, "negative_unloading": -1,
-               "positive_loading": 1}
+#: Required keys of a ``rig`` mapping (:class:`vision_torsion.measurements.TorqueRig`).
+RIG_KEYS = TorqueRig.required()
 
 
 def _error(message):
-    from ..errors import AnalysisError
-
     return AnalysisError(message)
 
 
-def check_rig(rig) -> dict:
-    """Validate the rig constants of the ``"pieces"`` torque model.
+def check_rig(rig) -> TorqueRig:
+    """The rig constants of the ``"pieces"`` torque model, as a :class:`~vision_torsion.measurements.TorqueRig`.
 
     Parameters
     ----------
-    rig : mapping
-        ``step_mass_kg`` (mass of one weight piece, kg), ``mass_std_kg`` (1σ of one
-        piece, kg), ``gravity_m_per_s2``, ``arm_radius_m`` (m); optional
+    rig : TorqueRig or mapping
+        A :class:`~vision_torsion.measurements.TorqueRig` (returned as it is: it was
+        checked when made), or a mapping of its constants: ``step_mass_kg`` (mass of
+        one weight piece, kg), ``mass_std_kg`` (1σ of one piece, kg),
+        ``arm_radius_m`` (m); optional ``gravity_m_per_s2`` (9.81),
         ``friction_torque_std_nm`` (1σ per image, N·m), ``arm_radius_std_m`` (m),
         ``gravity_std_m_per_s2`` (m/s²), 0 when absent.
 
     Returns
     -------
-    dict
-        The rig as plain floats, optional keys filled in.
+    TorqueRig
 
     Raises
     ------
     AnalysisError
         Not a mapping, a missing or unknown key, a non-finite value, a non-positive
-        step mass, g or r, or a negative uncertainty.
+        step mass, g or r, or a negative uncertainty (the message of the
+        :class:`~vision_torsion.errors.RigError` that :class:`TorqueRig` raised).
 
     Examples
     --------
-    >>> check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05))["friction_torque_std_nm"]
+    >>> check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)).friction_torque_std_nm
     0.0
     """
-    if not hasattr(rig, "keys"):
-        raise _error(f"rig must be a mapping of rig constants, got {type(rig).__name__}")
-    missing = [k for k in RIG_KEYS if k not in rig]
-    unknown = sorted(set(rig) - set(RIG_KEYS) - set(_RIG_OPTIONAL))
-    if missing or unknown:
-        raise _error(f"rig: missing key(s) {missing}, unknown key(s) {unknown}; expected {list(RIG_KEYS)} "
-                     f"and optionally {list(_RIG_OPTIONAL)}")
-    out = {}
-    for k in RIG_KEYS + _RIG_OPTIONAL:
-        v = rig.get(k, 0.0)
-        try:
-            v = float(v)
-        except (TypeError, ValueError):
-            raise _error(f"rig: {k} must be a number, got {v!r}") from None
-        positive = k in ("step_mass_kg", "gravity_m_per_s2", "arm_radius_m")
-        if not np.isfinite(v) or (v <= 0 if positive else v < 0):
-            raise _error(f"rig: {k} must be a {'positive' if positive else 'non-negative'} finite number, got {v!r}")
-        out[k] = v
-    return out
+    if isinstance(rig, TorqueRig):
+        return rig
+    try:
+        return TorqueRig.from_mapping(rig)
+    except RigError as exc:
+        raise AnalysisError(str(exc), reason=exc.reason) from None
 
 
 def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
@@ -217,41 +202,24 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         where = f"image {frame['image'].iloc[i]!r}" if "image" in frame else f"row {i}"
-        raise _error(f"measurements table, {where}: mass_kg is {frame['mass_kg'].iloc[i]!r}; the 'pieces' torque "
+        raise _error(f"measurements table, {where}: mass_kg is {str(frame['mass_kg'].iloc[i])!r}; the 'pieces' torque "
                      "model needs the mass on each pan (kg, >= 0)")
-    n = pieces_per_pan(mass, rig["step_mass_kg"])
-    sign = np.asarray(frame["phase"].map(_PHASE_SIGN), dtype=float)
+    n = pieces_per_pan(mass.reshape(-1), rig.step_mass_kg)
+    sign = np.asarray(frame["phase"].map(PHASE_SIGN), dtype=float)
     sign = np.where(np.isfinite(sign), sign, np.sign(tau))
-    g_r = rig["gravity_m_per_s2"] * rig["arm_radius_m"]
+    g_r = rig.gravity_m_per_s2 * rig.arm_radius_m
     n_max = int(n.max()) if n.size else 0
     k = np.arange(1, n_max + 1)
-    step = g_r * np.sqrt(2.0) * rig["mass_std_kg"]
+    step = g_r * np.sqrt(2.0) * rig.mass_std_kg
     cols = []
     for s in (1.0, -1.0):
         cols.append(np.where((sign[:, None] == s) & (n[:, None] >= k[None, :]), s * step, 0.0))
-    rel = float(np.hypot(rig["gravity_std_m_per_s2"] / rig["gravity_m_per_s2"], rig["arm_radius_std_m"] / rig["arm_radius_m"]))
+    rel = float(np.hypot(rig.gravity_std_m_per_s2 / rig.gravity_m_per_s2, rig.arm_radius_std_m / rig.arm_radius_m))
     if rel > 0:
         cols.append((tau * rel)[:, None])
-    if rig["friction_torque_std_nm"] > 0:
-        cols.append(np.eye(tau.size) * rig["friction_torque_std_nm"])
+    if rig.friction_torque_std_nm > 0:
+        cols.append(np.eye(tau.size) * rig.friction_torque_std_nm)
     return np.concatenate(cols, axis=1) if cols else np.zeros((tau.size, 0)), groups
-
-
-def pieces_per_pan(mass_kg, step_mass_kg) -> np.ndarray:
-    """Weight pieces on a pan (int array): ``mass_kg / step_mass_kg`` for whole pieces.
-
-    A load that is not a whole number of pieces counts as the next whole number, as
-    :func:`vision_torsion.session.torque.pieces_per_pan` counts it (so the marginal
-    1σ is the table's ``torque_std_nm``; :func:`.session.analyze_session` lists such
-    loads as an issue).
-
-    Examples
-    --------
-    >>> pieces_per_pan([0.0, 0.02, 0.06, 0.05], 0.02).tolist()
-    [0, 1, 3, 3]
-    """
-    m = np.asarray(mass_kg, dtype=float).reshape(-1)
-    return np.ceil(np.where(np.isfinite(m), m, 0.0) / step_mass_kg - 1e-6).astype(int).clip(min=0)
 
 
 def group_sources(groups, torque_std_nm) -> np.ndarray:
@@ -294,8 +262,6 @@ def torque_groups(torque_nm, *, correlation="level", resolution_nm=1e-9) -> np.n
     if correlation == "independent":
         return np.arange(tau.size)
     if correlation != "level":
-        from ..errors import AnalysisError
-
         raise AnalysisError(f"torque_correlation must be 'level' or 'independent', got {correlation!r}")
     keys = np.round(tau / resolution_nm).astype(np.int64)
     _, inverse = np.unique(keys, return_inverse=True)

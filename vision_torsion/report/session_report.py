@@ -174,22 +174,20 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         The session folder is invalid (every problem listed).
     """
     from ..analysis import analyze_session
+    from ..measurements import read_measurements
     from ..session import load_session, process_session
 
     session = load_session(session_dir, missing="pending")
     out = Path(out_dir) if out_dir is not None else session.folder / "results"
     result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
-    measurements = pd.read_csv(result.measurements_path, keep_default_na=False, na_values=[""])
+    measurements = read_measurements(result.measurements_path)  # indexed by CSV line
     waiting = measurements[measurements["status"] == "pending"]
-    measurements = measurements[measurements["status"] != "pending"].reset_index(drop=True)
+    measurements = measurements[measurements["status"] != "pending"]
     logger.info("analysing %d measurements", len(measurements))
-    rig, proto = session.config.rig, session.config.protocol
     analysis = analyze_session(
         measurements,
-        max_torque_nm=proto.max_torque_nm,
-        rig=dict(step_mass_kg=proto.step_mass_kg, mass_std_kg=rig.mass_std_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
-                 arm_radius_m=rig.arm_radius_m, friction_torque_std_nm=rig.friction_torque_std_nm,
-                 arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
+        max_torque_nm=session.config.protocol.max_torque_nm,
+        rig=session.config.torque_rig,
     )
     title, section_html, *steps = _stiffness_section(measurements)
     extra = [(title, section_html)]

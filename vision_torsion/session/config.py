@@ -24,6 +24,7 @@ import tomli_w
 
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import atomic_write_text
+from ..measurements import TorqueRig
 from ..settings import MeasureSettings
 
 __all__ = [
@@ -121,6 +122,12 @@ class SessionConfig:
     protocol: ProtocolConfig
     markers: MeasureSettings = field(default_factory=MeasureSettings)
     angle_sign: int = 1
+
+    @property
+    def torque_rig(self) -> TorqueRig:
+        """The rig constants the torque model needs (:class:`~vision_torsion.measurements.TorqueRig`):
+        the ``[rig]`` table with the protocol's step mass, for ``analyze_session(rig=...)``."""
+        return TorqueRig.from_rig(self.rig, step_mass_kg=self.protocol.step_mass_kg)
 
 
 # -- validation ---------------------------------------------------------------------

@@ -29,16 +29,16 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import ManifestError
 from ..images import IMAGE_SUFFIXES
+from ..measurements import MANIFEST_COLUMNS, MANIFEST_OPTIONAL_COLUMNS, PHASES, ZERO_TORQUE_PHASES
 from ..textfiles import csv_delimiter, decode_utf8
 from .binding import load_binding
-from .torque import PHASES
 
 __all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
            "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
 
 MANIFEST_NAME = "manifest.csv"
-REQUIRED_COLUMNS = ("image", "orientation_deg", "cycle", "phase", "step", "mass_kg")
-OPTIONAL_COLUMNS = ("torque_nm", "torque_std_nm")
+REQUIRED_COLUMNS = MANIFEST_COLUMNS
+OPTIONAL_COLUMNS = MANIFEST_OPTIONAL_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class ManifestRow:
     cycle : int
         1, 2, ...
     phase : str
-        One of :data:`~vision_torsion.session.torque.PHASES`.
+        One of :data:`~vision_torsion.measurements.PHASES`.
     step : int
         Step within the phase (>= 0), increasing down the file.
     mass_kg : float or None
@@ -232,8 +232,8 @@ def _parse_row(check: _RowChecker, line: int, rec: dict[str, str], has: set[str]
     mass = check.number(line, "mass_kg", rec["mass_kg"], nonnegative=True,
                         blank_ok=torque is not None,
                         expected="the mass on each pan in kg (>= 0)")
-    if phase == "reference" and mass:
-        check.add(line, f"mass_kg {rec['mass_kg']!r} on a reference row; a reference "
+    if phase in ZERO_TORQUE_PHASES and mass:
+        check.add(line, f"mass_kg {rec['mass_kg']!r} on a {phase} row; a {phase} "
                         "image is taken at zero load (mass_kg 0)")
     if None in (image, orient, cycle, step, phase) or (mass is None and torque is None):
         return None

@@ -38,14 +38,14 @@ from ..images import IMAGE_SUFFIXES
 from .config import (CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig,
                      config_from_dict, write_config)
 from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
-from .torque import PHASES, couple_torque
+from ..measurements import CYCLE_PHASES, PHASES
+from .torque import couple_torque
 
 __all__ = ["SessionPlan", "plan_session", "plan_rows", "CAPTURE_SHEET_NAME"]
 
 logger = logging.getLogger(__name__)
 
 CAPTURE_SHEET_NAME = "capture_sheet.md"
-_CYCLE_PHASES = PHASES[1:]
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".pn
     for orientation in proto.orientations_deg:
         add(orientation, 1, "reference", 0, 0)
         for cycle in range(1, proto.cycles + 1):
-            for phase in _CYCLE_PHASES:
+            for phase in CYCLE_PHASES:
                 first = cycle == 1 and phase == "positive_unloading"
                 for step, pieces in _phase_masses(phase, steps_per_phase, first):
                     add(orientation, cycle, phase, step, pieces)

@@ -48,6 +48,7 @@ from tqdm import tqdm
 
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_csv
+from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
 from ..settings import MeasureSettings
 from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
@@ -57,11 +58,9 @@ __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_N
 
 logger = logging.getLogger(__name__)
 
-MEASUREMENTS_NAME = "measurements.csv"
 #: Columns added after the manifest's own (whose torque_nm/torque_std_nm, if any,
-#: are replaced by these).
-OUTPUT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
-                  "angle_deg", "angle_std_deg", "status", "message")
+#: are replaced by these): :data:`vision_torsion.measurements.RESULT_COLUMNS`.
+OUTPUT_COLUMNS = RESULT_COLUMNS
 #: Bump when the cache entry layout changes; part of every cache key.
 _CACHE_FORMAT = 5
 #: Up to this many jobs run as threads of the calling process (jobs threads read,

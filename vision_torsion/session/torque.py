@@ -12,16 +12,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..measurements import PHASE_SIGN, PHASES, pieces_per_pan
 from .config import RigConfig
 
+# PHASES, PHASE_SIGN and pieces_per_pan are defined in vision_torsion.measurements
+# (the one home of the measurements vocabulary) and re-exported here.
 __all__ = ["TorqueValue", "PHASES", "PHASE_SIGN", "couple_torque", "pieces_per_pan"]
-
-#: The phases of a cycle, in protocol order (a ``reference`` image comes first).
-PHASES = ("reference", "positive_unloading", "negative_loading", "negative_unloading",
-          "positive_loading")
-#: Sign of the torque in each phase.
-PHASE_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1,
-              "negative_unloading": -1, "positive_loading": 1}
 
 
 @dataclass(frozen=True)
@@ -45,20 +41,6 @@ class TorqueValue:
     torque_common_std_nm: float
 
 
-def pieces_per_pan(mass_kg: float, step_mass_kg: float) -> int:
-    """Number of weight pieces making up a pan load of `mass_kg`.
-
-    A load that is not a whole number of step masses counts as the next whole number
-    (the conservative choice for the mass uncertainty).
-
-    >>> pieces_per_pan(0.06, 0.02), pieces_per_pan(0.0, 0.02), pieces_per_pan(0.05, 0.02)
-    (3, 0, 3)
-    """
-    if mass_kg <= 0:
-        return 0
-    return max(1, math.ceil(mass_kg / step_mass_kg - 1e-6))
-
-
 def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: float
                   ) -> TorqueValue:
     """Torque of a force couple with `mass_kg` on each pan of the loaded pair.
@@ -69,7 +51,7 @@ def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: f
         Mass on each of the two pans of the loaded pair (kg), >= 0.
     phase : str
         One of :data:`PHASES`; gives the sign (``positive_*`` +, ``negative_*`` -,
-        ``reference`` 0).
+        ``reference`` and ``closing`` 0).
     rig : RigConfig
         r, g and their uncertainties, the mass uncertainty of one weight piece and
         the friction term.

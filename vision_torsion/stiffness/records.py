@@ -13,7 +13,8 @@ Two inputs give the same :class:`TorqueAngleRecord`:
   directly, so no rig conversion applies and there is no time axis (the record is a
   series of load steps, labelled by ``phase``).
 
-Messages name the file, the column and the (1-based) data row.
+Messages name the file, the column and the row by its CSV line number (the header
+is line 1), the one row-numbering rule of :mod:`vision_torsion.measurements`.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import RecordError, RigError
+from ..measurements import MEASUREMENT_COLUMNS, PHASES, csv_line, read_measurements
 from .rig import RigConstants, output_angle_deg, pulses_to_input_deg
 
 __all__ = [
@@ -37,14 +39,7 @@ __all__ = [
     "MIN_RECORD_POINTS",
 ]
 
-MEASUREMENT_COLUMNS = (
-    "image", "orientation_deg", "cycle", "phase", "step", "mass_kg", "torque_nm",
-    "torque_std_nm", "angle_deg", "angle_std_deg", "status", "message",
-)
-PHASES = (
-    "reference", "positive_unloading", "negative_loading", "negative_unloading",
-    "positive_loading",
-)
+# MEASUREMENT_COLUMNS and PHASES: vision_torsion.measurements' vocabulary, re-exported.
 #: Fewest samples an encoder record may have: the zero-phase filter and the
 #: branch split need a few hundredths of a loading cycle at least.
 MIN_RECORD_POINTS = 30
@@ -125,15 +120,18 @@ def _require_columns(frame: pd.DataFrame, columns, name: str, what: str) -> None
         )
 
 
-def _numeric(frame: pd.DataFrame, column: str, name: str) -> np.ndarray:
-    """Column as float; a blank or non-numeric cell is an error naming row and column."""
+def _numeric(frame: pd.DataFrame, column: str, name: str, lines=None) -> np.ndarray:
+    """Column as float; a blank or non-numeric cell is an error naming its CSV line
+    (`lines`, else the row's position + 2: header = line 1) and the column."""
     values = pd.to_numeric(frame[column], errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(~np.isfinite(values))
     if bad.size:
         row = bad[0]
+        line = csv_line(row) if lines is None else int(lines[row])
+        value = frame[column].iloc[row]
         raise RecordError(
             f"{name}: column {column!r} has a missing or non-numeric value "
-            f"{frame[column].iloc[row]!r} in data row {row + 1}"
+            f"{'(blank)' if pd.isna(value) else repr(value)} on line {line}"
         )
     return values
 
@@ -142,11 +140,11 @@ def _check_time(time_s: np.ndarray, name: str) -> None:
     steps = np.diff(time_s)
     bad = np.flatnonzero(steps <= 0)
     if bad.size:
-        row = bad[0] + 2
+        row = bad[0] + 1  # 0-based position of the sample that does not come after the one before
         raise RecordError(
-            f"{name}: column 'time_s' must be strictly increasing; data row {row} "
-            f"(t = {time_s[row - 1]:g} s) does not come after row {row - 1} "
-            f"(t = {time_s[row - 2]:g} s)"
+            f"{name}: column 'time_s' must be strictly increasing; line {csv_line(row)} "
+            f"(t = {time_s[row]:g} s) does not come after line {csv_line(row - 1)} "
+            f"(t = {time_s[row - 1]:g} s)"
         )
 
 
@@ -219,26 +217,21 @@ def record_from_measurements(frame: pd.DataFrame, *, name: str = "measurements.c
     Raises
     ------
     RecordError
-        A needed column is missing, a usable row has a non-numeric torque or angle,
-        a phase is unknown (message names column ``phase``), or no row is ``ok``.
+        A needed column is missing, a row has a bad value or an unknown phase
+        (:class:`~vision_torsion.errors.MeasurementsError` from
+        :func:`vision_torsion.measurements.read_measurements`), a usable row has
+        no torque or angle, or no row is ``ok``. Rows are named by CSV line.
     """
     needed = ("orientation_deg", "cycle", "phase", "torque_nm", "angle_deg", "status")
-    _require_columns(frame, needed, name, "a measurements table")
-    ok = frame[frame["status"].astype(str).str.strip() == "ok"].reset_index(drop=True)
+    table = read_measurements(frame, columns=needed, name=name)
+    ok = table[table["status"] == "ok"]
     if ok.empty:
         raise RecordError(f"{name}: no row has status 'ok' (column 'status')")
-    phase = ok["phase"].astype(str).str.strip().to_numpy(dtype=object)
-    unknown = sorted(set(phase) - set(PHASES))
-    if unknown:
-        raise RecordError(
-            f"{name}: column 'phase' has unknown value(s) {', '.join(map(repr, unknown))}; "
-            f"expected one of {', '.join(PHASES)}"
-        )
     keys = ok[["orientation_deg", "cycle"]].astype(str).agg("/".join, axis=1)
     group = pd.factorize(keys)[0]
     return TorqueAngleRecord(
-        angle_deg=_numeric(ok, "angle_deg", name), torque_nm=_numeric(ok, "torque_nm", name),
-        phase=phase, group=group, source="camera", name=name,
+        angle_deg=_numeric(ok, "angle_deg", name, ok.index), torque_nm=_numeric(ok, "torque_nm", name, ok.index),
+        phase=ok["phase"].to_numpy(dtype=object), group=group, source="camera", name=name,
     )
 
 

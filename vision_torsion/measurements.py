@@ -1,0 +1,340 @@
+"""The measurements vocabulary: phases, column names, the torque rig, and the one reader.
+
+Everything that names a part of a session's table lives here, once: the phases of
+the protocol and the sign of their torque, the columns of ``manifest.csv`` and of
+``measurements.csv``, the weight pieces per pan, the constants of the force-couple
+rig that the torque model needs (:class:`TorqueRig`), and :func:`read_measurements`,
+the one reader and checker of a ``measurements.csv`` table. The session
+(:mod:`vision_torsion.session`), the hysteresis analysis
+(:mod:`vision_torsion.analysis`) and the stiffness curve
+(:mod:`vision_torsion.stiffness`) all take them from here.
+
+Rows are numbered one way everywhere: by their **CSV line number**, the header
+being line 1 and the first data row line 2 (the number a text editor or a
+spreadsheet shows). :func:`read_measurements` returns its table indexed by that
+number, so a message about a row, at any later stage, names the same line.
+
+This module sits at the bottom of the layers (it imports only :mod:`.errors`),
+beside :mod:`.settings`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import MISSING, asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .errors import MeasurementsError, RigError
+
+__all__ = [
+    "PHASES",
+    "CYCLE_PHASES",
+    "ZERO_TORQUE_PHASES",
+    "PHASE_SIGN",
+    "MANIFEST_COLUMNS",
+    "MANIFEST_OPTIONAL_COLUMNS",
+    "RESULT_COLUMNS",
+    "MEASUREMENT_COLUMNS",
+    "NUMERIC_COLUMNS",
+    "MEASUREMENTS_NAME",
+    "TorqueRig",
+    "pieces_per_pan",
+    "read_measurements",
+    "csv_line",
+]
+
+#: The phases of a session, in protocol order. Per orientation: a ``reference``
+#: image at zero load, then each cycle's four phases (positive unloading +Tmax → 0,
+#: negative loading 0 → −Tmax, negative unloading −Tmax → 0, positive loading
+#: 0 → +Tmax), then a ``closing`` image at zero load after the last cycle's
+#: unloading back to zero (the same load state as the end of cycle 1's positive
+#: unloading, so drift and creep show as the difference of the two).
+PHASES = ("reference", "positive_unloading", "negative_loading", "negative_unloading",
+          "positive_loading", "closing")
+#: The four phases of one loading cycle (one hysteresis loop), in order.
+CYCLE_PHASES = PHASES[1:5]
+#: Phases photographed with no weights on the pans (``mass_kg`` must be 0).
+ZERO_TORQUE_PHASES = ("reference", "closing")
+#: Sign of the torque in each phase.
+PHASE_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1,
+              "negative_unloading": -1, "positive_loading": 1, "closing": 0}
+
+#: Required columns of ``manifest.csv``, in the order ``plan`` writes them.
+MANIFEST_COLUMNS = ("image", "orientation_deg", "cycle", "phase", "step", "mass_kg")
+#: Optional manifest columns: a measured torque (N·m) and its 1σ overriding the weights.
+MANIFEST_OPTIONAL_COLUMNS = ("torque_nm", "torque_std_nm")
+#: Columns ``process`` adds after the manifest's own (replacing its torque columns).
+RESULT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
+                  "angle_deg", "angle_std_deg", "status", "message")
+#: Columns every ``measurements.csv`` has and the analysis needs.
+MEASUREMENT_COLUMNS = ("image", "orientation_deg", "cycle", "phase", "step", "mass_kg",
+                       "torque_nm", "torque_std_nm", "angle_deg", "angle_std_deg",
+                       "status", "message")
+#: Numeric columns (read as float64; a blank cell is NaN).
+NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm",
+                   "torque_std_nm", "torque_common_std_nm", "angle_deg", "angle_std_deg")
+#: Numeric columns that may not be negative (masses and standard uncertainties).
+_NON_NEGATIVE = ("mass_kg", "torque_std_nm", "torque_common_std_nm", "angle_std_deg")
+#: Text columns (read as str; a blank cell is "").
+_TEXT_COLUMNS = ("image", "phase", "status", "message", "torque_source")
+#: File name of the table ``process`` writes.
+MEASUREMENTS_NAME = "measurements.csv"
+#: Name of the index of a table :func:`read_measurements` returns (CSV line numbers).
+_LINE = "line"
+#: At most this many problems are listed in one error (then "and N more").
+_MAX_LISTED = 20
+
+
+def pieces_per_pan(mass_kg, step_mass_kg):
+    """Number of weight pieces making up a pan load of `mass_kg`.
+
+    A load that is not a whole number of step masses counts as the next whole number
+    (the conservative choice for the mass uncertainty); any load above zero is at
+    least one piece; zero, negative or non-finite loads are none.
+
+    Parameters
+    ----------
+    mass_kg : float or array_like
+        Mass on one pan (kg).
+    step_mass_kg : float
+        Mass of one weight piece (kg), > 0.
+
+    Returns
+    -------
+    int or numpy.ndarray of int
+        An int for a scalar `mass_kg`, else an array of its shape.
+
+    Examples
+    --------
+    >>> pieces_per_pan(0.06, 0.02), pieces_per_pan(0.0, 0.02), pieces_per_pan(0.05, 0.02)
+    (3, 0, 3)
+    >>> pieces_per_pan([0.0, 0.02, 0.06, 0.05, float("nan")], 0.02).tolist()
+    [0, 1, 3, 3, 0]
+    """
+    m = np.asarray(mass_kg, dtype=float)
+    loaded = np.isfinite(m) & (m > 0)
+    ratio = np.where(loaded, m, 0.0) / step_mass_kg
+    n = np.where(loaded, np.maximum(1.0, np.ceil(ratio - 1e-6)), 0.0).astype(int)
+    return int(n) if n.ndim == 0 else n
+
+
+@dataclass(frozen=True, kw_only=True)
+class TorqueRig:
+    """The constants of the force-couple rig that the torque model needs (SI units).
+
+    One object from ``session.toml`` (:attr:`vision_torsion.session.SessionConfig.torque_rig`)
+    to the analysis (``analyze_session(..., rig=...)``); checked once, here.
+
+    Attributes
+    ----------
+    step_mass_kg : float
+        Mass of one weight piece (kg), > 0.
+    mass_std_kg : float
+        Standard uncertainty (1σ) of one piece's mass (kg), >= 0.
+    gravity_m_per_s2 : float
+        Local g (m/s²), > 0; 9.81 by default.
+    arm_radius_m : float
+        Radius r at which the wires pull (m), > 0.
+    friction_torque_std_nm : float
+        1σ of the pulley friction torque per image (N·m), >= 0.
+    arm_radius_std_m : float
+        1σ of r (m), >= 0.
+    gravity_std_m_per_s2 : float
+        1σ of g (m/s²), >= 0.
+
+    Raises
+    ------
+    RigError
+        A value that is not a finite number, a non-positive step mass, r or g, or a
+        negative uncertainty (the message names the constant).
+
+    Examples
+    --------
+    >>> rig = TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.05)
+    >>> rig.gravity_m_per_s2, rig.friction_torque_std_nm
+    (9.81, 0.0)
+    """
+
+    step_mass_kg: float
+    mass_std_kg: float
+    gravity_m_per_s2: float = 9.81
+    arm_radius_m: float
+    friction_torque_std_nm: float = 0.0
+    arm_radius_std_m: float = 0.0
+    gravity_std_m_per_s2: float = 0.0
+
+    #: Constants that must be > 0 (the others are uncertainties, >= 0).
+    _POSITIVE = ("step_mass_kg", "gravity_m_per_s2", "arm_radius_m")
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise RigError(f"rig: {f.name} must be a number, got {v!r}") from None
+            positive = f.name in self._POSITIVE
+            if not math.isfinite(v) or (v <= 0 if positive else v < 0):
+                raise RigError(f"rig: {f.name} must be a {'positive' if positive else 'non-negative'} "
+                               f"finite number, got {v!r}")
+            object.__setattr__(self, f.name, v)
+
+    @classmethod
+    def required(cls) -> tuple[str, ...]:
+        """Names of the constants without a default."""
+        return tuple(f.name for f in fields(cls) if f.default is MISSING)
+
+    @classmethod
+    def from_mapping(cls, rig) -> "TorqueRig":
+        """From a mapping of the constants (unknown or missing keys are an error).
+
+        Raises
+        ------
+        RigError
+            Not a mapping, a missing or unknown key, or a bad value.
+        """
+        if not hasattr(rig, "keys"):
+            raise RigError(f"rig must be a mapping of rig constants, got {type(rig).__name__}")
+        names = [f.name for f in fields(cls)]
+        required = list(cls.required())
+        missing = [k for k in required if k not in rig]
+        unknown = sorted(set(rig) - set(names))
+        if missing or unknown:
+            optional = [k for k in names if k not in required]
+            raise RigError(f"rig: missing key(s) {missing}, unknown key(s) {unknown}; expected {required} "
+                           f"and optionally {optional}")
+        return cls(**{k: rig[k] for k in rig})
+
+    @classmethod
+    def from_rig(cls, rig, *, step_mass_kg: float) -> "TorqueRig":
+        """From an object holding the other constants as attributes (such as
+        :class:`vision_torsion.session.config.RigConfig`) and the step mass."""
+        return cls(step_mass_kg=step_mass_kg,
+                   **{f.name: getattr(rig, f.name) for f in fields(cls) if f.name != "step_mass_kg"})
+
+    def to_dict(self) -> dict:
+        """The constants as a plain dict of floats (JSON-safe)."""
+        return asdict(self)
+
+
+def csv_line(position: int) -> int:
+    """CSV line number of the data row at 0-based `position` (header = line 1).
+
+    >>> csv_line(0)
+    2
+    """
+    return int(position) + 2
+
+
+def _read_csv(path: Path, name: str) -> pd.DataFrame:
+    try:
+        # blank cells are missing values; text such as "NA" is not silently one
+        return pd.read_csv(path, keep_default_na=False, na_values=[""])
+    except FileNotFoundError:
+        raise MeasurementsError(f"{name}: no such file", reason="not_found") from None
+    except (OSError, UnicodeDecodeError, ValueError, pd.errors.ParserError) as exc:
+        raise MeasurementsError(f"{name}: cannot be read as CSV ({exc})", reason="unreadable") from None
+
+
+def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None = None) -> pd.DataFrame:
+    """Read and check a ``measurements.csv`` table: the one reader of that table.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or pandas.DataFrame
+        The file, or a table as read from one: the frame's row at position ``i``
+        is CSV line ``i + 2`` (header = line 1), whatever its index; except a table
+        this function returned (its index is named ``"line"``), or rows taken from
+        one, which keep their line numbers.
+    columns : sequence of str
+        The columns the caller needs (all of :data:`MEASUREMENT_COLUMNS` by default);
+        a missing one is an error. Other columns are kept.
+    name : str, optional
+        What messages call the table: the file's name by default, else
+        ``"measurements table"``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The table, **indexed by CSV line number** (header = line 1), every column
+        kept in order. Of the columns present, :data:`NUMERIC_COLUMNS` are float64
+        (a blank cell is NaN) and ``image, phase, status, message, torque_source``
+        are str (stripped; a blank cell is "").
+
+    Raises
+    ------
+    MeasurementsError
+        The file is missing or not CSV; `source` is neither a path nor a DataFrame;
+        a needed column is missing; or rows have problems: text that is not a number
+        in a numeric column, a negative mass or uncertainty, an unknown phase. Every
+        row problem is listed (the first 20, then a count), each with its CSV line
+        number and column.
+
+    Notes
+    -----
+    The contract on the caller's data (as photutils' input helper states its own):
+    the caller's frame is **never modified**; the result is a new frame object; a
+    column is copied only when it must change (converted to float64 or to
+    stripped text), and the others share their data with the caller's frame. So
+    do not write into the result's unconverted columns in place if the caller's
+    frame must stay as it is; reassigning a column is always safe.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> t = pd.DataFrame({"phase": ["reference", "positive_loading"], "angle_deg": ["0", "x"]})
+    >>> read_measurements(t, columns=("phase", "angle_deg"))
+    Traceback (most recent call last):
+    ...
+    vision_torsion.errors.MeasurementsError: measurements table: 1 problem(s) (line numbers are CSV lines, the header is line 1)
+      line 3: column angle_deg is not a number ('x')
+    """
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        name = name or path.name
+        frame = _read_csv(path, name)
+    elif isinstance(source, pd.DataFrame):
+        name = name or "measurements table"
+        frame = source
+    else:
+        raise MeasurementsError(f"measurements must be a pandas DataFrame or a CSV file, "
+                                f"got {type(source).__name__}", reason="bad_type")
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise MeasurementsError(f"{name}: missing column(s): {', '.join(missing)}", reason="missing_column")
+    out = frame.copy(deep=False)  # a new frame object; the columns are shared until replaced
+    if frame.index.name != _LINE:  # else: already numbered by this function (perhaps a subset of rows)
+        out.index = pd.RangeIndex(2, len(frame) + 2, name=_LINE)
+    problems: list[tuple[int, str]] = []
+    for col in NUMERIC_COLUMNS:
+        if col not in out.columns:
+            continue
+        raw = out[col]
+        if raw.dtype != np.float64:
+            num = pd.to_numeric(raw, errors="coerce").astype(np.float64)
+            text = raw.astype(str).str.strip()
+            bad = num.isna() & raw.notna() & (text != "") & (text.str.lower() != "nan")
+            problems += [(line, f"column {col} is not a number ({raw[line]!r})") for line in raw.index[bad]]
+            out[col] = num
+        if col in _NON_NEGATIVE:
+            neg = out[col] < 0
+            problems += [(line, f"{col} is negative ({out[col][line]:g})") for line in out.index[neg]]
+    for col in _TEXT_COLUMNS:
+        if col in out.columns:
+            out[col] = out[col].astype(object).where(out[col].notna(), "").astype(str).str.strip()
+    if "phase" in out.columns:
+        unknown = ~out["phase"].isin(PHASES)
+        problems += [(line, f"unknown phase {out['phase'][line]!r}, expected one of {', '.join(PHASES)}")
+                     for line in out.index[unknown]]
+    if problems:
+        problems.sort()
+        listed = [f"line {line}: {what}" for line, what in problems[:_MAX_LISTED]]
+        if len(problems) > _MAX_LISTED:
+            listed.append(f"and {len(problems) - _MAX_LISTED} more")
+        raise MeasurementsError(f"{name}: {len(problems)} problem(s) (line numbers are CSV lines, the header "
+                                "is line 1)\n  " + "\n  ".join(listed), reason="bad_row")
+    return out
