@@ -50,7 +50,7 @@ def test_rig_file_errors_name_the_constant(tmp_path):
     p.write_text("[meshing]\nreference_pairs = 37\n")
     with pytest.raises(RigError, match="reference_torque_nm and reference_pairs must be given together"):
         load_rig(p)
-    with pytest.raises(RigError, match="does not exist"):
+    with pytest.raises(RigError, match="no such file; expected a rig file"):
         load_rig(tmp_path / "missing.toml")
 
 

@@ -196,7 +196,7 @@ def test_scene_polarity_must_match_levels():
 
 
 def test_scene_file_errors(tmp_path):
-    with pytest.raises(SceneError, match="scene file not found"):
+    with pytest.raises(SceneError, match="no such file; expected a scene file"):
         load_scene(tmp_path / "none.toml")
     (tmp_path / "bad.toml").write_text("[image\nwidth=")
     with pytest.raises(SceneError, match="not valid TOML"):

@@ -47,7 +47,6 @@ import csv
 import io
 import logging
 import math
-import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -57,6 +56,7 @@ from scipy import stats
 
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
 from ..fileio import atomic_write_bytes, check_output_dir, output_set, write_csv, write_json
+from ..textfiles import read_toml
 from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
@@ -212,12 +212,7 @@ def load_spec(path) -> AccuracySpec:
         The file is missing, not TOML, has unknown keys or a bad value (named).
     """
     p = Path(path)
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ReferenceTableError(f"{p}: cannot read the spec ({exc.strerror or exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ReferenceTableError(f"{p}: not valid TOML ({exc})") from None
+    d = read_toml(p, what="an accuracy-check spec (TOML)", error=ReferenceTableError)
     unknown = set(d) - {"description", "tolerance_deg", "reference_std_deg", "correction", "markers"}
     if unknown:
         raise ReferenceTableError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -48,6 +47,7 @@ import numpy as np
 import tomli_w
 
 from ..errors import CalibrationError
+from ..textfiles import read_toml
 from ..fileio import atomic_write_text
 from ..pair import PairMeasurement
 
@@ -307,14 +307,21 @@ class PlaneCorrection:
         """
         p = Path(path)
         kind = check_suffix(p)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise CalibrationError(f"{p}: cannot read the correction file ({exc.strerror or exc})") from None
-        try:
-            d = tomllib.loads(text) if kind == "toml" else json.loads(text)
-        except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-            raise CalibrationError(f"{p}: not valid {kind.upper()} ({exc})") from None
+        if kind == "toml":
+            d = read_toml(p, what="a plane correction file", error=CalibrationError)
+        else:
+            try:
+                text = p.read_text(encoding="utf-8")
+            except FileNotFoundError:
+                raise CalibrationError(f"{p}: no such file; expected a plane correction file",
+                                       reason="not_found") from None
+            except (OSError, UnicodeDecodeError) as exc:
+                raise CalibrationError(f"{p}: cannot be read ({getattr(exc, 'strerror', None) or exc})",
+                                       reason="unreadable") from None
+            try:
+                d = json.loads(text)
+            except json.JSONDecodeError as exc:
+                raise CalibrationError(f"{p}: not valid JSON ({exc})", reason="bad_json") from None
         return cls.from_dict(d, source=str(p))
 
 

@@ -16,13 +16,13 @@ instead when a calibration certificate states a 1σ value; giving both is an err
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import tomli_w
 
 from ..errors import SessionError, VisionTorsionError
+from ..textfiles import read_toml
 from ..fileio import atomic_write_text
 from ..measurements import TorqueRig
 from ..settings import MeasureSettings
@@ -295,16 +295,7 @@ def load_config(path) -> SessionConfig:
         The file is missing, is not valid TOML, or has invalid keys (all listed).
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SessionError(f"{p}: no such file (a session folder needs {CONFIG_NAME})") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SessionError(f"{p}: cannot be read ({exc})") from exc
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SessionError(f"{p}: not valid TOML ({exc})") from exc
+    data = read_toml(p, what=f"the session description (a session folder needs {CONFIG_NAME})", error=SessionError)
     return config_from_dict(data, source=str(p))
 
 

@@ -34,13 +34,13 @@ Every key is optional; the checks that need a constant say which one is missing.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import RigError
+from ..textfiles import read_toml
 
 __all__ = ["RigConstants", "load_rig", "pulses_to_input_deg", "output_angle_deg"]
 
@@ -222,13 +222,7 @@ def load_rig(path) -> RigConstants:
         is invalid (message names the constant).
     """
     p = Path(path)
-    try:
-        with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise RigError(f"rig file {p} does not exist") from None
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise RigError(f"rig file {p} cannot be read as TOML: {exc}") from None
+    data = read_toml(p, what="a rig file of constants (TOML)", error=RigError)
     try:
         return RigConstants.from_dict(data)
     except RigError as exc:

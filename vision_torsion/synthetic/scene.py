@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SceneError
+from ..textfiles import read_toml
 
 __all__ = [
     "Scene",
@@ -289,12 +289,7 @@ def load_scene(path) -> Scene:
         inconsistent; the message names the file and the field.
     """
     p = Path(path)
-    if not p.is_file():
-        raise SceneError(f"{p}: scene file not found")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{p}: not valid TOML ({exc})") from exc
+    data = read_toml(p, what="a scene file (TOML)", error=SceneError)
     return scene_from_dict(data, where=str(p), name=p.stem)
 
 

@@ -25,7 +25,6 @@ parameters of every orientation and cycle.
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +33,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ..errors import SceneError
+from ..textfiles import read_toml
 from ..fileio import write_csv, write_json
 from .folders import truth_row, write_rendered
 from .render import render
@@ -87,12 +87,7 @@ def load_session_scene(path) -> tuple[Scene, SessionSpec]:
         The file is missing, invalid, or its ``[session]`` table has a bad field.
     """
     p = Path(path)
-    if not p.is_file():
-        raise SceneError(f"{p}: scene file not found")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SceneError(f"{p}: not valid TOML ({exc})") from exc
+    data = read_toml(p, what="a scene file (TOML)", error=SceneError)
     table = data.pop("session", {})
     if not isinstance(table, dict):
         raise SceneError(f"{p}: [session] must be a table")
