@@ -13,7 +13,7 @@ import time
 import pandas as pd
 import pytest
 
-from test_session_support import make_session
+from helpers import make_session
 from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
 from vision_torsion.session.cache import count_entries

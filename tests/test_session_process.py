@@ -1,4 +1,5 @@
-"""process_session bookkeeping, with a stand-in measurement core (see test_session_support).
+"""process_session bookkeeping, with a stand-in measurement core (helpers.FakeCore, passed in
+as process_session's ``measure`` function).
 
 These tests check what process owns: validation first, the output table, failure
 isolation, the cache and resumability, atomic writes, never writing into the
@@ -14,8 +15,7 @@ import pytest
 
 from vision_torsion.errors import OutputError
 
-from test_session_support import (FakeCore, draw_target, install_fake_core, make_session,
-                                  tree_digest)
+from helpers import FakeCore, draw_target, make_session, tree_digest
 from vision_torsion import fileio
 from vision_torsion.cli import process as process_cli
 from vision_torsion.errors import ManifestError, SessionError
@@ -32,8 +32,8 @@ ANGLE_TOL_DEG = 0.07
 
 
 @pytest.fixture
-def core(monkeypatch):
-    return install_fake_core(monkeypatch, FakeCore())
+def core():
+    return FakeCore()
 
 
 @pytest.fixture
@@ -49,7 +49,7 @@ def read(path):
 
 def test_table_torque_and_angles(session, core):
     folder, plan, truth = session
-    result = process_session(folder, jobs=1)
+    result = process_session(folder, jobs=1, measure=core.measure_pair)
     assert result.ok and result.n_images == len(plan.rows) == 20
     assert (result.n_measured, result.n_cached) == (20, 0)
     table = read(result.measurements_path)
@@ -74,7 +74,7 @@ def test_table_torque_and_angles(session, core):
 
 def test_angle_sign(tmp_path, core):
     _, truth = make_session(tmp_path / "s", orientations=(0,), angle_sign=-1)
-    table = read(process_session(tmp_path / "s", jobs=1).measurements_path)
+    table = read(process_session(tmp_path / "s", jobs=1, measure=core.measure_pair).measurements_path)
     ref, top = table.iloc[0], table[table["phase"] == "positive_unloading"].iloc[0]
     assert top["torque_nm"] > 0 and top["angle_deg"] < 0
     assert top["angle_deg"] == pytest.approx(-(truth[top["image"]] - truth[ref["image"]]),
@@ -86,7 +86,7 @@ def test_one_bad_image_does_not_stop_the_run(session, core, jobs):
     folder, plan, _ = session
     bad = plan.rows[3]["image"]
     (folder / bad).write_bytes(b"this is not a png")
-    result = process_session(folder, jobs=jobs)
+    result = process_session(folder, jobs=jobs, measure=core.measure_pair)
     assert not result.ok and (result.n_ok, result.n_failed) == (19, 1)
     table = read(result.measurements_path)
     row = table[table["image"] == bad].iloc[0]
@@ -101,7 +101,7 @@ def test_failed_reference_fails_its_orientation_only(session, core, jobs):
     folder, plan, _ = session
     ref = plan.rows[0]["image"]
     write_image(folder / ref, np.full((150, 200), 220.0))  # markers missing
-    result = process_session(folder, jobs=jobs)
+    result = process_session(folder, jobs=jobs, measure=core.measure_pair)
     table = read(result.measurements_path)
     o0 = table[table["orientation_deg"] == 0]
     assert (o0["status"] == "failed").all() and result.n_failed == len(o0) == 10
@@ -135,41 +135,41 @@ def test_validation_happens_before_measuring(session, core):
     (folder / plan.rows[7]["image"]).unlink()
     (folder / plan.rows[7]["image"]).mkdir()  # not a file: a problem (a missing one is pending)
     with pytest.raises(ManifestError, match=r"line 9: image '.*' is not a regular file"):
-        process_session(folder, jobs=1)
+        process_session(folder, jobs=1, measure=core.measure_pair)
     assert core.measured == [] and not (folder / "results").exists()
 
 
 def test_output_folder_cannot_be_the_session_folder(session, core):
     with pytest.raises(SessionError, match="cannot be the session folder itself"):
-        process_session(session[0], out_dir=session[0], jobs=1)
+        process_session(session[0], out_dir=session[0], jobs=1, measure=core.measure_pair)
 
 
 def test_session_folder_is_never_modified(session, core, tmp_path):
     folder, plan, _ = session
     (folder / plan.rows[4]["image"]).write_bytes(b"garbage")  # a failure is written too
     before = tree_digest(folder)
-    process_session(folder, out_dir=tmp_path / "elsewhere", jobs=1)
+    process_session(folder, out_dir=tmp_path / "elsewhere", jobs=1, measure=core.measure_pair)
     assert tree_digest(folder) == before
-    process_session(folder, jobs=1)  # default output: only results/ appears
+    process_session(folder, jobs=1, measure=core.measure_pair)  # default output: only results/ appears
     assert tree_digest(folder, exclude=("results",)) == before
     assert (folder / "results" / "measurements.csv").is_file()
 
 
 @pytest.mark.parametrize("jobs", [1, 3])  # with threads reading ahead, the same
-def test_resume_after_interruption_gives_the_same_file(session, monkeypatch, tmp_path, jobs):
+def test_resume_after_interruption_gives_the_same_file(session, tmp_path, jobs):
     folder, plan, _ = session
     (folder / plan.rows[4]["image"]).write_bytes(b"garbage")  # failures are cached too
-    full = install_fake_core(monkeypatch, FakeCore())
-    reference = process_session(folder, out_dir=tmp_path / "a", jobs=1).measurements_path
+    full = FakeCore()
+    reference = process_session(folder, out_dir=tmp_path / "a", jobs=1, measure=full.measure_pair).measurements_path
     # interrupted run: Ctrl-C after 8 measured images (rows 0-8, the garbage row 4
     # failing on the way), nothing written but the cache
-    install_fake_core(monkeypatch, FakeCore(interrupt_after=8))
     with pytest.raises(KeyboardInterrupt):
-        process_session(folder, out_dir=tmp_path / "b", jobs=jobs)
+        process_session(folder, out_dir=tmp_path / "b", jobs=jobs,
+                        measure=FakeCore(interrupt_after=8).measure_pair)
     assert not (tmp_path / "b" / "measurements.csv").exists()
     assert count_entries(tmp_path / "b" / ".cache") == 8 + 1  # + the failure
-    resumed = install_fake_core(monkeypatch, FakeCore())
-    result = process_session(folder, out_dir=tmp_path / "b", jobs=jobs)
+    resumed = FakeCore()
+    result = process_session(folder, out_dir=tmp_path / "b", jobs=jobs, measure=resumed.measure_pair)
     assert (result.n_measured, result.n_cached) == (20 - 9, 9)
     assert len(resumed.measured) == 11 and len(full.measured) == 19
     assert result.measurements_path.read_bytes() == reference.read_bytes()
@@ -187,7 +187,7 @@ def test_an_image_removed_after_validation_fails_alone(session, core, monkeypatc
         return loaded
 
     monkeypatch.setattr(process_module, "load_session", load_then_remove)
-    result = process_session(folder, jobs=jobs)
+    result = process_session(folder, jobs=jobs, measure=core.measure_pair)
     assert (result.n_ok, result.n_failed) == (19, 1)
     row = read(result.measurements_path).set_index("image").loc[gone]
     assert row["message"] == f"{gone}: cannot be read (No such file or directory)"
@@ -195,31 +195,27 @@ def test_an_image_removed_after_validation_fails_alone(session, core, monkeypatc
 
 
 @pytest.mark.parametrize("jobs", [1, 3])
-def test_an_unexpected_error_fails_its_image_and_is_not_cached(session, monkeypatch, jobs):
+def test_an_unexpected_error_fails_its_image_and_is_not_cached(session, core, jobs):
     folder, plan, _ = session
     broken = plan.rows[6]["image"]
-    core = FakeCore()
-    measure = core.measure_pair
 
     def measure_pair(image, *, settings, name=None, candidates=None):
         if name.endswith(broken):
             raise RuntimeError("a bug")
-        return measure(image, settings=settings, name=name)
+        return core.measure_pair(image, settings=settings, name=name)
 
-    core.measure_pair = measure_pair
-    install_fake_core(monkeypatch, core)
-    result = process_session(folder, jobs=jobs)
+    result = process_session(folder, jobs=jobs, measure=measure_pair)
     assert result.failures == ((broken, "internal error: RuntimeError: a bug"),)
     assert count_entries(folder / "results" / ".cache") == 19
 
 
 def test_rerun_measures_only_new_or_changed_images(session, core, tmp_path):
     folder, plan, truth = session
-    process_session(folder, jobs=1)
-    assert process_session(folder, jobs=1).n_measured == 0
+    process_session(folder, jobs=1, measure=core.measure_pair)
+    assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 0
     # a replaced image is measured again, and only it
     write_image(folder / plan.rows[6]["image"], draw_target(truth[plan.rows[6]["image"]] + 1))
-    result = process_session(folder, jobs=1)
+    result = process_session(folder, jobs=1, measure=core.measure_pair)
     assert (result.n_measured, result.n_cached) == (1, 19)
     # images added to the manifest
     make_session(tmp_path / "bigger", orientations=(0, 60, 120))
@@ -228,32 +224,32 @@ def test_rerun_measures_only_new_or_changed_images(session, core, tmp_path):
         if image.name.startswith("o120"):
             (folder / "images" / image.name).write_bytes(image.read_bytes())
     core.measured.clear()
-    result = process_session(folder, jobs=1)
+    result = process_session(folder, jobs=1, measure=core.measure_pair)
     assert (result.n_measured, result.n_cached) == (10, 20)
     assert all("o120" in m for m in core.measured)
 
 
 def test_changed_settings_measure_everything_again(session, core):
     folder, _, _ = session
-    process_session(folder, jobs=1)
+    process_session(folder, jobs=1, measure=core.measure_pair)
     toml = folder / "session.toml"
     toml.write_text(toml.read_text().replace('[markers]\n', '[markers]\nradius_range = [4.0, 30.0]\n'))
-    assert process_session(folder, jobs=1).n_measured == 20
+    assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 20
 
 
 def test_changed_measuring_code_measures_everything_again(session, core, monkeypatch):
     from vision_torsion.session import process as process_module
 
     folder, _, _ = session
-    process_session(folder, jobs=1)
+    process_session(folder, jobs=1, measure=core.measure_pair)
     monkeypatch.setattr(process_module, "_code_fingerprint", lambda: "another core")
-    assert process_session(folder, jobs=1).n_measured == 20
-    assert process_session(folder, jobs=1).n_measured == 0
+    assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 20
+    assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 0
 
 
 def test_results_are_written_atomically(session, core, monkeypatch):
     folder, plan, _ = session
-    first = process_session(folder, jobs=1).measurements_path
+    first = process_session(folder, jobs=1, measure=core.measure_pair).measurements_path
     before = first.read_bytes()
     (folder / plan.rows[2]["image"]).write_bytes(b"garbage")  # the new table would differ
 
@@ -262,7 +258,7 @@ def test_results_are_written_atomically(session, core, monkeypatch):
 
     monkeypatch.setattr(fileio.os, "replace", fail)
     with pytest.raises(OutputError, match=r"measurements\.csv: cannot write \(no space left on the device\)"):
-        process_session(folder, jobs=1)
+        process_session(folder, jobs=1, measure=core.measure_pair)
     assert first.read_bytes() == before
     assert [p.name for p in first.parent.iterdir() if p.name.endswith(".tmp")] == []
 
@@ -277,7 +273,7 @@ def test_measured_torque_overrides_the_weights(tmp_path, core):
     lines[2] += ",0.0801,0.0004"
     lines[3:] = [line + ",," for line in lines[3:]]
     manifest.write_text("\n".join(lines) + "\n")
-    table = read(process_session(folder, jobs=1).measurements_path)
+    table = read(process_session(folder, jobs=1, measure=core.measure_pair).measurements_path)
     assert list(table.columns).count("torque_nm") == 1
     assert (table["torque_nm"][1], table["torque_std_nm"][1]) == (0.0801, 0.0004)
     assert table["torque_source"][1] == "measured" and table["torque_source"][2] == "weights"
@@ -292,14 +288,27 @@ def _set_correction(folder, name):
 
 
 def test_plane_correction_is_applied_to_the_angles(session, core):
+    """A correction that stretches x by 1.5 turns a direction a (from the x axis) into
+    atan2(sin a, 1.5 cos a); the angles are differences of such directions."""
     from vision_torsion.calibration.correction import PlaneCorrection
 
-    folder, _, _ = session
-    PlaneCorrection(homography=np.eye(3)).save(folder / "plane.toml")
+    folder, plan, truth = session
+    PlaneCorrection(homography=np.diag([1.5, 1.0, 1.0])).save(folder / "plane.toml")
     _set_correction(folder, "plane.toml")
-    process_session(folder, jobs=1)
-    used = [c for c in core.corrections if c is not None]
-    assert used and all(isinstance(c, PlaneCorrection) for c in used)
+    table = read(process_session(folder, jobs=1, measure=core.measure_pair).measurements_path)
+
+    def seen(angle_deg):
+        a = np.radians(angle_deg)
+        return np.degrees(np.arctan2(np.sin(a), 1.5 * np.cos(a)))
+
+    moved = 0
+    for _, group in table.groupby("orientation_deg"):
+        ref = truth[group["image"].iloc[0]]
+        for image, angle in zip(group["image"], group["angle_deg"]):
+            expected = seen(truth[image]) - seen(ref)
+            assert angle == pytest.approx(expected, abs=ANGLE_TOL_DEG)
+            moved += abs(expected - (truth[image] - ref)) > 2 * ANGLE_TOL_DEG  # not the uncorrected angle
+    assert moved >= 4
 
 
 def test_bad_correction_file_fails_before_measuring(session, core):
@@ -309,5 +318,5 @@ def test_bad_correction_file_fails_before_measuring(session, core):
     (folder / "plane.toml").write_text("not a correction")
     _set_correction(folder, "plane.toml")
     with pytest.raises(CalibrationError, match="plane.toml"):
-        process_session(folder, jobs=1)
+        process_session(folder, jobs=1, measure=core.measure_pair)
     assert core.measured == []

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from .angle import sequence_angles
-from .errors import ImageReadError, OutputError, VisionTorsionError
+from .batch import measure_each
+from .errors import ImageReadError, OutputError
 from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
 from .pair import measure_pair
@@ -86,7 +86,7 @@ def pair_columns(pair, swapped: bool) -> dict:
     return {f"marker{k}_{f}": getattr(m, f) for k, m in ((1, a), (2, b)) for f in _MARKER_FIELDS}
 
 
-def measure_sequence(reference_pair, images, *, settings, correction=None, progress=False):
+def measure_sequence(reference_pair, images, *, settings, correction=None, progress=False, measure=measure_pair):
     """Measure images in order against a reference pair; one bad image never stops it.
 
     Parameters
@@ -101,26 +101,24 @@ def measure_sequence(reference_pair, images, *, settings, correction=None, progr
         Applied to the centres before the angles.
     progress : bool
         Show a progress bar.
+    measure : callable
+        Measures one image: ``measure(path, settings=..., name=...)`` returns its
+        :class:`~vision_torsion.pair.PairMeasurement`
+        (:func:`~vision_torsion.pair.measure_pair` by default).
 
     Returns
     -------
     (list, list, list)
         Per image: the PairMeasurement or None, the AngleResult or None (identity
-        tracked, unwrapped), and the failure message or "".
+        tracked, unwrapped), and the failure message or "" (see
+        :func:`vision_torsion.batch.attempt` for what counts as a failure).
     """
-    pairs, messages = [], []
-    for path, name in tqdm(images, desc="measuring", unit="image", disable=not progress):
-        try:
-            pairs.append(measure_pair(path, settings=settings, name=name))
-            messages.append("")
-        except VisionTorsionError as exc:
-            logger.debug("%s", exc)
-            pairs.append(None)
-            messages.append(str(exc))
-        except Exception as exc:  # noqa: BLE001 - one odd file must not stop the batch
-            logger.debug("unexpected error measuring %s", name, exc_info=exc)
-            pairs.append(None)
-            messages.append(f"{name}: internal error: {type(exc).__name__}: {exc}")
+    images = list(images)
+    done = measure_each(lambda item: measure(item[0], settings=settings, name=item[1]), images,
+                        names=[name for _, name in images], progress=progress)
+    pairs = [d.value for d in done]
+    # an internal error's message does not name the image (a bug's text rarely does)
+    messages = [f"{name}: {d.message}" if d.unexpected else d.message for (_, name), d in zip(images, done)]
     return pairs, sequence_angles(reference_pair, pairs, correction=correction), messages
 
 

@@ -46,9 +46,11 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
+from ..angle import sequence_angles
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
+from ..pair import PairMeasurement, measure_pair
 from ..settings import MeasureSettings
 from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
@@ -140,13 +142,16 @@ def _code_fingerprint() -> str:
     return digest(b"\0".join(parts))
 
 
-def _settings_key(settings: MeasureSettings) -> str:
-    """JSON identifying how images are measured: settings, correction content, code."""
+def _settings_key(settings: MeasureSettings, measure=measure_pair) -> str:
+    """JSON identifying how images are measured: settings, correction content, code,
+    and the measuring function when it is not the default."""
     d = settings.to_dict()
     if d.get("correction"):
         d["correction"] = digest(Path(d["correction"]).read_bytes())
-    return json.dumps({"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT},
-                      sort_keys=True)
+    key = {"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT}
+    if measure is not measure_pair:
+        key["measure"] = f"{getattr(measure, '__module__', '')}.{getattr(measure, '__qualname__', repr(measure))}"
+    return json.dumps(key, sort_keys=True)
 
 
 def _valid_entry(entry: dict) -> bool:
@@ -199,13 +204,13 @@ def _start_server() -> None:
         forkserver.ensure_running()
 
 
-def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset):
+def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
     """Yield each task's result in task order: in this process with `jobs` up to
     :data:`_MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
     bar = tqdm(total=len(tasks), unit="image", desc="measuring", disable=not progress)
     try:
         if jobs <= _MAX_THREAD_JOBS or len(tasks) <= 1:
-            with in_process(cache_dir, run, known):
+            with in_process(cache_dir, run, known, measure):
                 results = (_read_ahead(tasks, readers=jobs) if jobs > 1
                            else map(measure_task, tasks))
                 for result in results:
@@ -217,7 +222,7 @@ def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, kn
         # that long for the other; the messages cost ~0.2 ms each
         chunksize = max(1, min(4, len(tasks) // (jobs * 8)))
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=start_worker,
-                                   initargs=(cache_dir, run, known))
+                                   initargs=(cache_dir, run, known, measure))
         try:
             for result in pool.map(measure_task, tasks, chunksize=chunksize):
                 yield result
@@ -262,9 +267,6 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
     applied here, so changing it re-measures nothing. A row whose image does not
     exist yet, or whose orientation's reference image does not, is ``pending``.
     """
-    from ..angle import sequence_angles
-    from ..pair import PairMeasurement
-
     rows = session.manifest.rows
     out: list[tuple[float, float, str, str]] = [(math.nan, math.nan, "", "ok")] * len(rows)
     groups: dict[float, list[int]] = defaultdict(list)
@@ -325,7 +327,7 @@ def _table(session: Session, entries: list[dict], correction=None) -> pd.DataFra
 
 
 def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
-                    progress: bool = False) -> ProcessResult:
+                    progress: bool = False, measure=measure_pair) -> ProcessResult:
     """Measure every image of a session and write ``measurements.csv``.
 
     Parameters
@@ -342,6 +344,12 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         worker processes.
     progress : bool
         Show a progress bar (on stderr).
+    measure : callable
+        Measures one image: ``measure(image, *, settings, name, candidates)``
+        returns its :class:`~vision_torsion.pair.PairMeasurement`. The default,
+        :func:`~vision_torsion.pair.measure_pair`, is the measurement core; another
+        function (a stand-in in tests, an experimental fit) keys the cache apart from
+        it by its qualified name, and with more than three jobs must be picklable.
 
     Returns
     -------
@@ -378,7 +386,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
 
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
-    key = _settings_key(settings)
+    key = _settings_key(settings, measure)
     cache_dir = out / CACHE_DIRNAME
     cached, logs = read_cache(cache_dir, check=_valid_entry)
     run = CacheLog.new_run()
@@ -389,7 +397,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     jobs = max(1, min(jobs, len(tasks)))
     for image_key, text, source in _run_tasks(tasks, jobs=jobs, progress=progress,
                                               cache_dir=str(cache_dir), run=run,
-                                              known=frozenset(cached)):
+                                              known=frozenset(cached), measure=measure):
         measured.append(cached[image_key] if text is None else json.loads(text))
         sources.append(source)
     found = iter(measured)

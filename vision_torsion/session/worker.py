@@ -25,9 +25,10 @@ import cv2
 import xxhash
 from threadpoolctl import threadpool_limits
 
-from ..errors import VisionTorsionError
+from ..batch import attempt
 from ..images import GreyImage, decode_image
 from ..markers import find_candidates
+from ..pair import measure_pair
 from ..settings import MeasureSettings
 from .cache import CacheLog
 
@@ -60,12 +61,13 @@ def _settings_from(settings_json: str) -> MeasureSettings:
 
 
 class _Cache:
-    """This process's view of the cache: the keys cached when the run started, and
-    its own log (:class:`~.cache.CacheLog`); set by :func:`start_worker` or
-    :func:`in_process`."""
+    """This process's view of the cache: the keys cached when the run started, its
+    own log (:class:`~.cache.CacheLog`), and the function that measures an image;
+    set by :func:`start_worker` or :func:`in_process`."""
 
     known: frozenset = frozenset()
     log: CacheLog | None = None
+    measure = staticmethod(measure_pair)
 
 
 @dataclass(frozen=True)
@@ -133,20 +135,17 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         return read.result
     path, settings_json, _ = task
     key = read.key
-    from ..pair import measure_pair  # looked up here: tests replace the measuring code
 
-    try:
+    def measure(read: ReadImage):
         if read.error is not None:
             raise read.error
-        pair = measure_pair(read.image, settings=_settings_from(settings_json), name=path,
-                            candidates=read.candidates)
-        entry = {"status": "ok", "pair": pair.to_dict()}
-    except VisionTorsionError as exc:
-        entry = {"status": "failed", "message": str(exc)}
-    except Exception as exc:  # noqa: BLE001 - one broken image must not stop a batch
-        logger.error("unexpected error measuring %s", path, exc_info=exc)
-        return key, json.dumps({"status": "failed", "message":
-                                f"internal error: {type(exc).__name__}: {exc}"}), "measured"
+        return _Cache.measure(read.image, settings=_settings_from(settings_json), name=path,
+                              candidates=read.candidates)
+
+    done = attempt(measure, read, name=path)
+    if done.unexpected:  # a bug, not the image: not cached, so the next run tries again
+        return key, json.dumps({"status": "failed", "message": done.message}), "measured"
+    entry = {"status": "ok", "pair": done.value.to_dict()} if done.ok else {"status": "failed", "message": done.message}
     entry["image_xxh3_128"] = read.image_hash
     text = json.dumps(entry, sort_keys=True)
     if _Cache.log is not None:
@@ -178,26 +177,28 @@ def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:
     return finish_task(read_task(task), task)
 
 
-def start_worker(cache_dir: str, run: str, known: frozenset) -> None:
+def start_worker(cache_dir: str, run: str, known: frozenset, measure=measure_pair) -> None:
     """Worker initializer: one thread for BLAS and OpenCV (:func:`one_thread`), the
-    keys already cached, and a cache log of this run."""
+    keys already cached, a cache log of this run, and the measuring function
+    (:func:`~vision_torsion.pair.measure_pair` unless the caller passed another)."""
     one_thread()
     _Cache.known = known
     _Cache.log = CacheLog(cache_dir, run)
+    _Cache.measure = staticmethod(measure)
 
 
 @contextmanager
-def in_process(cache_dir: str, run: str, known: frozenset):
+def in_process(cache_dir: str, run: str, known: frozenset, measure=measure_pair):
     """:func:`start_worker` for measuring in this process (one thread while
     measuring, then as it was; the log closed afterwards)."""
-    saved = _Cache.known, _Cache.log
-    _Cache.known, _Cache.log = known, CacheLog(cache_dir, run)
+    saved = _Cache.known, _Cache.log, _Cache.measure
+    _Cache.known, _Cache.log, _Cache.measure = known, CacheLog(cache_dir, run), staticmethod(measure)
     try:
         with one_thread_here():
             yield
     finally:
         _Cache.log.close()
-        _Cache.known, _Cache.log = saved
+        _Cache.known, _Cache.log, _Cache.measure = saved
 
 
 def one_thread() -> None:

@@ -1,12 +1,12 @@
-"""Shared helpers for the session tests (imported by the other test_session_* files).
+"""Shared helpers for the session tests (not a test module: imported by test_session_*).
 
 - :func:`draw_target` renders two dark discs at sub-pixel centres with OpenCV, the
   way a camera sees the marker target rotated by a known angle.
 - :func:`make_session` plans a small session and renders every image of it with a
   known angle, returning the truth.
-- :func:`install_fake_core` replaces ``vision_torsion.pair`` / ``vision_torsion.angle``
-  by a simple centroid measurer so the bookkeeping of ``process`` (cache, resume,
-  failures, output table) can be tested independently of the measurement core, and
+- :class:`FakeCore` is a simple centroid measurer, passed to ``process_session`` as
+  its ``measure`` function, so the bookkeeping of ``process`` (cache, resume,
+  failures, output table) can be tested independently of the measurement core; it
   counts the images it measured.
 """
 
@@ -14,9 +14,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import sys
-import types
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import cv2
@@ -24,6 +21,8 @@ import numpy as np
 
 from vision_torsion.errors import MarkerError
 from vision_torsion.images import load_image, write_image
+from vision_torsion.markers import Marker
+from vision_torsion.pair import PairMeasurement
 from vision_torsion.session.plan import plan_session
 
 # Image geometry: non-square, target centre off the pixel grid.
@@ -96,33 +95,18 @@ def tree_digest(folder, *, exclude=()) -> dict[str, tuple[str, int]]:
 # -- a stand-in for the measurement core ----------------------------------------------
 
 
-@dataclass(frozen=True)
-class FakePair:
-    x1: float
-    y1: float
-    x2: float
-    y2: float
-
-    def to_dict(self):
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d):
-        return cls(**d)
-
-
-@dataclass(frozen=True)
-class FakeAngle:
-    angle_deg: float
-    angle_std_deg: float
-
-
 class FakeCore:
-    """Centroids of the two largest dark blobs; counts what it measured."""
+    """Centroids of the two largest dark blobs, as a real :class:`PairMeasurement`;
+    counts what it measured.
+
+    Passed to ``process_session(..., measure=core.measure_pair)`` so the bookkeeping of
+    ``process`` (cache, resume, failures, output table) is tested apart from the
+    measurement core; the angles are then computed by the real
+    :func:`vision_torsion.angle.sequence_angles` from these centres.
+    """
 
     def __init__(self, *, interrupt_after: int | None = None):
         self.measured: list[str] = []
-        self.corrections: list = []
         self.interrupt_after = interrupt_after
 
     def measure_pair(self, image, *, settings, name=None, candidates=None):
@@ -135,32 +119,13 @@ class FakeCore:
             raise MarkerError(f"{name or image}: found {n - 1} marker(s), expected 2")
         big = 1 + np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:2]
         ys, xs = np.indices(data.shape)
-        centres = []
+        markers = []
         for label in big:
             w = np.where(labels == label, weight, 0)
-            centres.append((float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())))
-        (x1, y1), (x2, y2) = sorted(centres)
+            x, y = float((w * xs).sum() / w.sum()), float((w * ys).sum() / w.sum())
+            radius = math.sqrt(stats[label, cv2.CC_STAT_AREA] / math.pi)
+            markers.append(Marker(x_px=x, y_px=y, radius_px=radius, x_std_px=0.01, y_std_px=0.01,
+                                  xy_cov_px2=0.0, radius_std_px=0.01))
+        first, second = sorted(markers, key=lambda m: m.x_px)
         self.measured.append(name or str(image))
-        return FakePair(x1, y1, x2, y2)
-
-    @staticmethod
-    def _direction(p):
-        return math.degrees(math.atan2(-(p.y2 - p.y1), p.x2 - p.x1))
-
-    def sequence_angles(self, reference, pairs, *, correction=None):
-        self.corrections.append(correction)
-        ref = self._direction(reference)
-        return [None if p is None else FakeAngle(self._direction(p) - ref, 0.01)
-                for p in pairs]
-
-
-def install_fake_core(monkeypatch, core: FakeCore) -> FakeCore:
-    pair = types.ModuleType("vision_torsion.pair")
-    pair.measure_pair = core.measure_pair
-    pair.PairMeasurement = FakePair
-    angle = types.ModuleType("vision_torsion.angle")
-    angle.sequence_angles = core.sequence_angles
-    angle.AngleResult = FakeAngle
-    monkeypatch.setitem(sys.modules, "vision_torsion.pair", pair)
-    monkeypatch.setitem(sys.modules, "vision_torsion.angle", angle)
-    return core
+        return PairMeasurement(first=first, second=second)
