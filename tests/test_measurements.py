@@ -90,6 +90,17 @@ def test_result_is_indexed_by_line_and_the_callers_frame_is_untouched():
     assert out["cycle"].dtype == np.float64 and (out["message"] == "").all()
     # a column that needed no change is shared, not copied
     assert np.shares_memory(out["angle_deg"].to_numpy(), table["angle_deg"].to_numpy())
+    # rows taken from a table it returned keep their line numbers
+    subset = out[out["phase"] == "negative_loading"]
+    assert list(read_measurements(subset).index) == list(subset.index) != list(range(2, len(subset) + 2))
+
+
+def test_bad_value_in_a_subset_keeps_its_line():
+    out = read_measurements(_table())
+    subset = out[out.index >= 10].astype({"angle_deg": object})
+    subset.loc[12, "angle_deg"] = "?"
+    with pytest.raises(MeasurementsError, match=r"line 12: column angle_deg is not a number"):
+        read_measurements(subset)
 
 
 def test_missing_file_and_columns():
