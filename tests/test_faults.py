@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from test_session_support import draw_target, make_session, tree_digest
+from helpers import draw_target, make_session, tree_digest
 from vision_torsion import fileio
 from vision_torsion.cli import main
 from vision_torsion.errors import ImageReadError, OutputError

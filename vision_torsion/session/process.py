@@ -157,8 +157,6 @@ def _settings_key(settings: MeasureSettings, measure=measure_pair) -> str:
 def _valid_entry(entry: dict) -> bool:
     """The cache's schema check: a failure carries its message, a result a marker
     pair that rebuilds (:meth:`~vision_torsion.pair.PairMeasurement.from_dict`)."""
-    from ..pair import PairMeasurement
-
     if entry.get("status") == "failed":
         return isinstance(entry.get("message"), str)
     try:
