@@ -48,7 +48,7 @@ def _failures(analysis, failures) -> pd.DataFrame:
 
 
 def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failures=None, extra_sections=None,
-                 title="Torsional stiffness and hysteresis report") -> ReportFiles:
+                 title="Torsional stiffness and hysteresis report", metadata=None) -> ReportFiles:
     """Write summary.json, stiffness_table.csv, figures/*.png and report.html.
 
     Parameters
@@ -70,6 +70,10 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
         Extra HTML sections appended to the page (trusted HTML).
     title : str
         Page title.
+    metadata : dict, optional
+        The test's metadata (gear, serial, operator, temperature, notes, ...) shown
+        at the top of the page with the software version and date, and stored
+        under ``metadata`` in summary.json.
 
     Returns
     -------
@@ -90,17 +94,18 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
 
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     pngs = {
-        "loops_overlay.png": _fig.png_bytes(_fig.loops_overlay(analysis)),
-        "phase_stiffness.png": _fig.png_bytes(_fig.phase_stiffness_chart(analysis)),
-        "orientation_effect.png": _fig.png_bytes(_fig.orientation_chart(analysis)),
+        "loops_overlay.png": _fig.safe_png(_fig.loops_overlay, analysis),
+        "phase_stiffness.png": _fig.safe_png(_fig.phase_stiffness_chart, analysis),
+        "orientation_effect.png": _fig.safe_png(_fig.orientation_chart, analysis),
     }
-    loop_pngs = [(o, _fig.png_bytes(_fig.loop_detail(analysis, o))) for o in orients]
+    loop_pngs = [(o, _fig.safe_png(_fig.loop_detail, analysis, o)) for o in orients]
     for o, png in loop_pngs:
         pngs[f"loop_{o:g}deg.png"] = png
     fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in pngs.items())
 
     summary = analysis.to_dict()
     summary["conditions"] = dict(conditions)
+    summary["metadata"] = {k: v for k, v in (metadata or {}).items() if v is not None}
     summary["counts"]["images"] = int(len(measurements_df))
     summary["counts"]["images_failed"] = int(len(failed))
     summary["failed_images"] = failed.to_dict(orient="records")
@@ -112,7 +117,7 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
         title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
         figures={"overlay": pngs["loops_overlay.png"], "stiffness": pngs["phase_stiffness.png"],
                  "orientation": pngs["orientation_effect.png"], "loops": loop_pngs},
-        failed=failed, extra_sections=extra_sections or (),
+        failed=failed, extra_sections=extra_sections or (), metadata=metadata,
     )
     html_path = atomic_write_text(out / "report.html", page)
     return ReportFiles(out_dir=out, summary_json=summary_path, stiffness_table_csv=table_path,

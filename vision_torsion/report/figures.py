@@ -2,19 +2,32 @@
 
 ``matplotlib.figure.Figure`` with an explicit Agg canvas: no pyplot, no global
 backend change, safe to import in any program.
+
+Every figure takes data of any sign and range: a value axis is logarithmic only
+when every value on it is positive and they span at least a decade, and then
+carries ticks at 1, 2 and 5 × 10ⁿ, so it never shows a single tick label; else it
+is linear (a wrong angle sign gives negative stiffnesses, which must be drawn, not
+crash the report). Titles say in words what is plotted, with units.
 """
 
 from __future__ import annotations
 
 import io
+import logging
 import math
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import NullFormatter, ScalarFormatter
+from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
-__all__ = ["png_bytes", "loops_overlay", "loop_detail", "phase_stiffness_chart", "orientation_chart"]
+__all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "phase_stiffness_chart", "orientation_chart",
+           "value_scale"]
+
+logger = logging.getLogger(__name__)
+
+#: A value axis is logarithmic only when its positive values span at least this ratio.
+LOG_AXIS_MIN_RATIO = 10.0
 
 _PHASE_LABELS = {
     "positive_unloading": "positive unloading", "negative_loading": "negative loading",
@@ -28,6 +41,54 @@ def png_bytes(fig: Figure, *, dpi: int = 110) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi)
     return buf.getvalue()
+
+
+def safe_png(draw, *args) -> bytes:
+    """PNG of ``draw(*args)``; if drawing fails, a PNG saying so, so the report is
+    still written (the reason is logged as a warning and printed in the figure).
+
+    Examples
+    --------
+    >>> def broken():
+    ...     raise ValueError("no data")
+    >>> safe_png(broken)[1:4]
+    b'PNG'
+    """
+    try:
+        return png_bytes(draw(*args))
+    except (ValueError, TypeError, KeyError, IndexError, ZeroDivisionError, OverflowError) as exc:
+        name = getattr(draw, "__name__", "figure")
+        logger.warning("report figure %s could not be drawn: %s", name, exc)
+        fig = Figure(figsize=(6.0, 1.2))
+        fig.text(0.5, 0.5, f"This figure ({name.replace('_', ' ')}) could not be drawn:\n{exc}",
+                 ha="center", va="center", wrap=True, fontsize=9)
+        return png_bytes(fig)
+
+
+def value_scale(values) -> str:
+    """``"log"`` when every finite value is > 0 and they span >= LOG_AXIS_MIN_RATIO, else ``"linear"``.
+
+    Examples
+    --------
+    >>> value_scale([0.3, 4.5]), value_scale([1.0, 2.0]), value_scale([-0.5, 4.0]), value_scale([])
+    ('log', 'linear', 'linear', 'linear')
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0 or np.any(v <= 0):
+        return "linear"
+    return "log" if v.max() / v.min() >= LOG_AXIS_MIN_RATIO else "linear"
+
+
+def _set_value_axis(ax, values) -> None:
+    """y axis per :func:`value_scale`; a log axis gets labels at 1, 2, 5 × 10ⁿ."""
+    if value_scale(values) == "log":
+        ax.set_yscale("log")
+        ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(ScalarFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    else:
+        ax.axhline(0.0, color="0.5", lw=0.6)
 
 
 def _colours(n: int):
@@ -61,7 +122,7 @@ def loops_overlay(analysis) -> Figure:
         ax.plot(np.degrees(lp.angle_rad), lp.torque_nm, "-o", ms=2.5, lw=1.0, color=colours[lp.orientation_deg],
                 label=label, alpha=0.85)
     _axes_labels(ax)
-    ax.set_title("Torque–angle loops, all orientations and cycles")
+    ax.set_title("Torque (N·m) against rotation angle (deg): every loop, one colour per orientation")
     if orients:
         ax.legend(title="orientation", fontsize=8)
     return fig
@@ -92,32 +153,50 @@ def loop_detail(analysis, orientation_deg: float) -> Figure:
                 ax.plot(np.degrees(fit.predict(dense)), dense, style, lw=1.3,
                         color="tab:red" if key == "bilinear" else "tab:blue", label=label if k == 0 else None)
     _axes_labels(ax)
-    ax.set_title(f"Orientation {orientation_deg:g}°")
+    ax.set_title(f"Torque (N·m) against rotation angle (deg) at orientation {orientation_deg:g}°,\n"
+                 "measured and fitted", fontsize=10)
     ax.legend(fontsize=8)
     return fig
 
 
 def phase_stiffness_chart(analysis) -> Figure:
-    """Stiffness of each phase per orientation (mean over cycles, ±u95), log scale."""
+    """Stiffness of each phase per orientation (mean over cycles, ±u95); the value
+    axis is logarithmic only where that shows more than one tick label."""
     fig = Figure(figsize=(7.5, 4.2), layout="constrained")
     ax = fig.add_subplot()
     po = analysis.per_orientation
     orients = _orientations(analysis)
     width = 0.8 / 4
+    values = []
     for j, (phase, label) in enumerate(_PHASE_LABELS.items()):
         sub = po[po["figure"] == f"k_{phase}"].set_index("orientation_deg").reindex(orients)
         x = np.arange(len(orients)) + (j - 1.5) * width
-        ax.bar(x, sub["mean"], width, yerr=2 * sub["std"], label=label, capsize=2)
+        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0)
+        ax.bar(x, sub["mean"].to_numpy(dtype=float), width, yerr=yerr, label=label, capsize=2)
+        values.extend(sub["mean"].to_numpy(dtype=float))
     ax.set_xticks(np.arange(len(orients)), [f"{o:g}°" for o in orients])
-    ax.set_yscale("log")
-    ax.yaxis.set_major_formatter(ScalarFormatter())
-    ax.yaxis.set_minor_formatter(NullFormatter())
+    _set_value_axis(ax, values)
+    if not np.isfinite(np.asarray(values, dtype=float)).any():
+        ax.text(0.5, 0.5, "no phase stiffness could be computed (reasons in the table of figures not computed)",
+                ha="center", va="center", transform=ax.transAxes, fontsize=9)
     ax.set_ylabel("stiffness (N·m/rad)")
-    ax.set_xlabel("orientation")
-    ax.set_title("Segmental stiffness per phase (error bars: u95, k = 2)")
+    ax.set_xlabel("flexspline orientation (deg)")
+    ax.set_title("Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95 (k = 2)",
+                 fontsize=10)
     ax.grid(True, axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=8)
     return fig
+
+
+#: The analysis's unit codes as a reader writes them.
+_UNIT_WORDS = {"nm_per_rad": "N·m/rad", "nm": "N·m", "j": "J", "deg": "deg", "per_nm": "1/(N·m)", "1": ""}
+
+_FIGURE_WORDS = {
+    "hysteresis": "Hysteresis, largest loop width",
+    "loop_energy": "Energy lost per loop",
+    "bilinear_k_u": "Bilinear stiffness above the switch",
+    "bilinear_k_l": "Bilinear stiffness below the switch",
+}
 
 
 def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_k_u", "bilinear_k_l")) -> Figure:
@@ -131,17 +210,21 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
         ax = fig.add_subplot(rows, cols, i + 1)
         sub = po[po["figure"] == name]
         s = analysis.summary.get(name, {})
-        if sub.empty:
-            ax.text(0.5, 0.5, f"{name}: not available", ha="center", va="center", transform=ax.transAxes)
+        words = _FIGURE_WORDS.get(name, name.replace("_", " "))
+        if sub.empty or not np.isfinite(sub["mean"].to_numpy(dtype=float)).any():
+            ax.text(0.5, 0.5, f"{words}: not available", ha="center", va="center", transform=ax.transAxes)
             ax.set_axis_off()
             continue
-        ax.errorbar(sub["orientation_deg"], sub["mean"], yerr=2 * sub["std"], fmt="o", capsize=3)
+        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0)
+        ax.errorbar(sub["orientation_deg"], sub["mean"], yerr=yerr, fmt="o", capsize=3)
         if s.get("mean") is not None:
             ax.axhline(s["mean"], color="tab:red", lw=0.8, ls="--", label="session mean")
         test = s.get("orientation_test", {})
-        verdict = ("orientation effect > uncertainty" if test.get("significant")
-                   else "no orientation effect beyond uncertainty" if test.get("significant") is False else "not tested")
-        ax.set_title(f"{name} ({s.get('unit', '')})\n{verdict}", fontsize=9)
+        verdict = ("orientation effect found" if test.get("significant")
+                   else "no orientation effect found" if test.get("significant") is False else "orientation effect not tested")
+        unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
+        ax.set_ylabel(unit or "(no unit)")
+        ax.set_title(f"{words}{f' ({unit})' if unit else ''}\n{verdict}", fontsize=9)
         ax.set_xticks(sub["orientation_deg"])
         ax.set_xlabel("orientation (deg)")
         ax.grid(True, alpha=0.3)

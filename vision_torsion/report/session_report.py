@@ -78,6 +78,25 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
     }
 
 
+def _test_metadata(session) -> dict:
+    """The test's metadata from session.toml's optional ``[test]``/``[gear]`` tables
+    (whatever the configuration carries under ``test`` and ``gear``: a dict or a
+    dataclass), only the entries present."""
+    import dataclasses
+
+    out = {}
+    for table in ("gear", "test"):
+        value = getattr(session.config, table, None)
+        if value is None:
+            continue
+        if dataclasses.is_dataclass(value):
+            value = dataclasses.asdict(value)
+        if isinstance(value, dict):
+            out.update({k: v for k, v in value.items()
+                        if v is not None and not isinstance(v, (dict, list, tuple)) or isinstance(v, (list, tuple)) and v})
+    return out
+
+
 _STIFFNESS_TITLE = "Stiffness per load step (Δτ/Δθ, each loop on its own)"
 
 
@@ -204,6 +223,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
             conditions=_conditions(session, result.n_images, result.n_failed),
             out_dir=out,
             extra_sections=extra,
+            metadata=_test_metadata(session),
         )
     return SessionReport(
         files=files,
