@@ -518,3 +518,54 @@ def test_implausible_rig_numbers_are_errors_with_the_unit(capsys, small_session,
     path.write_text(text)
     code, _, err = _process(capsys, small_session, tmp_path)
     assert code == 2 and re.search(message, err), err
+
+
+# -- worker processes end with the main process ----------------------------------------------
+
+
+def _children(pid: int) -> set[int]:
+    """Every descendant of `pid` (Linux /proc)."""
+    found, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            text = Path(f"/proc/{p}/task/{p}/children").read_text()
+        except OSError:
+            continue
+        kids = {int(k) for k in text.split()}
+        todo.extend(kids - found)
+        found |= kids
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_workers_exit_when_the_main_process_is_killed(tmp_path):
+    import signal
+    import sys
+    import time
+
+    from test_session_core import draw
+
+    folder = tmp_path / "session"
+    make_session(folder, orientations=(0, 60, 120), steps=8, draw=draw)
+    script = ("import sys; from vision_torsion.session import process_session; "
+              "process_session(sys.argv[1], out_dir=sys.argv[2], jobs=4)")
+    proc = subprocess.Popen([sys.executable, "-c", script, str(folder), str(tmp_path / "out")])
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None and len(workers) < 4:
+            workers = _children(proc.pid)
+            time.sleep(0.02)
+        if proc.poll() is not None:
+            pytest.skip("the run finished before its workers were seen")
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait()
+    deadline = time.monotonic() + 10
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = {w for w in alive if Path(f"/proc/{w}").exists()
+                 and Path(f"/proc/{w}/stat").read_text().split(")")[-1].split()[0] != "Z"}
+    assert not alive, f"worker processes still running after the main process died: {alive}"

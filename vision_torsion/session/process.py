@@ -220,7 +220,7 @@ def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, kn
         # that long for the other; the messages cost ~0.2 ms each
         chunksize = max(1, min(4, len(tasks) // (jobs * 8)))
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=start_worker,
-                                   initargs=(cache_dir, run, known, measure))
+                                   initargs=(cache_dir, run, known, measure, os.getpid()))
         try:
             for result in pool.map(measure_task, tasks, chunksize=chunksize):
                 yield result

@@ -32,7 +32,7 @@ from ..pair import measure_pair
 from ..settings import MeasureSettings
 from .cache import CacheLog
 
-__all__ = ["measure_task", "read_task", "finish_task", "ReadImage", "digest", "content_hash", "start_worker", "in_process", "one_thread", "one_thread_here"]
+__all__ = ["measure_task", "read_task", "finish_task", "ReadImage", "digest", "content_hash", "start_worker", "exit_with", "in_process", "one_thread", "one_thread_here"]
 
 logger = logging.getLogger(__name__)
 
@@ -177,14 +177,55 @@ def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:
     return finish_task(read_task(task), task)
 
 
-def start_worker(cache_dir: str, run: str, known: frozenset, measure=measure_pair) -> None:
+def start_worker(cache_dir: str, run: str, known: frozenset, measure=measure_pair,
+                 main_pid: int | None = None) -> None:
     """Worker initializer: one thread for BLAS and OpenCV (:func:`one_thread`), the
-    keys already cached, a cache log of this run, and the measuring function
-    (:func:`~vision_torsion.pair.measure_pair` unless the caller passed another)."""
+    keys already cached, a cache log of this run, the measuring function
+    (:func:`~vision_torsion.pair.measure_pair` unless the caller passed another), and
+    a watchdog that ends this worker when the main process `main_pid` dies
+    (:func:`exit_with`)."""
+    if main_pid is not None:
+        exit_with(main_pid)
     one_thread()
     _Cache.known = known
     _Cache.log = CacheLog(cache_dir, run)
     _Cache.measure = staticmethod(measure)
+
+
+def exit_with(main_pid: int, *, interval_s: float = 0.2) -> None:
+    """End this process soon after the process `main_pid` dies.
+
+    A worker whose main process was killed (SIGKILL, a crash, the terminal closed)
+    would otherwise go on measuring the rest of its tasks for nobody. A daemon
+    thread checks every `interval_s` whether the main process still exists and
+    whether this process's parent changed (the fork server, the parent of workers
+    started through it, exits when the main process does); then the worker exits
+    at once (``os._exit``: nothing of its own is left to save, every result it
+    finished is already in its cache log).
+    """
+    import os
+    import threading
+    import time
+
+    parent = os.getppid()
+
+    def gone() -> bool:
+        if os.getppid() != parent:
+            return True
+        try:
+            os.kill(main_pid, 0)
+        except ProcessLookupError:
+            return True
+        except PermissionError:
+            return False
+        return False
+
+    def watch():
+        while not gone():
+            time.sleep(interval_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="vision-torsion-watchdog", daemon=True).start()
 
 
 @contextmanager
