@@ -47,9 +47,9 @@ import numpy as np
 import tomli_w
 
 from ..errors import CalibrationError
-from ..textfiles import read_toml
 from ..fileio import atomic_write_text
 from ..pair import PairMeasurement
+from ..textfiles import decode_utf8, read_toml
 
 __all__ = ["PlaneCorrection", "load_correction", "normalised", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -311,13 +311,14 @@ class PlaneCorrection:
             d = read_toml(p, what="a plane correction file", error=CalibrationError)
         else:
             try:
-                text = p.read_text(encoding="utf-8")
+                raw = p.read_bytes()
             except FileNotFoundError:
                 raise CalibrationError(f"{p}: no such file; expected a plane correction file",
                                        reason="not_found") from None
-            except (OSError, UnicodeDecodeError) as exc:
-                raise CalibrationError(f"{p}: cannot be read ({getattr(exc, 'strerror', None) or exc})",
+            except OSError as exc:
+                raise CalibrationError(f"{p}: cannot be read ({exc.strerror or exc})",
                                        reason="unreadable") from None
+            text = decode_utf8(raw, name=p, error=CalibrationError, what="the correction file")
             try:
                 d = json.loads(text)
             except json.JSONDecodeError as exc:

@@ -31,6 +31,7 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import SessionError
 from ..fileio import atomic_write_text
+from ..textfiles import decode_utf8
 
 __all__ = ["Binding", "load_binding", "write_binding", "BINDING_NAME"]
 
@@ -85,7 +86,7 @@ def load_binding(session_dir) -> Binding | None:
     """
     path = Path(session_dir) / BINDING_NAME
     try:
-        text = path.read_text(encoding="utf-8")
+        text = decode_utf8(path.read_bytes(), name=path, error=SessionError, what="binding.json")
     except FileNotFoundError:
         return None
     except OSError as exc:
