@@ -57,7 +57,7 @@ def _exact_pair(rendered) -> PairMeasurement:
 
 
 def tilted(seeds: int) -> dict:
-    scene = load_scene(ROOT / "synthetic" / "tilted.toml")
+    scene = load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "tilted.toml")
     angles = list(scene.sweep.angles_deg)
     truth = np.array(angles[1:])
     runs = []
@@ -103,7 +103,7 @@ def tilted(seeds: int) -> dict:
 
 
 def standard() -> dict:
-    scene = load_scene(ROOT / "synthetic" / "standard.toml")
+    scene = load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
     angles = [a for a in scene.sweep.angles_deg if a != 0.0]
     ref_img = render(scene, 0.0, seed=10_000).image
     imgs = [render(scene, a, seed=i).image for i, a in enumerate(angles)]
@@ -117,7 +117,7 @@ def standard() -> dict:
             names.append(f"img_{i:03d}.png")
             write_image(d / names[-1], im, bit_depth=8)
         write_csv(d / "reference.csv", pd.DataFrame({"image": names, "reference_angle_deg": [0.0, *angles]}))
-        res = check_accuracy(d, spec=ROOT / "calibration" / "synthetic_selfcheck.toml")
+        res = check_accuracy(d, spec=ROOT / "vision_torsion" / "calibration" / "specs" / "synthetic_selfcheck.toml")
     core = ROOT / "benchmarks" / "results" / "core.json"
     core_rms = None
     if core.is_file():

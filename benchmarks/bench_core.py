@@ -135,11 +135,11 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=20, help="repeats of the sweep (default 20: 400 angles)")
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)  # one core
-    std = load_scene(ROOT / "synthetic" / "standard.toml")
+    std = load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
     acc = accuracy(std, args.repeats)
     spd = speed(std)  # after the accuracy run: the first few hundred calls of a fresh process run slower
     rt = render_time(std)
-    dis = distractors(load_scene(ROOT / "synthetic" / "distractors.toml"))
+    dis = distractors(load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "distractors.toml"))
     rows = [
         ("angles measured", f"{acc['n']}", ""),
         ("RMS angle error", f"{acc['rms_deg']:.5f}°", "≤ 0.0007°"),

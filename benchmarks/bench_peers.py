@@ -65,7 +65,7 @@ import numpy as np  # noqa: E402
 from peers import PEERS, PeerFailure  # noqa: E402
 
 ROOT = HERE.parent
-SCENE_DIR = ROOT / "synthetic"
+SCENE_DIR = ROOT / "vision_torsion" / "synthetic" / "scenes"
 RESULTS = HERE / "results"
 
 #: Scenes in table order, with the file stem in ``synthetic/`` and whether the

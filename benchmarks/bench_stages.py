@@ -50,7 +50,7 @@ one_core()  # one thread per process (BLAS, OpenCV): workers inherit the environ
 
 import numpy as np  # noqa: E402
 
-SCENE = HERE.parent / "synthetic" / "standard.toml"
+SCENE = HERE.parent / "vision_torsion" / "synthetic" / "scenes" / "standard.toml"
 RESULTS = HERE / "results"
 BASE_SEED = 20240809
 

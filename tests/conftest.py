@@ -22,7 +22,7 @@ def small_scene():
     )
 
 
-SCENE_DIR = __import__("pathlib").Path(__file__).resolve().parents[1] / "synthetic"
+SCENE_DIR = __import__("pathlib").Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes"
 
 
 @pytest.fixture(scope="session")

@@ -40,7 +40,7 @@ DEFAULT_TOLERANCE_PX = 0.1
 
 @pytest.fixture(scope="module")
 def standard_image():
-    scene = load_scene(Path(__file__).resolve().parents[1] / "synthetic" / "standard.toml")
+    scene = load_scene(Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
     return render(scene, 27.5, seed=np.random.default_rng(8))
 
 

@@ -27,7 +27,7 @@ ANGLES = [0.0, -40.0, 15.0, 65.0]
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     out = tmp_path_factory.mktemp("acc") / "check"
-    write_accuracy_folder(load_scene(ROOT / "synthetic" / "standard.toml"), out, angles_deg=ANGLES, seed=5)
+    write_accuracy_folder(load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml"), out, angles_deg=ANGLES, seed=5)
     return out
 
 
@@ -84,9 +84,9 @@ def test_cli_exit_codes(folder, tmp_path, capsys):
 
 
 def test_spec_sets_tolerance_and_cli_overrides(folder, tmp_path):
-    spec = ROOT / "calibration" / "synthetic_selfcheck.toml"
+    spec = ROOT / "vision_torsion" / "calibration" / "specs" / "synthetic_selfcheck.toml"
     assert load_spec(spec).tolerance_deg == 0.005
-    assert load_spec(ROOT / "calibration" / "rotary_stage.toml").tolerance_deg == 0.02
+    assert load_spec(ROOT / "vision_torsion" / "calibration" / "specs" / "rotary_stage.toml").tolerance_deg == 0.02
     res = check_accuracy(folder, out_dir=tmp_path / "s", spec=spec)
     assert res.tolerance_deg == 0.005
     assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "t"), "--spec", str(spec), "--tolerance", "1e-7", "-q"]) == 1

@@ -15,7 +15,7 @@ from vision_torsion.synthetic.geometry import CameraMapping, marker_centres_disk
 
 from pathlib import Path
 
-TILTED = load_scene(Path(__file__).resolve().parents[1] / "synthetic" / "tilted.toml")
+TILTED = load_scene(Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "tilted.toml")
 CAM = CameraMapping(TILTED)
 SIGMA = 0.005  # px: the measured centre uncertainty on the standard scene
 

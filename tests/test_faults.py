@@ -569,3 +569,41 @@ def test_workers_exit_when_the_main_process_is_killed(tmp_path):
         alive = {w for w in alive if Path(f"/proc/{w}").exists()
                  and Path(f"/proc/{w}/stat").read_text().split(")")[-1].split()[0] != "Z"}
     assert not alive, f"worker processes still running after the main process died: {alive}"
+
+
+# -- ready scenes and specs by name -----------------------------------------------------------
+
+
+def test_ready_scenes_and_specs_are_named(capsys, tmp_path):
+    from vision_torsion.calibration.accuracy import load_spec
+    from vision_torsion.errors import SceneError
+    from vision_torsion.resources import SCENES, SPECS, available
+    from vision_torsion.synthetic import load_scene
+
+    assert {"standard", "jpeg", "paper_session", "small_target"} <= set(available(SCENES))
+    assert set(available(SPECS)) >= {"rotary_stage", "synthetic_selfcheck"}
+    assert load_scene("standard").image.width == 1400
+    assert load_spec("rotary_stage").tolerance_deg == 0.02
+    with pytest.raises(SceneError, match=r"standrd: no such file, and no ready scene of that name "
+                                         r"\(ready: distractors, jpeg, "):
+        load_scene("standrd")
+    code, _, _ = run(capsys, "synth", "accuracy", tmp_path / "a", "--scene", "small_target", "--angles", "1")
+    assert code == 0 and (tmp_path / "a" / "reference.csv").is_file()
+
+
+@pytest.mark.parametrize("name", ["binding.json", "correction.json"])
+def test_json_inputs_with_a_bom_or_another_encoding(tmp_path, name):
+    from vision_torsion.calibration.correction import load_correction
+    from vision_torsion.errors import CalibrationError, SessionError
+    from vision_torsion.session.binding import load_binding
+
+    path = tmp_path / name
+    path.write_bytes("{\"k\": \"é\"}".encode("latin-1"))
+    error, load = ((SessionError, lambda: load_binding(tmp_path)) if name == "binding.json"
+                   else (CalibrationError, lambda: load_correction(path)))
+    with pytest.raises(error, match=rf"{name}: line 1: not UTF-8 text \(byte 0xe9 at column 8\)"):
+        load()
+    path.write_bytes(b"\xef\xbb\xbf{}")  # a BOM is read past: the complaint is about the content
+    with pytest.raises(error) as info:
+        load()
+    assert "BOM" not in str(info.value) and "UTF-8" not in str(info.value)

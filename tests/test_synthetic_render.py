@@ -9,7 +9,7 @@ from vision_torsion.synthetic.coverage import band_coverage, shape_coverage, squ
 from vision_torsion.synthetic.geometry import CameraMapping, marker_centres_disk, rotate_about
 from vision_torsion.synthetic.render import _circle_distance_fn
 
-SCENES = sorted((__import__("pathlib").Path(__file__).parents[1] / "synthetic").glob("*.toml"))
+SCENES = sorted((__import__("pathlib").Path(__file__).parents[1] / "vision_torsion" / "synthetic" / "scenes").glob("*.toml"))
 
 
 def _disc(cx, cy, r, size=(90, 100)):

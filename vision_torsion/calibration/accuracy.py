@@ -211,7 +211,9 @@ def load_spec(path) -> AccuracySpec:
     ReferenceTableError
         The file is missing, not TOML, has unknown keys or a bad value (named).
     """
-    p = Path(path)
+    from ..resources import SPECS, named_file
+
+    p = named_file(path, SPECS, error=ReferenceTableError, what="spec")  # a path, or a ready spec's name
     d = read_toml(p, what="an accuracy-check spec (TOML)", error=ReferenceTableError)
     unknown = set(d) - {"description", "tolerance_deg", "reference_std_deg", "correction", "markers"}
     if unknown:

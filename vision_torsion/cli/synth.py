@@ -20,7 +20,7 @@ def register(sub) -> None:
         description="Render images at the scene's sweep angles (or --angles) with reference.csv and truth.csv.",
     )
     a.add_argument("out_dir", metavar="OUT_DIR")
-    a.add_argument("--scene", required=True, metavar="FILE", help="scene TOML (see synthetic/)")
+    a.add_argument("--scene", required=True, metavar="FILE", help="scene TOML file, or the name of a ready scene: standard, small_target, low_contrast, distractors, jpeg, twelve_bit, tilted")
     a.add_argument("--angles", nargs="+", type=float, metavar="DEG", help="rotation angles in degrees (CCW)")
     a.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     add_force_option(a, "OUT_DIR")
@@ -35,7 +35,7 @@ def register(sub) -> None:
         ),
     )
     s.add_argument("out_dir", metavar="OUT_DIR")
-    s.add_argument("--scene", required=True, metavar="FILE", help="scene TOML with a [session] table (see synthetic/paper_session.toml)")
+    s.add_argument("--scene", required=True, metavar="FILE", help="scene TOML file with a [session] table, or a ready scene's name: paper_session")
     s.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     add_force_option(s, "OUT_DIR")
     add_common_options(s)

@@ -288,7 +288,9 @@ def load_scene(path) -> Scene:
         The file is missing or not valid TOML, or a field is missing, wrong-typed or
         inconsistent; the message names the file and the field.
     """
-    p = Path(path)
+    from ..resources import SCENES, named_file
+
+    p = named_file(path, SCENES, error=SceneError, what="scene")  # a path, or a ready scene's name
     data = read_toml(p, what="a scene file (TOML)", error=SceneError)
     return scene_from_dict(data, where=str(p), name=p.stem)
 

@@ -86,7 +86,9 @@ def load_session_scene(path) -> tuple[Scene, SessionSpec]:
     SceneError
         The file is missing, invalid, or its ``[session]`` table has a bad field.
     """
-    p = Path(path)
+    from ..resources import SCENES, named_file
+
+    p = named_file(path, SCENES, error=SceneError, what="scene")  # a path, or a ready scene's name
     data = read_toml(p, what="a scene file (TOML)", error=SceneError)
     table = data.pop("session", {})
     if not isinstance(table, dict):
