@@ -165,3 +165,15 @@ def test_step_stiffness_reads_a_file(tmp_path):
     synthetic_measurements(steps=3).to_csv(p, index=False)
     assert len(step_stiffness(p)) == 4 * 3
     assert isinstance(summarise_steps(step_stiffness(p)), pd.DataFrame)
+
+
+def test_step_stiffness_names_a_missing_column_and_a_bad_line():
+    from vision_torsion.errors import RecordError
+
+    table = synthetic_measurements(steps=3)
+    with pytest.raises(RecordError, match="step"):
+        step_stiffness(table.drop(columns="step"))
+    table = table.astype({"angle_deg": object})
+    table.loc[4, "angle_deg"] = "n/a"
+    with pytest.raises(RecordError, match=r"line 6: column angle_deg is not a number \('n/a'\)"):
+        step_stiffness(table)

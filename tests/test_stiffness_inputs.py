@@ -99,8 +99,9 @@ def test_torque_that_never_changes_is_a_sensor_not_read():
     # was "the polynomial fit is not monotonic; try a lower --order").
     frame = _encoder_frame()
     frame["torque_nm"] = 2.5
-    with pytest.raises(RecordError, match=r"column 'torque_nm' never changes \(every value is 2.5 N·m\)"):
+    with pytest.raises(RecordError, match=r"column 'torque_nm' never changes \(every value is 2.5 N·m\)") as info:
         analyze_stiffness_curve(frame, rig=RigConstants(pulses_per_rev=100))
+    assert info.value.reason == "torque_constant"
 
 
 def test_torque_within_its_noise_is_not_a_load():
@@ -116,8 +117,9 @@ def test_inverted_transmission_ratio_has_its_own_message():
     syn = synthetic_encoder_record(seed=2)
     rig = RigConstants(pulses_per_rev=51200, transmission_ratio=-100, sensor_stiffness_nm_per_rad=2e4)
     with pytest.raises(AnalysisError, match=r"the sign of transmission_ratio = -100 or of the torque "
-                                            r"sensor is inverted"):
+                                            r"sensor is inverted") as info:
         analyze_stiffness_curve(syn.frame, rig=rig)
+    assert info.value.reason == "inverted_sign"
 
 
 def test_no_loading_branch():

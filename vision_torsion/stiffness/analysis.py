@@ -253,7 +253,8 @@ def _check_torque(record: TorqueAngleRecord) -> None:
     if span == 0:
         raise RecordError(
             f"{record.name}: column 'torque_nm' never changes (every value is {torque[0]:g} N·m): "
-            "the torque sensor was not read or not connected; no stiffness can be computed"
+            "the torque sensor was not read or not connected; no stiffness can be computed",
+            reason="torque_constant",
         )
     if record.time_s is not None:
         noise = robust_noise_std(torque)
@@ -261,7 +262,8 @@ def _check_torque(record: TorqueAngleRecord) -> None:
             raise RecordError(
                 f"{record.name}: column 'torque_nm' changes by only {span:.3g} N·m, within its "
                 f"noise (std {noise:.2g} N·m): the gear was not loaded, or the torque sensor was "
-                "not read; no stiffness can be computed"
+                "not read; no stiffness can be computed",
+                reason="torque_not_loaded",
             )
 
 
@@ -278,7 +280,8 @@ def _check_sign(record, filtered, level, threshold, rig) -> None:
         raise AnalysisError(
             f"{record.name}: the torque falls as the output angle rises (torque against input "
             f"angle / transmission_ratio has a negative slope): the sign of transmission_ratio{ratio} "
-            "or of the torque sensor is inverted; change the sign of transmission_ratio in the rig file"
+            "or of the torque sensor is inverted; change the sign of transmission_ratio in the rig file",
+            reason="inverted_sign",
         )
 
 
@@ -483,7 +486,8 @@ def analyze_stiffness_curve(
         fits, cycle_curves = _fit_cycles(record, filtered, split, method=fit_method, order=order,
                                          points=points, notes=notes)
         if not fits:
-            raise AnalysisError(f"{record.name}: no loading branch could be fitted: " + "; ".join(notes))
+            raise AnalysisError(f"{record.name}: no loading branch could be fitted: " + "; ".join(notes),
+                                reason="no_fit")
     curves = _summarise(cycle_curves, points=points, notes=notes, source=record.source)
     if record.source == "encoder":
         cycle_backlash, backlash = _backlash(record, filtered, split,

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import pandas as pd
 
-from ..errors import AnalysisError, RecordError
+from ..errors import AnalysisError
+from ..measurements import read_measurements
 from .analysis import StiffnessResult, analyze_stiffness_curve, as_record
 from .plots import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
 from .rig import RigConstants
@@ -104,12 +105,8 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
     >>> sorted(section.figures), len(section.steps)
     (['step_stiffness'], 40)
     """
-    frame = measurements
-    if not isinstance(frame, pd.DataFrame):
-        try:
-            frame = pd.read_csv(frame, keep_default_na=False, na_values=[""])
-        except (OSError, ValueError) as exc:
-            raise RecordError(f"{measurements} cannot be read as CSV: {exc}") from None
+    frame = read_measurements(measurements, columns=("orientation_deg", "cycle", "phase", "step",
+                                                     "torque_nm", "angle_deg", "status"))
     steps = step_stiffness(frame)
     if steps.empty:
         raise AnalysisError("no two consecutive load steps of one phase were measured: "

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..errors import RecordError
+from ..measurements import CYCLE_PHASES, read_measurements
 from .records import record_from_measurements
 
 __all__ = ["STEP_COLUMNS", "step_stiffness", "summarise_steps"]
@@ -42,7 +42,8 @@ STEP_COLUMNS = (
     "torque_from_nm", "torque_to_nm", "torque_mid_nm", "delta_torque_nm", "delta_angle_deg",
     "delta_angle_std_deg", "stiffness_nm_per_rad", "stiffness_std_nm_per_rad", "flag",
 )
-_PHASE_ORDER = ("positive_unloading", "negative_loading", "negative_unloading", "positive_loading")
+_PHASE_ORDER = CYCLE_PHASES
+_NEEDED = ("orientation_deg", "cycle", "phase", "step", "torque_nm", "angle_deg", "status")
 #: |Δθ| below this many of its standard uncertainties is not a measured twist.
 MIN_TWIST_SIGMAS = 3.0
 
@@ -53,7 +54,7 @@ def _column(frame, name, default=0.0):
     return pd.to_numeric(frame[name], errors="coerce").fillna(default).to_numpy(dtype=float)
 
 
-def step_stiffness(measurements, *, name: str = "measurements.csv") -> pd.DataFrame:
+def step_stiffness(measurements, *, name: str = "measurements table") -> pd.DataFrame:
     """Stiffness Δτ/Δθ of every load step of every loop of a camera session.
 
     Parameters
@@ -75,8 +76,10 @@ def step_stiffness(measurements, *, name: str = "measurements.csv") -> pd.DataFr
     Raises
     ------
     RecordError
-        The table is invalid (as
-        :func:`~.records.record_from_measurements`), or lacks column ``step``.
+        The table is invalid (read by
+        :func:`vision_torsion.measurements.read_measurements`, whose errors name
+        the CSV line and column, and checked as by
+        :func:`~.records.record_from_measurements`).
 
     Examples
     --------
@@ -85,24 +88,15 @@ def step_stiffness(measurements, *, name: str = "measurements.csv") -> pd.DataFr
     >>> len(steps), sorted(set(steps["phase"]))[0]
     (16, 'negative_loading')
     """
-    if not isinstance(measurements, pd.DataFrame):
-        name = str(measurements)
-        try:
-            measurements = pd.read_csv(measurements, keep_default_na=False, na_values=[""])
-        except (OSError, ValueError) as exc:
-            raise RecordError(f"{name} cannot be read as CSV: {exc}") from None
-    record_from_measurements(measurements, name=name)  # the one validation of the table
-    if "step" not in measurements.columns:
-        raise RecordError(f"{name}: step stiffness needs column 'step'")
-    ok = measurements[measurements["status"].astype(str).str.strip() == "ok"].copy()
-    ok["phase"] = ok["phase"].astype(str).str.strip()
-    ok = ok[ok["phase"].isin(_PHASE_ORDER)]
+    table = read_measurements(measurements, columns=_NEEDED)
+    record_from_measurements(table, name=name)  # no ok row, an ok row without torque or angle
+    ok = table[(table["status"] == "ok") & table["phase"].isin(_PHASE_ORDER)].copy()
     ok["_step"] = pd.to_numeric(ok["step"], errors="coerce")
     ok["_torque"] = _column(ok, "torque_nm", np.nan)
     ok["_angle"] = _column(ok, "angle_deg", np.nan)
     ok["_torque_std"] = _column(ok, "torque_std_nm")
     ok["_angle_std"] = _column(ok, "angle_std_deg")
-    ok["_image"] = ok["image"].astype(str) if "image" in ok.columns else ""
+    ok["_image"] = ok["image"] if "image" in ok.columns else ""
     rows = []
     for (orient, cycle, phase), part in ok.groupby(["orientation_deg", "cycle", "phase"], sort=False):
         part = part.sort_values("_step")
