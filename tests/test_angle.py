@@ -96,3 +96,28 @@ def test_reported_uncertainty_is_honest(standard_scene):
         stds.append(res.angle_std_deg)
     ratio = np.mean(stds) / np.sqrt(np.mean(np.square(errs)))
     assert 0.7 < ratio < 1.3, ratio
+
+
+def test_rotation_angle_applies_the_correction_named_in_settings(tmp_path):
+    """Issue 18: settings.correction was ignored by rotation_angle (only the folder
+    drivers loaded it). A correction stretching x by 1.5 turns a direction a into
+    atan2(sin a, 1.5 cos a); from a reference at the scene's 0° the 20° image reads
+    atan(tan 20° / 1.5) = 13.65°."""
+    from vision_torsion.correction import PlaneCorrection
+    from vision_torsion.errors import VisionTorsionError
+    from vision_torsion.settings import MeasureSettings
+    from vision_torsion.synthetic import Scene
+
+    scene = Scene()
+    ref, cur = render(scene, 0.0, seed=1).image, render(scene, 20.0, seed=2).image
+    path = PlaneCorrection(np.diag([1.5, 1.0, 1.0])).save(tmp_path / "plane.toml")
+    direct = rotation_angle(ref, cur, correction=PlaneCorrection.load(path))
+    via_settings = rotation_angle(ref, cur, settings=MeasureSettings(correction=str(path)))
+    plain = rotation_angle(ref, cur)
+    expected = np.degrees(np.arctan(np.tan(np.radians(20.0)) / 1.5))
+    assert direct.angle_deg == pytest.approx(expected, abs=0.01)  # 0.01°: the scene's markers are not at 0° exactly
+    assert via_settings.angle_deg == direct.angle_deg
+    assert plain.angle_deg == pytest.approx(20.0, abs=0.005)
+    with pytest.raises(VisionTorsionError, match="either as correction= or in settings.correction") as info:
+        rotation_angle(ref, cur, settings=MeasureSettings(correction=str(path)), correction=path)
+    assert info.value.reason == "conflicting_options"

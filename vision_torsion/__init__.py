@@ -77,8 +77,8 @@ _LAZY = {
     "AccuracyResult": "calibration",
     "calibrate_plane": "calibration",
     "calibrate_from_target": "calibration",
-    "PlaneCorrection": "calibration",
-    "load_correction": "calibration",
+    "PlaneCorrection": "correction",
+    "load_correction": "correction",
     # stiffness curve and meshing teeth
     "analyze_stiffness_curve": "stiffness",
     "StiffnessResult": "stiffness",

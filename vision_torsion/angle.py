@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import MarkerError
+from .correction import load_correction
+from .errors import MarkerError, VisionTorsionError
 from .markers import is_frame
 from .pair import PairMeasurement, measure_pair, select_pair
 from .settings import MeasureSettings
@@ -207,12 +208,14 @@ def rotation_angle(
         Images (found and fitted with `settings`), tables from
         :func:`~vision_torsion.markers.find_markers`, or already selected pairs.
     settings : MeasureSettings, optional
-        How markers are found and which pair is the target.
+        How markers are found, which pair is the target, and the plane/lens
+        correction file (``settings.correction``), applied as `correction` is.
     near_deg : float
         Predicted angle (deg); with two equal markers the answer is the candidate
         within ±90° of it.
-    correction : PlaneCorrection, optional
-        Plane/lens correction applied to both pairs (see :func:`pair_angle`).
+    correction : PlaneCorrection or path, optional
+        Plane/lens correction applied to both pairs (see :func:`pair_angle`); give it
+        here or in `settings`, not both.
 
     Returns
     -------
@@ -223,6 +226,11 @@ def rotation_angle(
     ------
     ImageReadError, MarkerError
         An image cannot be read or its target found.
+    CalibrationError
+        The correction file cannot be read.
+    VisionTorsionError
+        A correction given both as `correction` and in `settings` (reason
+        ``conflicting_options``).
 
     Examples
     --------
@@ -234,6 +242,10 @@ def rotation_angle(
     (True, True)
     """
     settings = settings or MeasureSettings()
+    if correction is not None and settings.correction is not None:
+        raise VisionTorsionError("give the plane correction either as correction= or in settings.correction, "
+                                 "not both", reason="conflicting_options")
+    correction = load_correction(settings.correction if correction is None else correction)
     ref = _as_pair(reference, settings, "reference")
     cur = _as_pair(current, settings, "current")
     return pair_angle(ref, cur, near_deg=near_deg, correction=correction)

@@ -19,6 +19,7 @@ import pandas as pd
 
 from .angle import sequence_angles
 from .batch import measure_each
+from .correction import load_correction
 from .errors import ImageReadError, OutputError
 from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
@@ -160,8 +161,6 @@ def measure_folder(
     CalibrationError
         ``settings.correction`` cannot be loaded.
     """
-    from .calibration.correction import load_correction
-
     settings = settings or MeasureSettings()
     correction = load_correction(settings.correction)
     files = list_images(image_dir)

@@ -61,7 +61,7 @@ from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
 from ..textfiles import csv_delimiter, decode_utf8
-from .correction import load_correction
+from ..correction import load_correction
 
 __all__ = [
     "AccuracyResult",

@@ -47,6 +47,7 @@ import pandas as pd
 from tqdm import tqdm
 
 from ..angle import sequence_angles
+from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
@@ -380,8 +381,6 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     check_output_dir(out)  # before measuring: a run must not do its work and then fail to write it
     settings = session.settings
     # a bad correction file is unusable input: say so before measuring anything
-    from ..calibration.correction import load_correction
-
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
     key = _settings_key(settings, measure)
