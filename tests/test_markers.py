@@ -193,3 +193,19 @@ def test_candidates_found_beforehand_give_the_same_pair(scene_file):
         assert measure_pair(image, settings=settings, candidates=candidates) == alone
         with pytest.raises(MarkerError):  # they are what is used: none given, none found
             measure_pair(image, settings=settings, candidates=[])
+
+
+def test_settings_and_explicit_options_are_not_mixed(small_scene):
+    """Issue 18: settings used to override explicit keyword options silently
+    (fit="algebraic" with settings of fit="pixels" fitted pixels)."""
+    from vision_torsion.errors import VisionTorsionError
+
+    image = render(small_scene, 0.0, seed=5).image
+    for option in ({"fit": "algebraic"}, {"polarity": "bright"}, {"radius_range": (5.0, 40.0)}):
+        with pytest.raises(VisionTorsionError, match=f"give either settings or {next(iter(option))}, not both") as info:
+            find_markers(image, settings=MeasureSettings(), **option)
+        assert info.value.reason == "conflicting_options"
+    by_options = find_markers(image, fit="algebraic")
+    by_settings = find_markers(image, settings=MeasureSettings(fit="algebraic"))
+    assert by_options.equals(by_settings)
+    assert not by_options.equals(find_markers(image))  # the option really chose another fit

@@ -34,7 +34,7 @@ import numpy as np
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
 from .edges import MarkerPatch, edge_points, fast_median, harmonic_circularity, marker_patch, marker_roi
-from .errors import FitError
+from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, patch_extent
 from .settings import MeasureSettings
@@ -320,9 +320,9 @@ def _ellipse_radial(ef):
 def find_markers(
     image,
     *,
-    polarity: str = "dark",
+    polarity: str | None = None,
     radius_range=None,
-    fit: str = "pixels",
+    fit: str | None = None,
     settings: MeasureSettings | None = None,
 ) -> pd.DataFrame:
     """Find and fit every circular marker of one polarity in an image.
@@ -331,14 +331,16 @@ def find_markers(
     ----------
     image : array_like, GreyImage or path
         Grey image indexed ``[y, x]``, or a file to load.
-    polarity : {"dark", "bright"}
-        Dark markers on a bright disk, or bright on dark.
+    polarity : {"dark", "bright"}, optional
+        Dark markers on a bright disk (the default), or bright on dark.
     radius_range : tuple of float, optional
         (smallest, largest) marker radius in px.
-    fit : {"pixels", "geometric", "algebraic", "ellipse"}
-        Marker-fit method (see :data:`~vision_torsion.settings.FIT_METHODS`).
+    fit : {"pixels", "geometric", "algebraic", "ellipse"}, optional
+        Marker-fit method (see :data:`~vision_torsion.settings.FIT_METHODS`);
+        ``"pixels"`` by default.
     settings : MeasureSettings, optional
-        Overrides `polarity`, `radius_range` and `fit` when given.
+        All of the above in one object; give either `settings` or the separate
+        options, not both.
 
     Returns
     -------
@@ -352,6 +354,9 @@ def find_markers(
     ------
     ImageReadError
         The image is unreadable or not a 2-D grey image.
+    VisionTorsionError
+        `settings` given together with `polarity`, `radius_range` or `fit` (reason
+        ``conflicting_options``; settings used to win silently), or an invalid option.
 
     Examples
     --------
@@ -363,8 +368,13 @@ def find_markers(
     >>> bool(abs(table["x_px"].max() - r.centres[:, 0].max()) < 0.02)
     True
     """
+    options = {"polarity": polarity, "radius_range": radius_range, "fit": fit}
+    given = {k: v for k, v in options.items() if v is not None}
     if settings is None:
-        settings = MeasureSettings(polarity=polarity, radius_range=radius_range, fit=fit)  # validates
+        settings = MeasureSettings(**given)  # validates; defaults for the rest
+    elif given:
+        raise VisionTorsionError(f"find_markers: give either settings or {', '.join(given)}, not both "
+                                 "(settings already says how markers are found)", reason="conflicting_options")
     return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
 
 
