@@ -34,6 +34,13 @@ from .errors import FitError
 
 __all__ = ["CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse"]
 
+#: Largest condition number accepted for the normal equations of the ellipse's centre
+#: and semi-axes (normalised units). A full ellipse, even a near-circle, gives < 10²;
+#: a 60° arc about 3·10⁶, a 30° arc 7·10⁷, a 20° arc 5·10¹⁷ (the points then fix no
+#: ellipse: a = 6·10⁶ px was returned). Beyond ~10¹⁰ half the digits of the solve
+#: are noise.
+_MAX_ELLIPSE_CONDITION = 1e10
+
 
 @dataclass(frozen=True)
 class CircleFit:
@@ -362,7 +369,19 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
     Raises
     ------
     FitError
-        Fewer than 6 points, or no ellipse fits them.
+        Fewer than 6 points; the direct fit finds no ellipse; a refinement step's
+        solve is singular; the result is not a real ellipse (a semi-axis not
+        positive and finite); or the normal equations of the centre and semi-axes
+        are ill-conditioned (condition number above :data:`_MAX_ELLIPSE_CONDITION`:
+        the points cover too short an arc to fix an ellipse).
+
+    Notes
+    -----
+    The points are centred and scaled before fitting (as :func:`fit_circle_geometric`
+    and scikit-image do), so the conditioning does not depend on where the marker
+    lies in the image. For a near-circle the orientation θ is not determined by the
+    points; that does not harm the centre, so θ is left out of the conditioning test
+    and its iterations are not required to converge.
 
     Examples
     --------
@@ -390,8 +409,13 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
                 J[:, k] = (_ellipse_residuals(dp, uu, vv) - r0) / h
             JTW = J.T * ww
             H = JTW @ J + 1e-12 * np.eye(5)
-            step = np.linalg.solve(H, -JTW @ r0)
+            try:
+                step = np.linalg.solve(H, -JTW @ r0)
+            except np.linalg.LinAlgError as exc:
+                raise FitError("ellipse fit is singular (points on a line?)") from exc
             p = p + step
+            if not np.all(np.isfinite(p)):
+                raise FitError("ellipse fit diverged (the points do not determine an ellipse)")
             if np.max(np.abs(step)) < 1e-11:
                 break
         res_all = _ellipse_residuals(p, u, v)
@@ -401,6 +425,12 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
         if np.array_equal(new, inl) or new.sum() < 6:
             break
         inl = new
+    condition = np.linalg.cond(H[:4, :4])
+    if not condition < _MAX_ELLIPSE_CONDITION:
+        raise FitError(f"ellipse fit is ill-conditioned (condition number {condition:.1e} for the centre and "
+                       "semi-axes): the edge points cover too short an arc to fix an ellipse")
+    if not (p[2] > 0 and p[3] > 0):
+        raise FitError(f"ellipse fit did not give a real ellipse (semi-axes {p[2] * s:.3g} and {p[3] * s:.3g} px)")
     dof = max(int(inl.sum()) - 5, 1)
     chi2 = float(np.sum(ws[inl] * res_all[inl] ** 2)) / dof
     factor = chi2 if weights is None else max(chi2, 1.0)
