@@ -150,7 +150,7 @@ def test_normalised_keeps_angles_and_looks_like_identity():
     n = normalised(corr, (700.0, 500.0))
     X, Y = n.to_disk(700.0, 500.0)
     assert (float(X), float(Y)) == pytest.approx((700.0, 500.0), abs=1e-9)
-    J, _, _ = n._jacobian(700.0, 500.0)
+    J, _, _ = n.jacobian(700.0, 500.0)
     assert np.linalg.det(J) == pytest.approx(1.0, abs=1e-12) and J[0, 1] == pytest.approx(J[1, 0], abs=1e-12)
     pts = np.array([[200.0, 300.0], [1100.0, 700.0], [400.0, 900.0]])
 
