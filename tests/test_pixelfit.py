@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from vision_torsion.edges import fast_median, marker_patch, normal_cdf, robust_sigma
+from vision_torsion._ring import fast_median, marker_patch, normal_cdf, robust_sigma
 from vision_torsion.errors import FitError
 from vision_torsion.pixelfit import fit_disc
 from vision_torsion.synthetic import render

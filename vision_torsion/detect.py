@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .edges import fast_median
+from ._ring import fast_median
 
 __all__ = ["Blob", "detect_blobs", "default_radius_range"]
 

@@ -33,7 +33,8 @@ import numpy as np
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from .edges import MarkerPatch, edge_points, fast_median, harmonic_circularity, marker_patch, marker_roi
+from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch, marker_roi
+from .edges import edge_points
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, patch_extent
@@ -187,7 +188,7 @@ def _start(patch: MarkerPatch, blob: Blob):
 
 
 def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
-    """:func:`~vision_torsion.edges.harmonic_circularity` of edge points (px) around
+    """:func:`~vision_torsion._ring.harmonic_circularity` of edge points (px) around
     a circle centred on (cx, cy) (px)."""
     dx, dy = ex - cx, ey - cy
     dist = np.maximum(np.hypot(dx, dy), 1e-12)

@@ -46,7 +46,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .edges import (
+from ._ring import (
+    INV_SQRT_2PI,
     MarkerPatch,
     bounded_edge_width,
     check_contrast,
@@ -62,7 +63,6 @@ from .errors import FitError
 
 __all__ = ["DiscFit", "fit_disc"]
 
-_INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
 #: Ring beyond the edge zone ±3s (px). Inside, the marker's pixels only inform its
@@ -178,7 +178,7 @@ def _evaluate(p, px: _Pixels):
     M += B
     resid = px.vals - L * M
     g = np.multiply(L, gauss, out=J[2])  # dI/dR
-    g *= (F - B) * _INV_SQRT_2PI / s
+    g *= (F - B) * INV_SQRT_2PI / s
     np.maximum(d, 1e-9, out=d)
     np.divide(g, d, out=d)  # d is not needed any more: g/d
     dx *= d  # dI/dcx
@@ -224,7 +224,7 @@ def _sectors(xs, ys, cx, cy, R):
 
 def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the pixels to keep, or None: the occluder cut of
-    :func:`~vision_torsion.edges.cut_occluders`, and the edge pixels of the sectors
+    :func:`~vision_torsion._ring.cut_occluders`, and the edge pixels of the sectors
     it touched. `resid`, `J`, `u` are the model at `p`."""
 
     def resolve(keep):
@@ -247,9 +247,9 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
 
 def _edge_diagnostics(p, resid, J, u):
-    """Per-sector edge points (:func:`~vision_torsion.edges.sector_edge_offsets`),
+    """Per-sector edge points (:func:`~vision_torsion._ring.sector_edge_offsets`),
     their RMS distance from the circle (px) and the circularity they give
-    (:func:`~vision_torsion.edges.harmonic_circularity`)."""
+    (:func:`~vision_torsion._ring.harmonic_circularity`)."""
     cx, cy, R = p[0], p[1], p[2]
     band = np.flatnonzero(np.abs(u) < 3.0)
     # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
@@ -286,7 +286,7 @@ def fit_disc(
     max_iter : int
         Levenberg-Marquardt iterations at most.
     patch : MarkerPatch, optional
-        Pixels around the marker from :func:`~vision_torsion.edges.marker_patch`;
+        Pixels around the marker from :func:`~vision_torsion._ring.marker_patch`;
         taken from `image` when None. It must reach past the edge by the ring's
         width (3s + 7.5 px, and 0.5 px more for the start's error).
 

@@ -1,0 +1,309 @@
+"""Helpers of the ring-of-pixels marker fits, shared by :mod:`.pixelfit` (the default
+fit of the blurred-disc model to the pixels) and :mod:`.edges` (sub-pixel edge points
+for the circle and ellipse fits).
+
+Private: the patch of pixels around a marker and its coordinates, the edge profile's
+normal distribution, the robust occluder cut, the ~1 px sectors of arc, and the
+checks both fits make (contrast, edge width, lost arc, circularity). Neither fit
+module imports the other's internals; both import these.
+
+Coordinates are image pixels (x, y), origin at the centre of the top-left pixel,
+y downwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
+
+import cv2
+import numpy as np
+
+from .errors import FitError
+
+#: 1/√(2π): the standard normal density's factor (the edge profile's derivative).
+INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
+
+
+def normal_cdf(u, gauss=None):
+    """Standard normal distribution function Φ(u), to 1e-7 (Abramowitz & Stegun 7.1.26).
+
+    ``gauss`` is ``exp(-u²/2)`` when the caller has it already (the edge model's
+    derivative needs it): ``scipy.special.ndtr`` is exact but was half the cost of
+    a model evaluation, and importing scipy.special costs every worker process
+    0.4 s. An error of 1e-7 of the contrast is far below the noise of any image
+    (8-bit: 4e-3).
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if u.ndim == 0:
+        return normal_cdf(u[None], None if gauss is None else np.atleast_1d(gauss))[0]
+    if gauss is None:
+        gauss = np.exp(-0.5 * u * u)
+    # in place: on a few thousand values each numpy call costs about as much as
+    # its arithmetic
+    t = np.abs(u)
+    t *= 0.3275911 / np.sqrt(2.0)
+    t += 1.0
+    np.reciprocal(t, out=t)
+    tail = t * 0.5307027145
+    for c in (-0.7265760135, 0.7107068705, -0.142248368, 0.127414796):
+        tail += c
+        tail *= t
+    tail *= gauss  # = Φ(-|u|)
+    # Φ(u) = 1/2 + sign(u)·(1/2 - Φ(-|u|))
+    np.subtract(0.5, tail, out=tail)
+    np.copysign(tail, u, out=tail)
+    tail += 0.5
+    return tail
+
+
+def marker_roi(shape, cx, cy, extent):
+    """Bounds (x0, y0, x1, y1) of the square of half-size `extent` around (cx, cy), or None if it leaves the image."""
+    h, w = shape
+    x0, x1 = int(np.floor(cx - extent)), int(np.ceil(cx + extent)) + 1
+    y0, y1 = int(np.floor(cy - extent)), int(np.ceil(cy + extent)) + 1
+    if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+        return None
+    return x0, y0, x1, y1
+
+
+@dataclass(frozen=True)
+class MarkerPatch:
+    """The pixels around a marker, flattened once for repeated edge extraction.
+
+    Attributes
+    ----------
+    values : numpy.ndarray
+        Grey levels (DN), float64, row by row.
+    shape : tuple of int
+        (rows, columns) of the square the flat array came from.
+    x0, y0 : int
+        Column and row of its top-left pixel in the image.
+    xs, ys : numpy.ndarray
+        Pixel-centre coordinates (px), float64, flat like `values` (made when
+        first asked for: the pixel-model fit works from indices).
+    """
+
+    values: np.ndarray
+    shape: tuple
+    x0: int = 0
+    y0: int = 0
+
+    @cached_property
+    def xs(self) -> np.ndarray:
+        return _grid(*self.shape)[0] + self.x0
+
+    @cached_property
+    def ys(self) -> np.ndarray:
+        return _grid(*self.shape)[1] + self.y0
+
+    def coordinates(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) in px of the pixels at flat positions `index`."""
+        row, col = np.divmod(index, self.shape[1])
+        return col + float(self.x0), row + float(self.y0)
+
+    def squared_distance(self, cx, cy) -> np.ndarray:
+        """Squared distance (px²) of every pixel centre from (cx, cy), flat like
+        `values`: by broadcasting a row and a column, one pass over the patch."""
+        rows, cols = self.shape
+        dx = np.arange(self.x0 - cx, self.x0 - cx + cols - 0.5)
+        dy = np.arange(self.y0 - cy, self.y0 - cy + rows - 0.5)
+        return np.add.outer(dy * dy, dx * dx).ravel()
+
+    def centroid(self, weights) -> tuple[float, float, float]:
+        """Sum of `weights` (flat like `values`) and their weighted mean (x, y) in px."""
+        rows, cols = self.shape
+        w = weights.reshape(rows, cols)
+        total = float(w.sum())
+        x = self.x0 + float(w.sum(axis=0) @ np.arange(cols)) / total
+        y = self.y0 + float(w.sum(axis=1) @ np.arange(rows)) / total
+        return total, x, y
+
+
+def marker_patch(image, cx, cy, extent) -> MarkerPatch:
+    """Pixels within the square of half-size `extent` (px) around (cx, cy).
+
+    Raises
+    ------
+    FitError
+        The square leaves the image.
+    """
+    roi = marker_roi(image.shape, cx, cy, extent)
+    if roi is None:
+        raise FitError("the marker's edge ring leaves the image")
+    x0, y0, x1, y1 = roi
+    return MarkerPatch(
+        values=np.asarray(image[y0:y1, x0:x1], dtype=np.float64).ravel(),
+        shape=(y1 - y0, x1 - x0),
+        x0=x0,
+        y0=y0,
+    )
+
+
+@lru_cache(maxsize=16)
+def _grid(rows, cols):
+    """Flat column and row indices (float64) of a rows x cols block, read-only: a
+    session's markers keep their size, so each block shape is built once."""
+    ys, xs = np.mgrid[0:rows, 0:cols]
+    gx, gy = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
+    gx.flags.writeable = gy.flags.writeable = False
+    return gx, gy
+
+
+def grow_cut(keep, ring_idx, shape):
+    """Widen the outlier cut by 2 px: an occluder's blurred flanks stay below the
+    threshold but still pull the grey levels and the edge next to it.
+
+    `keep` flags the ring pixels ``patch.values[ring_idx]`` of a patch of `shape`
+    (rows, columns) that survived the cut; returns the flags with the cut grown."""
+    cut = np.zeros(shape, np.uint8)
+    cut.flat[ring_idx[~keep]] = 1
+    cut = cv2.dilate(cut, np.ones((5, 5), np.uint8))
+    return keep & (cut.flat[ring_idx] == 0)
+
+
+def robust_sigma(resid) -> float:
+    """Noise σ of model residuals, robust to an occluder's pixels (same unit as `resid`).
+
+    1.4826·MAD (of every fourth residual: the median is the costly part), then
+    sigma clipping from there: the RMS of the residuals within 3σ, corrected for the
+    truncation of a normal distribution at 3σ (factor 0.98658), until it changes by
+    less than 1 %. The MAD alone underestimates σ of quantised data (8-bit images
+    at ~2 DN noise by 15 %), which made a 4.5σ cut remove ordinary noise pixels;
+    clipping from the plain RMS instead can settle on a σ inflated by a wire lying
+    along the edge.
+    """
+    a2 = np.square(resid)
+    sample = a2[::4] if a2.size >= 400 else a2
+    k = sample.size // 2  # the upper median: a partition, without np.median's copies
+    sig = 1.4826 * float(np.sqrt(np.partition(sample, k)[k]))
+    largest = float(a2.max()) if a2.size else 0.0
+    for _ in range(12):
+        limit = 9.0 * sig * sig
+        if largest < limit:
+            inner_n, inner_sum = a2.size, float(a2.sum())
+        else:
+            inside = a2 < limit
+            inner_n = int(np.count_nonzero(inside))
+            inner_sum = float(np.dot(a2, inside))
+        if inner_n < 8:
+            break
+        new = np.sqrt(inner_sum / inner_n) / 0.98658
+        done = abs(new - sig) < 0.01 * sig
+        sig = new
+        if done:
+            break
+    return sig or 1e-6
+
+
+def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
+    """Flags of the ring pixels to keep, or None when nothing is to be cut.
+
+    Pixels more than 4.5 robust σ off the model are a wire or a speck in the ring.
+    The levels behind `resid` were pulled by the occluder, so that first cut also
+    chose ordinary pixels by their values (a truncation bias): ``resolve(keep)``
+    gives the residuals with the levels solved without it, the cut is made again
+    against them and grown by 2 px (:func:`grow_cut`). A quarter of the edge zone
+    (`edge_zone`, flags) cut at first is the model not fitting the edge yet (a first
+    iteration, a sharp or odd edge profile), not an occluder: None; so is half of
+    it cut once grown (a wire lying along the edge for 60° of arc loses ~30 %).
+    """
+    keep = np.abs(resid) < 4.5 * robust_sigma(resid)
+    if keep.all() or keep[edge_zone].mean() <= 0.75:
+        return None
+    resid = resolve(keep)
+    keep = grow_cut(np.abs(resid) < 4.5 * robust_sigma(resid[keep]), ring_idx, shape)
+    return keep if keep[edge_zone].mean() > 0.5 else None
+
+
+def sector_index(psi, radius):
+    """Angular sector (~1 px of arc at `radius` px, at least 24) of each direction
+    `psi` (rad, image axes), and the number of sectors."""
+    n_sec = max(24, int(round(2 * np.pi * radius)))
+    return ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec, n_sec
+
+
+def sector_edge_offsets(sector, n_sec, g, resid, g_cos, g_sin, *, drop=None):
+    """The edge's radial offset in each sector of arc, from that sector's pixels alone.
+
+    One Gauss-Newton step of the edge model, δₖ = Σ gᵢeᵢ / Σ gᵢ² over the sector's
+    pixels (g = ∂I/∂R, e the residual, both per pixel), placed along the sector's
+    g²-weighted mean direction (`g_cos`, `g_sin`: g·cos ψ and g·sin ψ per pixel).
+    Sectors with less than a tenth of the median information Σg², or flagged in
+    `drop`, are left out.
+
+    Returns
+    -------
+    delta, angle, information : numpy.ndarray
+        Per kept sector: the offset (px), the direction (rad) and Σg² (DN²/px²).
+
+    Raises
+    ------
+    FitError
+        Fewer than 12 sectors are kept.
+    """
+    den = np.bincount(sector, g * g, minlength=n_sec)
+    num = np.bincount(sector, g * resid, minlength=n_sec)
+    cs = np.bincount(sector, g * g_cos, minlength=n_sec)
+    sn = np.bincount(sector, g * g_sin, minlength=n_sec)
+    positive = den[den > 0]
+    good = den > 0.1 * fast_median(positive) if positive.size else den > 0
+    if drop is not None:
+        good &= ~drop
+    if good.sum() < 12:
+        raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
+    return num[good] / den[good], np.arctan2(sn[good], cs[good]), den[good]
+
+
+def fast_median(values) -> float:
+    """np.median of a 1-D array by one partition (np.median's checks and copies
+    cost more than the partition itself on a few thousand values)."""
+    k = values.size // 2
+    if values.size % 2:
+        return float(np.partition(values, k)[k])
+    lo, hi = np.partition(values, (k - 1, k))[k - 1 : k + 1]
+    return 0.5 * (float(lo) + float(hi))
+
+
+def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:
+    """1 - 2·|second harmonic of the radial deviation|/R: the minor/major axis ratio
+    of a near-circle, from edge points' radial deviations (px) from a circle of
+    `radius` (px) in directions ψ given by their cosines and sines.
+
+    Deviations, not radii: with sectors missing (an occluder) the radius itself
+    would leak into the harmonic and fake an ellipse.
+    """
+    scale = 2.0 / max(deviation.size, 1)
+    a2 = scale * np.dot(deviation, cos_psi * cos_psi - sin_psi * sin_psi)  # cos 2ψ
+    b2 = scale * np.dot(deviation, 2.0 * cos_psi * sin_psi)  # sin 2ψ
+    return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
+
+
+def check_contrast(contrast, sigma2) -> None:
+    """Raise FitError unless the marker's contrast (DN) exceeds 3x the noise σ (σ² in DN²)."""
+    if not abs(contrast) > 3.0 * np.sqrt(sigma2):
+        raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)",
+                       reason="low_contrast")
+
+
+def bounded_edge_width(new, old) -> float:
+    """An updated edge width s (px) kept within [old/2, 2·old] and never below 0.3 px:
+    an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))."""
+    return float(min(max(new, 0.3, 0.5 * old), 2.0 * old))
+
+
+def lost_sectors(cut_sectors, n_sec, *, most=0.25):
+    """Edge sectors to drop: those holding cut edge pixels, and two neighbours each side.
+
+    `cut_sectors` are the sector indices (0 … n_sec - 1) of the edge-zone pixels the
+    outlier cut removed. When more than the fraction `most` of the sectors lost
+    pixels, that is the model not fitting the edge yet (a first iteration, a sharp
+    or odd edge profile), not occlusion: no sector is dropped, and the fit's own
+    outlier handling still applies.
+    """
+    lost = np.bincount(cut_sectors, minlength=n_sec) > 0
+    if lost.mean() > most:
+        lost[:] = False
+    elif lost.any():
+        lost = np.convolve(np.concatenate([lost[-2:], lost, lost[:2]]).astype(int), np.ones(5, int), "valid") > 0
+    return lost
