@@ -34,6 +34,7 @@ from scipy.optimize import minimize
 
 from ..errors import AnalysisError
 from .branches import BranchSplit
+from .combine import mean_over_cycles
 from .records import TorqueAngleRecord
 
 __all__ = ["Backlash", "contact_edge", "detect_backlash", "summarise_backlash"]
@@ -237,8 +238,8 @@ def summarise_backlash(per_cycle) -> Backlash:
     """Mean dead zone over cycles, each found on its own cycle's samples.
 
     The standard uncertainty of each mean combines the scatter between cycles
-    (Type A, sd/sqrt(n)) with the edge fits' own (Type B, sqrt(sum std²)/n). With
-    one cycle it is that cycle's dead zone.
+    (Type A) with the edge fits' own (Type B), :func:`~.combine.mean_over_cycles`.
+    With one cycle it is that cycle's dead zone.
 
     Raises
     ------
@@ -261,9 +262,8 @@ def summarise_backlash(per_cycle) -> Backlash:
     n = len(items)
 
     def mean_std(value, std):
-        v = np.array([getattr(b, value) for b in items])
-        s = np.array([getattr(b, std) for b in items])
-        return float(v.mean()), float(np.sqrt(np.var(v, ddof=1) / n + np.sum(s**2) / n**2))
+        m, u = mean_over_cycles([getattr(b, value) for b in items], [getattr(b, std) for b in items])
+        return float(m), float(u)
 
     lower, lower_std = mean_std("lower_deg", "lower_std_deg")
     upper, upper_std = mean_std("upper_deg", "upper_std_deg")

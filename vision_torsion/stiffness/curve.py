@@ -37,6 +37,7 @@ from numpy.polynomial import chebyshev as cheb
 from scipy.interpolate import BSpline
 
 from ..errors import AnalysisError
+from .combine import mean_over_cycles
 
 __all__ = ["FIT_METHODS", "BranchFit", "StiffnessCurve", "fit_loading_branch", "stiffness_curve",
            "summarise_curves"]
@@ -334,8 +335,9 @@ def summarise_curves(curves, *, points: int = 200) -> StiffnessCurve:
     StiffnessCurve
         ``cycle = None``, ``n_cycles = len(curves)``; K is the mean over cycles and
         its standard uncertainty combines the scatter between cycles (Type A,
-        sd/sqrt(n)) with the fits' own (Type B, sqrt(sum std²)/n):
-        u = sqrt(u_A² + u_B²). With one cycle it is that cycle's curve and band.
+        sd/sqrt(n)) with the fits' own (Type B, sqrt(sum std²)/n)
+        (:func:`~.combine.mean_over_cycles`). With one cycle it is that cycle's
+        curve and band.
         ``angle_deg`` is the mean angle of the cycles at each torque.
 
     Raises
@@ -368,9 +370,7 @@ def summarise_curves(curves, *, points: int = 200) -> StiffnessCurve:
     k = np.array([np.interp(mag, np.abs(c.torque_nm), c.stiffness_nm_per_rad) for c in curves])
     k_std = np.array([np.interp(mag, np.abs(c.torque_nm), c.stiffness_std_nm_per_rad) for c in curves])
     angle = np.array([np.interp(mag, np.abs(c.torque_nm), c.angle_deg) for c in curves])
-    n = len(curves)
-    u_b2 = np.sum(k_std**2, axis=0) / n**2
-    u_a2 = np.var(k, axis=0, ddof=1) / n if n > 1 else 0.0
+    k_mean, k_u = mean_over_cycles(k, k_std)
     return StiffnessCurve(kind=kind, angle_deg=angle.mean(axis=0), torque_nm=sign * mag,
-                          stiffness_nm_per_rad=k.mean(axis=0), stiffness_std_nm_per_rad=np.sqrt(u_a2 + u_b2),
-                          cycle=None, n_cycles=n)
+                          stiffness_nm_per_rad=k_mean, stiffness_std_nm_per_rad=k_u,
+                          cycle=None, n_cycles=len(curves))

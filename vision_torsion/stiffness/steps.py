@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from ..measurements import CYCLE_PHASES, read_measurements
+from .combine import mean_over_cycles
 from .records import record_from_measurements
 
 __all__ = ["STEP_COLUMNS", "step_stiffness", "summarise_steps"]
@@ -154,7 +155,7 @@ def summarise_steps(steps: pd.DataFrame) -> pd.DataFrame:
         flag``: the mean over the loops whose step is not flagged; its standard
         uncertainty combines the scatter between loops (Type A, sd/sqrt(n)) with the
         propagated part (Type B, sqrt(sum σ²)/n). A step flagged in every loop keeps
-        its flag and has no value.
+        its flag and has no value. (:func:`~.combine.mean_over_cycles`.)
 
     Examples
     --------
@@ -169,14 +170,14 @@ def summarise_steps(steps: pd.DataFrame) -> pd.DataFrame:
         good = part[(part["flag"] == "") & np.isfinite(part["stiffness_nm_per_rad"])]
         n = len(good)
         k = good["stiffness_nm_per_rad"].to_numpy()
-        u_b2 = float(np.sum(good["stiffness_std_nm_per_rad"].to_numpy() ** 2)) / n**2 if n else np.nan
+        mean, u = (mean_over_cycles(k, good["stiffness_std_nm_per_rad"].to_numpy()) if n
+                   else (np.nan, np.nan))
         sd = float(np.std(k, ddof=1)) if n > 1 else np.nan
-        u = float(np.sqrt(u_b2 + (sd**2 / n if n > 1 else 0.0))) if n else np.nan
         flags = sorted({f for f in part["flag"] if f})
         out.append({
             "phase": phase, "step_from": a, "step_to": b, "torque_mid_nm": float(part["torque_mid_nm"].median()),
-            "n_loops": n, "stiffness_nm_per_rad": float(k.mean()) if n else np.nan,
-            "stiffness_std_nm_per_rad": u, "sd_between_loops_nm_per_rad": sd,
+            "n_loops": n, "stiffness_nm_per_rad": float(mean),
+            "stiffness_std_nm_per_rad": float(u), "sd_between_loops_nm_per_rad": sd,
             "flag": "" if n else "; ".join(flags),
         })
     return pd.DataFrame(out, columns=["phase", "step_from", "step_to", "torque_mid_nm", "n_loops",
