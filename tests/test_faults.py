@@ -607,3 +607,48 @@ def test_json_inputs_with_a_bom_or_another_encoding(tmp_path, name):
     with pytest.raises(error) as info:
         load()
     assert "BOM" not in str(info.value) and "UTF-8" not in str(info.value)
+
+
+# -- a marker fit far above the noise marks the image suspect ------------------------------
+
+
+def test_a_damaged_block_on_a_marker_makes_the_image_suspect(capsys, tmp_path):
+    from vision_torsion.pair import measure_pair
+    from vision_torsion.synthetic import load_scene, render
+
+    scene = load_scene("standard")
+    d = tmp_path / "images"
+    d.mkdir()
+    for i, angle in enumerate((0.0, 1.0, 2.0, 3.0, 4.0)):
+        image = render(scene, angle, seed=i).image
+        if i == 3:  # an 16x16 block across marker 1's edge displaced by 3 px, as a damaged JPEG block
+            m = measure_pair(image).first
+            x0, y0 = int(m.x_px + m.radius_px - 8), int(m.y_px - 8)
+            image = np.array(image, dtype=np.float64)
+            image[y0:y0 + 16, x0:x0 + 16] = np.roll(image[y0:y0 + 16, x0:x0 + 16], 3, axis=1)
+        cv2.imwrite(str(d / f"img_{i}.png"), np.clip(np.rint(image), 0, 255).astype(np.uint8))
+    before = tree_digest(d)
+    code, _, err = run(capsys, "measure", d, "--reference", d / "img_0.png", "-o", tmp_path / "out")
+    table = pd.read_csv(tmp_path / "out" / "angles.csv", keep_default_na=False).set_index("image")
+    assert code == 1
+    assert list(table["status"]) == ["ok", "ok", "ok", "suspect", "ok"]
+    assert re.match(r"suspect: marker \d's edge residual [\d.]+ px is [\d.]+ times the sequence's typical",
+                    table.loc["img_3.png", "message"])
+    assert table.loc["img_3.png", "angle_deg"] != ""  # the angle is kept to look at
+    assert "img_3.png: suspect: marker" in err
+    assert tree_digest(d) == before
+
+
+def test_clean_sequences_of_every_ready_scene_raise_no_flag():
+    from vision_torsion.pair import measure_pair
+    from vision_torsion.quality import residual_flags
+    from vision_torsion.resources import SCENES, available
+    from vision_torsion.settings import MeasureSettings
+    from vision_torsion.synthetic import load_scene, render
+
+    for name in set(available(SCENES)) - {"paper_session"}:  # that one is the standard scene's geometry
+        scene = load_scene(name)
+        settings = MeasureSettings(polarity=scene.markers.polarity)
+        pairs = [measure_pair(render(scene, angle, seed=7 + k).image, settings=settings)
+                 for k, angle in enumerate((0.0, 3.0, 11.0, 27.0))]
+        assert residual_flags(pairs) == [""] * 4, name

@@ -24,6 +24,7 @@ from .errors import ImageReadError, OutputError
 from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
 from .pair import measure_pair
+from .quality import SUSPECT, residual_flags
 from .settings import MeasureSettings
 
 __all__ = ["MeasureResult", "measure_folder", "measure_sequence", "list_images", "ANGLE_COLUMNS", "pair_columns"]
@@ -151,7 +152,9 @@ def measure_folder(
     -------
     MeasureResult
         The table (:data:`ANGLE_COLUMNS`): angle in degrees counter-clockwise as
-        displayed with its standard uncertainty, status ``ok``/``failed``, message,
+        displayed with its standard uncertainty, status ``ok``/``failed``/``suspect``
+        (measured, but a marker's fit residual is far above the folder's typical one:
+        :mod:`vision_torsion.quality`; counted in ``n_failed``), message,
         and both markers' centres (px), radii, uncertainties and residuals.
 
     Raises
@@ -173,11 +176,13 @@ def measure_folder(
     pairs, angles, messages = measure_sequence(
         ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress
     )
+    flags = residual_flags([ref_pair, *pairs])[1:]  # the reference counts towards the typical residual
     rows = []
-    for f, pair, ang, msg in zip(files, pairs, angles, messages):
+    for f, pair, ang, msg, flag in zip(files, pairs, angles, messages, flags):
         row = {"image": printable_name(f.name), "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}
         if ang is not None:
-            row.update(angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg, status="ok")
+            row.update(angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg,
+                       status=SUSPECT if flag else "ok", message=flag)
             row.update(pair_columns(pair, ang.swapped))
         rows.append(row)
     table = pd.DataFrame(rows, columns=ANGLE_COLUMNS)

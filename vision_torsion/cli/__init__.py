@@ -109,6 +109,8 @@ def progress_enabled(args) -> bool:
 
 def failure_line(image: str, message: str) -> str:
     """One line for a failed item, naming the image once (most messages already do)."""
+    if message.startswith("suspect:"):  # measured, but not good data (vision_torsion.quality)
+        return f"{image}: {message}"
     return f"failed: {message}" if image in message else f"failed: {image}: {message}"
 
 

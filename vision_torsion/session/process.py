@@ -52,6 +52,7 @@ from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
 from ..pair import PairMeasurement, measure_pair
+from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
 from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
@@ -83,11 +84,13 @@ class ProcessResult:
     measurements_path : pathlib.Path
         The ``measurements.csv`` written.
     n_images, n_ok, n_failed : int
-        Rows of the manifest, and how many got status ``ok`` / ``failed``.
+        Rows of the manifest, and how many got status ``ok`` / ``failed`` or
+        ``suspect`` (measured, but a marker's fit residual is far above the
+        session's noise: :mod:`vision_torsion.quality`).
     n_measured, n_cached : int
         Images measured in this run, and images whose result came from the cache.
     failures : tuple of (str, str)
-        (image, message) of every failed row, in manifest order.
+        (image, message) of every failed or suspect row, in manifest order.
     pending : tuple of (str, str)
         (image, message) of every row not photographed yet (status ``pending``),
         or whose orientation's reference image is not: a partly shot session.
@@ -298,9 +301,10 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
             reason = f"angles of orientation {orientation:g} failed: {exc}"
         else:
             reason = "no angle relative to the reference (marker identity lost)"
-        for i, angle in zip(idx, angles):
+        flags = residual_flags(pairs)
+        for i, angle, flag in zip(idx, angles, flags):
             if angle is not None:
-                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, "", "ok")
+                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, flag, SUSPECT if flag else "ok")
             elif entries[i]["status"] == "pending":
                 out[i] = (math.nan, math.nan, entries[i]["message"], "pending")
             else:
@@ -406,7 +410,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if new_logs or len(logs) > 1:
         # one log for the next run; the old logs' entries were read at the start
         merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=_valid_entry)}, logs + new_logs)
-    failed = table[table["status"] == "failed"]
+    failed = table[table["status"].isin(("failed", SUSPECT))]  # a suspect angle is not good data
     waiting = table[table["status"] == "pending"]
     failures = tuple(zip(failed["image"], failed["message"]))
     unlisted = tuple(unlisted_images(session, exclude=[out]))
