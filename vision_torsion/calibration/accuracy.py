@@ -55,7 +55,7 @@ import pandas as pd
 from scipy import stats
 
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
-from ..fileio import atomic_write_bytes, check_output_dir, output_set, write_csv, write_json
+from ..fileio import check_output_dir, output_set, write_csv, write_json
 from ..textfiles import read_toml
 from ..measure import measure_sequence
 from ..pair import measure_pair
@@ -264,8 +264,11 @@ def _statistics(ref, meas, n_failed, tolerance, reference_std):
 
 
 def _plot(path, table, tolerance):
+    # matplotlib only when a plot is drawn: check-accuracy starts faster
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+
+    from ..plotting import save_figure
 
     ok = table[table["status"] == "ok"]
     fig = Figure(figsize=(7, 4), dpi=120)
@@ -284,11 +287,7 @@ def _plot(path, table, tolerance):
     ax.set_ylabel("measured − reference (deg)")
     ax.legend(loc="best", fontsize="small")
     fig.tight_layout()
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    atomic_write_bytes(path, buf.getvalue())
+    save_figure(fig, path)
 
 
 def check_accuracy(

@@ -12,14 +12,14 @@ crash the report). Titles say in words what is plotted, with units.
 
 from __future__ import annotations
 
-import io
 import logging
 import math
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+from ..plotting import png_bytes as _png_bytes
 
 __all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "phase_stiffness_chart", "orientation_chart",
            "value_scale"]
@@ -35,12 +35,13 @@ _PHASE_LABELS = {
 }
 
 
-def png_bytes(fig: Figure, *, dpi: int = 110) -> bytes:
-    """Render a figure to PNG bytes."""
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    return buf.getvalue()
+#: Resolution of the report's figures (dots per inch).
+REPORT_DPI = 110
+
+
+def png_bytes(fig: Figure, *, dpi: float = REPORT_DPI) -> bytes:
+    """PNG of a report figure (:func:`vision_torsion.plotting.png_bytes` at the report's resolution)."""
+    return _png_bytes(fig, dpi=dpi)
 
 
 def safe_png(draw, *args) -> bytes:

@@ -3,20 +3,21 @@ band, n(T).
 
 Figures are built with :class:`matplotlib.figure.Figure` directly, never
 ``pyplot``, so no global backend or figure registry is touched (safe in threads, no
-``matplotlib.use`` at import). :func:`save_figure` writes PNGs atomically.
+``matplotlib.use`` at import). :func:`~vision_torsion.plotting.save_figure` writes
+PNGs atomically (at the figures' 120 dpi).
 """
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..fileio import atomic_write_bytes
+from ..plotting import save_figure
 
 __all__ = ["plot_torque_angle", "plot_stiffness", "plot_meshing", "plot_step_stiffness", "save_figure"]
 
+#: Resolution of the saved figures (dots per inch).
+_DPI = 120
 _COLOURS = {"positive_loading": "tab:red", "negative_loading": "tab:blue",
             "positive_unloading": "tab:orange", "negative_unloading": "tab:cyan"}
 
@@ -26,7 +27,7 @@ def _words(kind: str) -> str:
 
 
 def _axes(title: str, xlabel: str, ylabel: str):
-    fig = Figure(figsize=(7.0, 4.5), layout="constrained")
+    fig = Figure(figsize=(7.0, 4.5), layout="constrained", dpi=_DPI)
     ax = fig.add_subplot()
     ax.set(title=title, xlabel=xlabel, ylabel=ylabel)
     ax.grid(True, alpha=0.3)
@@ -167,10 +168,3 @@ def plot_step_stiffness(steps, summary) -> Figure:
     ax.axvline(0.0, color="0.5", lw=0.6)
     ax.legend(loc="best", fontsize="small", title="crosses: flagged steps")
     return fig
-
-
-def save_figure(fig: Figure, path, *, dpi: int = 120):
-    """Write `fig` as PNG to `path` atomically; return the path."""
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi)
-    return atomic_write_bytes(path, buffer.getvalue())
