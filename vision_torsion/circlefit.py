@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import FitError
+from .numerics import numeric_jacobian
 
 __all__ = ["CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse"]
 
@@ -401,12 +402,7 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
         uu, vv, ww = u[inl], v[inl], ws[inl]
         for _ in range(30):
             r0 = _ellipse_residuals(p, uu, vv)
-            J = np.empty((uu.size, 5))
-            for k in range(5):
-                h = 1e-7 * max(1.0, abs(p[k]))
-                dp = p.copy()
-                dp[k] += h
-                J[:, k] = (_ellipse_residuals(dp, uu, vv) - r0) / h
+            J = numeric_jacobian(lambda q: _ellipse_residuals(q, uu, vv), p, 1e-7 * np.maximum(1.0, np.abs(p)), f0=r0)
             JTW = J.T * ww
             H = JTW @ J + 1e-12 * np.eye(5)
             try:

@@ -37,13 +37,12 @@ Definitions (formulas)
 from __future__ import annotations
 
 import numpy as np
-from scipy import optimize
 
 from ..errors import AnalysisError
+from ..numerics import fit_breakpoints, numeric_jacobian
 from .uncertainty import (
     least_squares_weights,
     linearised_covariance,
-    numeric_jacobian,
     parameter_stds,
     torque_jacobian,
     torque_source_jacobian,
@@ -311,36 +310,21 @@ def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std
     if levels.size < 6:
         raise AnalysisError(f"three-segment fit needs at least 6 distinct torque magnitudes, got {levels.size}")
     w = least_squares_weights(s_all)
-    sw = np.sqrt(w)
     is_pos = (sign > 0).astype(float)
 
     def design(x, t1, t2):
         h = _hinge_columns(x, t1, t2) * sign[:, None]
         return np.column_stack([is_pos, 1.0 - is_pos, h])
 
-    def sse(t):
-        t1, t2 = t
-        if not (levels[1] < t1 < t2 < levels[-2]):
-            return np.inf
-        a = design(x_all, t1, t2)
-        coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
-        r = y - a @ coef
-        return float(np.sum(w * r * r))
-
     mids = 0.5 * (levels[1:] + levels[:-1])  # mids[k] lies between levels[k] and levels[k+1]
-    best, best_t = np.inf, None
-    for i in range(1, mids.size):
-        for j in range(i + 2, mids.size - 1):
-            v = sse((mids[i], mids[j]))
-            if v < best:
-                best, best_t = v, (mids[i], mids[j])
-    if best_t is None:
+    starts = [(mids[i], mids[j]) for i in range(1, mids.size) for j in range(i + 2, mids.size - 1)]
+    fit = fit_breakpoints(lambda t: design(x_all, t[0], t[1]), y, starts, weights=w,
+                          feasible=lambda t: levels[1] < t[0] < t[1] < levels[-2],
+                          xatol=levels[-1] * 1e-7, fatol_rel=1e-12)
+    if fit.breakpoints is None:
         raise AnalysisError("three-segment fit: too few torque levels to place two break torques")
-    res = optimize.minimize(sse, np.array(best_t), method="Nelder-Mead",
-                            options={"xatol": levels[-1] * 1e-7, "fatol": 1e-12 * max(best, 1e-300)})
-    t1, t2 = (float(v) for v in (res.x if res.fun <= best else best_t))
-    a = design(x_all, t1, t2)
-    coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+    t1, t2 = (float(v) for v in fit.breakpoints)
+    coef = fit.coef
     if not np.all(coef[2:] > 0):
         raise AnalysisError("three-segment fit gives a non-positive compliance: the branches are not monotone")
 

@@ -71,10 +71,10 @@ import numpy as np
 from scipy import optimize
 
 from ..errors import AnalysisError
+from ..numerics import numeric_jacobian
 from .uncertainty import (
     least_squares_weights,
     linearised_covariance,
-    numeric_jacobian,
     parameter_stds,
     torque_source_jacobian,
 )

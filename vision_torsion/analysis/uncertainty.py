@@ -335,24 +335,11 @@ def _stds(values: dict) -> dict:
 # ---------------------------------------------------------------------------------
 
 
-def numeric_jacobian(fun, p: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Central-difference Jacobian of a vector function (one column per parameter)."""
-    cols = []
-    for j, h in enumerate(steps):
-        dp = np.zeros_like(p)
-        dp[j] = h
-        cols.append((fun(p + dp) - fun(p - dp)) / (2.0 * h))
-    return np.column_stack(cols)
-
-
 def torque_jacobian(model, tau: np.ndarray, groups: np.ndarray, h: float = 1e-7) -> np.ndarray:
-    """d(model angles)/d(shared error of each torque group), by central differences."""
+    """d(model angles)/d(shared error of each torque group), by central differences:
+    :func:`torque_source_jacobian` with one unit source per group."""
     n_groups = int(groups.max()) + 1 if groups.size else 0
-    cols = []
-    for g in range(n_groups):
-        d = np.where(groups == g, h, 0.0)
-        cols.append((model(tau + d) - model(tau - d)) / (2.0 * h))
-    return np.column_stack(cols) if cols else np.zeros((tau.size, 0))
+    return torque_source_jacobian(model, tau, (groups[:, None] == np.arange(n_groups)).astype(float), h)
 
 
 def torque_source_jacobian(model, tau: np.ndarray, sources: np.ndarray, h: float = 1e-7) -> np.ndarray:

@@ -30,9 +30,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import minimize
-
 from ..errors import AnalysisError
+from ..numerics import fit_breakpoints, numeric_jacobian
 from .branches import BranchSplit
 from .combine import mean_over_cycles
 from .records import TorqueAngleRecord
@@ -128,32 +127,22 @@ def contact_edge(angle_rad, torque_nm, *, sign: int, search=None):
         raise AnalysisError(f"the dead-zone edge fit needs at least 6 samples, got {x.size}")
     lo, hi = (x.min(), x.max()) if search is None else sorted(sign * np.asarray(search, dtype=float))
     scale = float(x.max() - x.min())
-
-    def rss(p):
-        a = _hinge_design(x, p[0], p[1], scale)
-        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-        r = y - a @ coef
-        return float(r @ r)
-
-    grid = [(rss((xc, lk)), xc, lk) for xc in np.linspace(lo, hi, 40) for lk in np.linspace(-3, 4, 15)]
-    _, xc0, lk0 = min(grid)
-    best = minimize(rss, [xc0, lk0], method="Nelder-Mead",
-                    options={"xatol": 1e-9 * scale, "fatol": 1e-14 * rss((xc0, lk0)), "maxiter": 4000})
-    xc, lk = best.x
+    starts = [(xc, lk) for xc in np.linspace(lo, hi, 40) for lk in np.linspace(-3, 4, 15)]
+    best = fit_breakpoints(lambda t: _hinge_design(x, t[0], t[1], scale), y, starts,
+                           xatol=1e-9 * scale, fatol_rel=1e-14, maxiter=4000)
+    xc, lk = best.breakpoints
     if not (np.any(x < xc) and np.any(x > xc)):
         raise AnalysisError("the dead-zone edge fit put the edge outside the data")
     # Linearised covariance of (xc, log_kappa, L, A) from a numerical Jacobian.
-    a = _hinge_design(x, xc, lk, scale)
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    coef = best.coef
 
     def model(p):
         return _hinge_design(x, p[0], p[1], scale) @ p[2:]
 
     p = np.array([xc, lk, *coef])
     steps = np.array([1e-6 * scale, 1e-6, 1e-6 * max(abs(coef[0]), 1.0), 1e-6 * max(abs(coef[1]), 1.0)])
-    jac = np.column_stack([(model(p + dp) - model(p - dp)) / (2 * h)
-                           for h, dp in zip(steps, np.diag(steps))])
-    s2 = best.fun / max(x.size - 4, 1)
+    jac = numeric_jacobian(model, p, steps)
+    s2 = best.sse / max(x.size - 4, 1)
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     return float(sign * xc), float(np.sqrt(max(cov[0, 0], 0.0)))
 
