@@ -177,3 +177,13 @@ def test_step_stiffness_names_a_missing_column_and_a_bad_line():
     table.loc[4, "angle_deg"] = "n/a"
     with pytest.raises(RecordError, match=r"line 6: column angle_deg is not a number \('n/a'\)"):
         step_stiffness(table)
+
+
+def test_mains_hum_at_a_high_sampling_rate_does_not_flicker_the_branches():
+    # At 1 kHz a cut-off of 5 % of the rate (50 Hz) sat on 50 Hz hum, which flickered
+    # the torque in and out of the zero band: an extra 6-sample branch. The default
+    # cut-off is capped at 20 Hz.
+    syn = realistic_encoder_record(seed=3, sampling_rate_hz=1000.0, samples=20000, cycles=1)
+    result = analyze_stiffness_curve(syn.frame, rig=syn.rig)
+    assert len(result.split.branches) == 6
+    assert result.settings["cutoff_hz"] is None  # the default was used

@@ -46,7 +46,7 @@ def register(subparsers) -> None:
                              "none for a measurements.csv, whose stiffness is given per load step)")
     parser.add_argument("--order", type=int, default=7, help="polynomial order (default: 7)")
     parser.add_argument("--cutoff-hz", type=float, default=None,
-                        help="low-pass cut-off in Hz (default: 5%% of the sampling rate)")
+                        help="low-pass cut-off in Hz (default: 5%% of the sampling rate, at most 20 Hz)")
     parser.add_argument("--filter-order", type=int, default=4,
                         help="Butterworth order (default: 4)")
     parser.add_argument("--threshold-nm", type=float, default=None,

@@ -429,7 +429,7 @@ def analyze_stiffness_curve(
         Polynomial order (7 fits the saturating stiffness law of the paper to well
         under 1 % on synthetic records; lower it for a few camera-rig steps).
     cutoff_hz : float, optional
-        Low-pass cut-off, Hz; default 5 % of the sampling rate.
+        Low-pass cut-off, Hz; default 5 % of the sampling rate, at most 20 Hz.
     filter_order : int
         Butterworth order.
     threshold_nm : float, optional

@@ -28,6 +28,10 @@ log = logging.getLogger(__name__)
 #: quasi-static loading changes over seconds, so 5 Hz at 100 Hz sampling keeps the
 #: curve and removes most white sensor noise (its std falls to about a third).
 DEFAULT_CUTOFF_FRACTION = 0.05
+#: ... but never above this, Hz: mains hum (50/60 Hz) must lie well in the stop band.
+#: At 1 kHz sampling a 5 % cut-off would sit on 50 Hz hum, which then flickers the
+#: torque in and out of the zero band near zero torque; 20 Hz damps it ~1500-fold.
+MAX_DEFAULT_CUTOFF_HZ = 20.0
 
 
 def sampling_rate_hz(time_s) -> float:
@@ -58,14 +62,15 @@ def sampling_rate_hz(time_s) -> float:
 
 
 def default_cutoff_hz(sampling_rate: float) -> float:
-    """Default cut-off frequency, Hz: :data:`DEFAULT_CUTOFF_FRACTION` of the sampling rate.
+    """Default cut-off frequency, Hz: :data:`DEFAULT_CUTOFF_FRACTION` of the sampling
+    rate, at most :data:`MAX_DEFAULT_CUTOFF_HZ` (below mains hum).
 
     Examples
     --------
-    >>> default_cutoff_hz(100.0)
-    5.0
+    >>> default_cutoff_hz(100.0), default_cutoff_hz(1000.0)
+    (5.0, 20.0)
     """
-    return DEFAULT_CUTOFF_FRACTION * float(sampling_rate)
+    return min(DEFAULT_CUTOFF_FRACTION * float(sampling_rate), MAX_DEFAULT_CUTOFF_HZ)
 
 
 def lowpass(values, *, sampling_rate: float, cutoff_hz: float | None = None, order: int = 4):
