@@ -19,8 +19,8 @@ def test_geometric_fit_recovers_centre_with_honest_covariance():
     for _ in range(300):
         x, y = _noisy_circle(rng)
         f = fit_circle_geometric(x, y, weights=np.full(x.size, 1 / 0.02**2))
-        errs.append(f.x - 812.3)
-        stds.append(f.centre_std[0])
+        errs.append(f.x_px - 812.3)
+        stds.append(f.centre_std_px[0])
     ratio = np.mean(stds) / np.sqrt(np.mean(np.square(errs)))
     assert 0.85 < ratio < 1.15  # 300 samples: RMS known to ~4 %
 
@@ -31,8 +31,8 @@ def test_geometric_beats_algebraic_on_a_partial_arc():
     geo, alg = [], []
     for _ in range(100):
         x, y = _noisy_circle(rng, arc=np.pi / 2, sigma=0.3)
-        geo.append(fit_circle_geometric(x, y).radius - 35.2)
-        alg.append(fit_circle_algebraic(x, y).radius - 35.2)
+        geo.append(fit_circle_geometric(x, y).radius_px - 35.2)
+        alg.append(fit_circle_algebraic(x, y).radius_px - 35.2)
     assert abs(np.mean(geo)) < 0.5 * abs(np.mean(alg))
 
 
@@ -42,7 +42,7 @@ def test_outliers_are_rejected():
     x[:8] += 3.0  # a wire across part of the edge
     f = fit_circle_geometric(x, y)
     assert f.inliers[:8].sum() == 0 and f.inliers[8:].all()
-    assert abs(f.x - 812.3) < 0.005 and abs(f.y - 455.7) < 0.005
+    assert abs(f.x_px - 812.3) < 0.005 and abs(f.y_px - 455.7) < 0.005
 
 
 def test_algebraic_fit_is_the_paper_formula():
@@ -54,10 +54,10 @@ def test_algebraic_fit_is_the_paper_formula():
     def q(a, b, r):
         return np.sum(((x - a) ** 2 + (y - b) ** 2 - r**2) ** 2)
 
-    best = q(f.x, f.y, f.radius)
+    best = q(f.x_px, f.y_px, f.radius_px)
     for d in np.eye(3) * 1e-3:
-        assert q(f.x + d[0], f.y + d[1], f.radius + d[2]) > best
-        assert q(f.x - d[0], f.y - d[1], f.radius - d[2]) > best
+        assert q(f.x_px + d[0], f.y_px + d[1], f.radius_px + d[2]) > best
+        assert q(f.x_px - d[0], f.y_px - d[1], f.radius_px - d[2]) > best
 
 
 def test_ellipse_fit_recovers_axes_and_orientation():
@@ -68,8 +68,8 @@ def test_ellipse_fit_recovers_axes_and_orientation():
     x = 300.2 + u * np.cos(-th) - v * np.sin(-th)
     y = 211.9 + u * np.sin(-th) + v * np.cos(-th)
     e = fit_ellipse(x, y)
-    assert abs(e.x - 300.2) < 1e-6 and abs(e.y - 211.9) < 1e-6
-    assert abs(e.a - a) < 1e-6 and abs(e.b - b) < 1e-6
+    assert abs(e.x_px - 300.2) < 1e-6 and abs(e.y_px - 211.9) < 1e-6
+    assert abs(e.a_px - a) < 1e-6 and abs(e.b_px - b) < 1e-6
     assert abs(e.angle_deg - 25.0) < 1e-4
 
 
@@ -116,5 +116,5 @@ def test_ellipse_guards_keep_well_posed_fits(arc_deg, ratio):
     y = 900.7 + ratio * 35 * np.sin(t) + rng.normal(0, 0.02, t.size)
     e = fit_ellipse(x, y)
     tol = 0.01 if arc_deg == 360 else 1.0
-    assert abs(e.x - 1300.3) < tol and abs(e.y - 900.7) < tol
-    assert 0 < e.b <= e.a < 60
+    assert abs(e.x_px - 1300.3) < tol and abs(e.y_px - 900.7) < tol
+    assert 0 < e.b_px <= e.a_px < 60

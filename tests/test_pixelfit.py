@@ -57,7 +57,7 @@ def test_centres_are_accurate_and_the_covariance_is_honest(small_scene):
         r = render(small_scene, float(rng.uniform(-180, 180)), seed=seed)
         for x, y in r.centres:
             f = fit_disc(r.image, x + rng.uniform(-0.5, 0.5), y + rng.uniform(-0.5, 0.5), 20.0 + rng.uniform(-0.5, 0.5))
-            errs.append((f.x - x, f.y - y))
+            errs.append((f.x_px - x, f.y_px - y))
             stds.append(np.sqrt(np.diag(f.cov)[:2]))
     errs, stds = np.array(errs), np.array(stds)
     rms = np.sqrt(np.mean(errs**2, axis=0))
@@ -77,10 +77,10 @@ def test_result_does_not_depend_on_the_start(small_scene):
     a = fit_disc(r.image, x + 0.6, y - 0.3, 19.4)
     b = fit_disc(r.image, x - 0.2, y + 0.3, 20.5, edge_width=0.9)
     sx, sy = np.sqrt(np.diag(a.cov)[:2])
-    assert abs(a.x - b.x) < 0.3 * sx and abs(a.y - b.y) < 0.3 * sy
+    assert abs(a.x_px - b.x_px) < 0.3 * sx and abs(a.y_px - b.y_px) < 0.3 * sy
     # the radius (not used by the angle) also carries the error of the erf edge
     # profile, which weighs differently as the ring's inner side moves: ~0.005 px
-    assert abs(a.radius - b.radius) < 0.01
+    assert abs(a.radius_px - b.radius_px) < 0.01
 
 
 def test_a_wire_across_the_edge_does_not_move_the_centre(small_scene):
@@ -95,7 +95,7 @@ def test_a_wire_across_the_edge_does_not_move_the_centre(small_scene):
                                                     "wire_offset_px": x + 17.0 - cx}), 0.0, seed=5)
     a = fit_disc(clean.image, x + 0.3, y, 20.0)
     b = fit_disc(wired.image, x + 0.3, y, 20.0)
-    assert np.hypot(b.x - a.x, b.y - a.y) < 0.01
+    assert np.hypot(b.x_px - a.x_px, b.y_px - a.y_px) < 0.01
     assert b.n_pixels < a.n_pixels  # the wire's pixels were cut
 
 
@@ -103,10 +103,10 @@ def test_diagnostics_of_a_round_marker(small_scene):
     r = render(small_scene, 0.0, seed=2)
     x, y = r.centres[0]
     f = fit_disc(r.image, x, y, 20.0)
-    assert f.edge_x.size > 100  # sectors of ~1 px of arc: 2π·20 ≈ 126
+    assert f.edge_x_px.size > 100  # sectors of ~1 px of arc: 2π·20 ≈ 126
     assert f.residual_rms_px < 0.1
     assert abs(f.foreground_dn - f.background_dn - (-160.0)) < 2.0
-    assert 0.9 < f.edge_width < 1.3  # blur σ = 1 px combined with the pixel width: ≈ 1.04 px
+    assert 0.9 < f.edge_width_px < 1.3  # blur σ = 1 px combined with the pixel width: ≈ 1.04 px
 
 
 def test_too_little_contrast_is_an_error():

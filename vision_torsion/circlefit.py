@@ -49,13 +49,13 @@ class CircleFit:
 
     Attributes
     ----------
-    x, y : float
+    x_px, y_px : float
         Centre (px).
-    radius : float
+    radius_px : float
         Radius (px).
     cov : numpy.ndarray
-        3x3 covariance of (x, y, radius) in px².
-    residual_rms : float
+        3x3 covariance of (x_px, y_px, radius_px) in px².
+    residual_rms_px : float
         RMS orthogonal distance of the inlier points to the circle (px).
     inliers : numpy.ndarray
         Boolean mask of the points kept.
@@ -63,31 +63,33 @@ class CircleFit:
         Name of the estimator.
     """
 
-    x: float
-    y: float
-    radius: float
+    x_px: float
+    y_px: float
+    radius_px: float
     cov: np.ndarray
-    residual_rms: float
+    residual_rms_px: float
     inliers: np.ndarray = field(repr=False)
     method: str = "geometric"
 
     @property
-    def centre_std(self) -> tuple[float, float]:
-        """Standard uncertainties of x and y (px)."""
+    def centre_std_px(self) -> tuple[float, float]:
+        """Standard uncertainties of x_px and y_px (px)."""
         return float(np.sqrt(self.cov[0, 0])), float(np.sqrt(self.cov[1, 1]))
 
 
 @dataclass(frozen=True)
 class EllipseFit:
-    """A fitted ellipse: centre (px), semi-axes a ≥ b (px), orientation (deg, CCW as displayed), centre covariance (px²)."""
+    """A fitted ellipse: centre ``x_px, y_px`` (px), semi-axes ``a_px ≥ b_px`` (px),
+    orientation ``angle_deg`` (deg, CCW as displayed), centre covariance ``cov`` (px²),
+    ``residual_rms_px`` (px)."""
 
-    x: float
-    y: float
-    a: float
-    b: float
+    x_px: float
+    y_px: float
+    a_px: float
+    b_px: float
     angle_deg: float
     cov: np.ndarray
-    residual_rms: float
+    residual_rms_px: float
     inliers: np.ndarray = field(repr=False)
     method: str = "ellipse"
 
@@ -144,7 +146,7 @@ def fit_circle_algebraic(x, y, *, weights=None) -> CircleFit:
     --------
     >>> t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     >>> f = fit_circle_algebraic(3 + 2 * np.cos(t), 4 + 2 * np.sin(t))
-    >>> round(f.x, 9), round(f.y, 9), round(f.radius, 9)
+    >>> round(f.x_px, 9), round(f.y_px, 9), round(f.radius_px, 9)
     (3.0, 4.0, 2.0)
     """
     x, y, w, ok = _check_points(x, y, weights, 3)
@@ -172,11 +174,11 @@ def fit_circle_algebraic(x, y, *, weights=None) -> CircleFit:
     J = np.array([[0.5, 0, 0], [0, 0.5, 0], [ua / (2 * r), va / (2 * r), 1 / (2 * r)]])
     cov = J @ cov_sol @ J.T * s * s
     return CircleFit(
-        x=float(mx + ua * s),
-        y=float(my + va * s),
-        radius=float(r * s),
+        x_px=float(mx + ua * s),
+        y_px=float(my + va * s),
+        radius_px=float(r * s),
         cov=cov,
-        residual_rms=float(np.sqrt(np.mean(dist**2)) * s),
+        residual_rms_px=float(np.sqrt(np.mean(dist**2)) * s),
         inliers=ok.copy(),
         method="algebraic",
     )
@@ -223,7 +225,7 @@ def fit_circle_geometric(
     ws = w * s * s  # weights in normalised units
     if initial is None:
         start = fit_circle_algebraic(x[ok], y[ok], weights=w[ok])
-        p = np.array([(start.x - mx) / s, (start.y - my) / s, start.radius / s])
+        p = np.array([(start.x_px - mx) / s, (start.y_px - my) / s, start.radius_px / s])
     else:
         p = np.array([(initial[0] - mx) / s, (initial[1] - my) / s, initial[2] / s], dtype=np.float64)
     inl = ok.copy()
@@ -271,11 +273,11 @@ def fit_circle_geometric(
     if not (p[2] > 0 and np.all(np.isfinite(p))):
         raise FitError("geometric circle fit gave a non-positive radius")
     return CircleFit(
-        x=float(mx + p[0] * s),
-        y=float(my + p[1] * s),
-        radius=float(p[2] * s),
+        x_px=float(mx + p[0] * s),
+        y_px=float(my + p[1] * s),
+        radius_px=float(p[2] * s),
         cov=cov,
-        residual_rms=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
+        residual_rms_px=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
         inliers=inl,
         method="geometric",
     )
@@ -388,7 +390,7 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
     --------
     >>> t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     >>> e = fit_ellipse(10 + 5 * np.cos(t), 20 + 3 * np.sin(t))
-    >>> round(e.x, 6), round(e.y, 6), round(e.a, 6), round(e.b, 6)
+    >>> round(e.x_px, 6), round(e.y_px, 6), round(e.a_px, 6), round(e.b_px, 6)
     (10.0, 20.0, 5.0, 3.0)
     """
     x, y, w, ok = _check_points(x, y, weights, 6)
@@ -435,12 +437,12 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
     if b > a:
         a, b, th = b, a, th + np.pi / 2
     return EllipseFit(
-        x=float(mx + x0 * s),
-        y=float(my + y0 * s),
-        a=float(a * s),
-        b=float(b * s),
+        x_px=float(mx + x0 * s),
+        y_px=float(my + y0 * s),
+        a_px=float(a * s),
+        b_px=float(b * s),
         angle_deg=float(np.rad2deg(-th) % 180.0),
         cov=cov,
-        residual_rms=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
+        residual_rms_px=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
         inliers=inl,
     )

@@ -73,9 +73,9 @@ class EdgePoints:
 
     Attributes
     ----------
-    x, y : numpy.ndarray
+    x_px, y_px : numpy.ndarray
         Edge points (px).
-    std : numpy.ndarray
+    std_px : numpy.ndarray
         Standard uncertainty of each point along the edge normal (px).
     noise_dn : float
         Residual RMS of the pixel model (DN): the image noise where the model fits.
@@ -87,9 +87,9 @@ class EdgePoints:
         Pixels used.
     """
 
-    x: np.ndarray
-    y: np.ndarray
-    std: np.ndarray
+    x_px: np.ndarray
+    y_px: np.ndarray
+    std_px: np.ndarray
     noise_dn: float
     edge_width_px: float
     background_dn: float
@@ -215,9 +215,9 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     rho = Rk + delta
     std = np.sqrt(sigma2 / info)
     return EdgePoints(
-        x=cx + rho * np.cos(ang),
-        y=cy + rho * np.sin(ang),
-        std=std,
+        x_px=cx + rho * np.cos(ang),
+        y_px=cy + rho * np.sin(ang),
+        std_px=std,
         noise_dn=float(np.sqrt(sigma2)),
         edge_width_px=s,
         background_dn=float(coef[0]),

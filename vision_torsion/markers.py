@@ -233,22 +233,22 @@ def fit_marker(
         shape = None
         for _ in range(max_iter):
             ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape, patch=patch)
-            w = 1.0 / ep.std**2
+            w = 1.0 / ep.std_px**2
             if fit == "algebraic":
-                cf = fit_circle_algebraic(ep.x, ep.y)
-                nx_, ny_, nr, cov, rms, n_in = cf.x, cf.y, cf.radius, cf.cov, cf.residual_rms, int(cf.inliers.sum())
+                cf = fit_circle_algebraic(ep.x_px, ep.y_px)
+                nx_, ny_, nr, cov, rms, n_in = cf.x_px, cf.y_px, cf.radius_px, cf.cov, cf.residual_rms_px, int(cf.inliers.sum())
             elif fit == "ellipse":
-                ef = fit_ellipse(ep.x, ep.y, weights=w)
-                nx_, ny_ = ef.x, ef.y
-                nr = float(np.sqrt(ef.a * ef.b))
+                ef = fit_ellipse(ep.x_px, ep.y_px, weights=w)
+                nx_, ny_ = ef.x_px, ef.y_px
+                nr = float(np.sqrt(ef.a_px * ef.b_px))
                 cov = np.zeros((3, 3))
                 cov[:2, :2] = ef.cov
                 cov[2, 2] = np.nan
-                rms, n_in = ef.residual_rms, int(ef.inliers.sum())
+                rms, n_in = ef.residual_rms_px, int(ef.inliers.sum())
                 shape = _ellipse_radial(ef)
             else:
-                cf = fit_circle_geometric(ep.x, ep.y, weights=w, initial=(cx, cy, r))
-                nx_, ny_, nr, cov, rms, n_in = cf.x, cf.y, cf.radius, cf.cov, cf.residual_rms, int(cf.inliers.sum())
+                cf = fit_circle_geometric(ep.x_px, ep.y_px, weights=w, initial=(cx, cy, r))
+                nx_, ny_, nr, cov, rms, n_in = cf.x_px, cf.y_px, cf.radius_px, cf.cov, cf.residual_rms_px, int(cf.inliers.sum())
             # the centre converges faster than radius and edge width, and is what counts
             moved = max(abs(nx_ - cx), abs(ny_ - cy))
             cx, cy, r, s = nx_, ny_, nr, ep.edge_width_px
@@ -258,7 +258,7 @@ def fit_marker(
                 break
     except FitError as exc:
         return _failed(blob, exc)
-    circ = _harmonic_circularity(ep.x, ep.y, cx, cy, r)
+    circ = _harmonic_circularity(ep.x_px, ep.y_px, cx, cy, r)
     if fit != "ellipse" and circ < 0.9:
         return _not_round(cx, cy, r, circ)
     return Marker(
@@ -290,26 +290,26 @@ def _pixels_marker(f: DiscFit) -> Marker:
     """A :class:`Marker` from the pixel-model fit (``fit="pixels"``)."""
     circ = f.circularity
     if circ < 0.9:
-        return _not_round(f.x, f.y, f.radius, circ)
+        return _not_round(f.x_px, f.y_px, f.radius_px, circ)
     return Marker(
-        x_px=f.x,
-        y_px=f.y,
-        radius_px=f.radius,
+        x_px=f.x_px,
+        y_px=f.y_px,
+        radius_px=f.radius_px,
         x_std_px=float(np.sqrt(f.cov[0, 0])),
         y_std_px=float(np.sqrt(f.cov[1, 1])),
         xy_cov_px2=float(f.cov[0, 1]),
         radius_std_px=float(np.sqrt(f.cov[2, 2])),
         residual_rms_px=f.residual_rms_px,
-        n_edge_points=int(f.edge_x.size),
+        n_edge_points=int(f.edge_x_px.size),
         contrast_dn=f.foreground_dn - f.background_dn,
         circularity=circ,
-        edge_width_px=f.edge_width,
+        edge_width_px=f.edge_width_px,
     )
 
 
 def _ellipse_radial(ef):
     th = -np.deg2rad(ef.angle_deg)  # image-axes orientation of the major axis
-    a, b = ef.a, ef.b
+    a, b = ef.a_px, ef.b_px
 
     def radial(psi):
         t = psi - th

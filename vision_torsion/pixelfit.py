@@ -95,21 +95,21 @@ class DiscFit:
 
     Attributes
     ----------
-    x, y : float
+    x_px, y_px : float
         Centre (px).
-    radius : float
+    radius_px : float
         Radius of the edge (px).
-    edge_width : float
+    edge_width_px : float
         Edge width s (px).
     cov : numpy.ndarray
-        3x3 covariance of (x, y, radius) (px²).
+        3x3 covariance of (x_px, y_px, radius_px) (px²).
     noise_dn : float
         Residual RMS of the pixel model (DN).
     background_dn, foreground_dn : float
         Grey levels outside and inside the marker at the starting centre (DN).
     n_pixels : int
         Pixels used by the final fit.
-    edge_x, edge_y : numpy.ndarray
+    edge_x_px, edge_y_px : numpy.ndarray
         Edge points per angular sector (~1 px of arc): where the pixels of that
         sector alone put the edge, given the fitted model (px). A diagnostic of the
         edge's shape, not used by the fit.
@@ -120,17 +120,17 @@ class DiscFit:
         ratio of a near-circle.
     """
 
-    x: float
-    y: float
-    radius: float
-    edge_width: float
+    x_px: float
+    y_px: float
+    radius_px: float
+    edge_width_px: float
     cov: np.ndarray
     noise_dn: float
     background_dn: float
     foreground_dn: float
     n_pixels: int
-    edge_x: np.ndarray
-    edge_y: np.ndarray
+    edge_x_px: np.ndarray
+    edge_y_px: np.ndarray
     residual_rms_px: float
     circularity: float
 
@@ -313,7 +313,7 @@ def fit_disc(
     >>> r = render(Scene(), 0.0, seed=3)
     >>> x, y = r.centres[0]
     >>> f = fit_disc(r.image, x + 0.6, y - 0.4, 34.0)
-    >>> bool(abs(f.x - x) < 0.02 and abs(f.y - y) < 0.02)
+    >>> bool(abs(f.x_px - x) < 0.02 and abs(f.y_px - y) < 0.02)
     True
     """
     s = float(edge_width)
@@ -394,17 +394,17 @@ def fit_disc(
         raise FitError("the marker's edge model is degenerate (no edge in the ring)") from exc
     ex, ey, rms, circularity = _edge_diagnostics(p, resid, J, u)
     return DiscFit(
-        x=float(p[0]),
-        y=float(p[1]),
-        radius=float(p[2]),
-        edge_width=float(p[3]),
+        x_px=float(p[0]),
+        y_px=float(p[1]),
+        radius_px=float(p[2]),
+        edge_width_px=float(p[3]),
         cov=cov[:3, :3].copy(),
         noise_dn=float(np.sqrt(sigma2)),
         background_dn=float(p[4]),
         foreground_dn=float(p[5]),
         n_pixels=int(n),
-        edge_x=ex,
-        edge_y=ey,
+        edge_x_px=ex,
+        edge_y_px=ey,
         residual_rms_px=rms,
         circularity=circularity,
     )
