@@ -62,11 +62,10 @@ import math
 
 import numpy as np
 from scipy.optimize import least_squares
-from tqdm.auto import tqdm
-
 from ..angle import sequence_angles
+from ..batch import measure_each
 from ..circlefit import fit_ellipse
-from ..errors import CalibrationError, FitError, VisionTorsionError
+from ..errors import CalibrationError, FitError
 from ..pair import PairMeasurement, measure_pair
 from ..settings import MeasureSettings
 from .correction import PlaneCorrection, normalised
@@ -81,59 +80,76 @@ MIN_SWEEP_DEG = 40.0
 MIN_IMAGES = 6
 
 
-def _rot(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.array([[c, -s], [s, c]]) if np.ndim(t) == 0 else np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+def _rotation(angle_rad):
+    """2x2 rotation matrix of an angle (rad), or a stack of them for an array of angles."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    if np.ndim(angle_rad) == 0:
+        return np.array([[c, -s], [s, c]])
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
 
 def _as_pairs(data, settings, progress):
+    """The marker pairs of `data` (pairs pass through, images are measured); an image
+    whose target is not found is left out, unless it is the reference."""
     settings = settings or MeasureSettings()
-    pairs = []
-    for i, item in enumerate(tqdm(data, desc="measuring", unit="image", disable=not progress)):
-        if isinstance(item, PairMeasurement):
-            pairs.append(item)
-            continue
-        name = str(item) if isinstance(item, (str, bytes)) or hasattr(item, "__fspath__") else f"image {i}"
-        try:
-            pairs.append(measure_pair(item, settings=settings, name=name))
-        except VisionTorsionError as exc:
-            if i == 0:
-                raise CalibrationError(f"the reference (first) image is unusable: {exc}") from None
-            logger.warning("left out of the calibration: %s", exc)
-    return pairs
+
+    def measure(item):
+        index, value = item
+        if isinstance(value, PairMeasurement):
+            return value
+        is_path = isinstance(value, (str, bytes)) or hasattr(value, "__fspath__")
+        return measure_pair(value, settings=settings, name=str(value) if is_path else f"image {index}")
+
+    done = measure_each(measure, list(enumerate(data)), progress=progress)
+    if done and not done[0].ok:
+        raise CalibrationError(f"the reference (first) image is unusable: {done[0].message}")
+    for d in done:
+        if not d.ok:
+            logger.warning("left out of the calibration: %s", d.message)
+    return [d.value for d in done if d.ok]
 
 
-def _centres_and_weights(pairs, swapped):
-    """Centres (n, 2, 2) as [image, marker, xy] with marker identity tracked, and whitening (n, 2, 2, 2)."""
-    P = np.empty((len(pairs), 2, 2))
-    W = np.empty((len(pairs), 2, 2, 2))
-    for i, (p, sw) in enumerate(zip(pairs, swapped)):
-        ms = (p.second, p.first) if sw else (p.first, p.second)
-        for j, m in enumerate(ms):
-            P[i, j] = m.x_px, m.y_px
-            cov = m.cov
+def _centres_and_whitening(pairs, swapped):
+    """Marker centres and their whitening matrices, marker identity tracked.
+
+    Returns
+    -------
+    centres_px : ndarray (n, 2, 2)
+        [image, marker, (x, y)] in px.
+    whitening : ndarray (n, 2, 2, 2)
+        L⁻¹ with Σ = L·Lᵀ the centre covariance, per image and marker.
+    """
+    centres_px = np.empty((len(pairs), 2, 2))
+    whitening = np.empty((len(pairs), 2, 2, 2))
+    for i, (pair, swap) in enumerate(zip(pairs, swapped)):
+        markers = (pair.second, pair.first) if swap else (pair.first, pair.second)
+        for j, marker in enumerate(markers):
+            centres_px[i, j] = marker.x_px, marker.y_px
+            cov = marker.cov
             if not np.all(np.isfinite(cov)) or np.linalg.det(cov) <= 0:
                 raise CalibrationError(f"image {i}: marker {j + 1} has no usable centre covariance")
-            W[i, j] = np.linalg.inv(np.linalg.cholesky(cov))
-    return P, W
+            whitening[i, j] = np.linalg.inv(np.linalg.cholesky(cov))
+    return centres_px, whitening
 
 
-def _distort(u, k1, c, f):
+def _distort(points_px, k1, centre_px, focal_length_px):
+    """Radial distortion of undistorted points (px): c + (u − c)(1 + k1·|u − c|²/f²)."""
     if k1 == 0.0:
-        return u
-    d = u - c
-    return c + d * (1.0 + k1 * np.sum(d * d, axis=-1, keepdims=True) / f**2)
+        return points_px
+    offset = points_px - centre_px
+    return centre_px + offset * (1.0 + k1 * np.sum(offset * offset, axis=-1, keepdims=True) / focal_length_px**2)
 
 
-def _affine_start(P):
-    """Ellipse through all centres → (centre, M mapping the unit circle onto it)."""
+def _affine_start(centres_px):
+    """Ellipse through all centres → (its centre, the matrix mapping the unit circle onto it)."""
     try:
-        e = fit_ellipse(P[..., 0].ravel(), P[..., 1].ravel(), clip=np.inf)
+        e = fit_ellipse(centres_px[..., 0].ravel(), centres_px[..., 1].ravel(), clip=np.inf)
     except FitError as exc:
         raise CalibrationError(f"no ellipse fits the marker centres ({exc})") from None
     phi = math.radians(e.angle_deg)
-    M = np.array([[e.a * math.cos(phi), e.b * math.sin(phi)], [-e.a * math.sin(phi), e.b * math.cos(phi)]])
-    return np.array([e.x, e.y]), M
+    circle_to_ellipse = np.array([[e.a_px * math.cos(phi), e.b_px * math.sin(phi)],
+                                  [-e.a_px * math.sin(phi), e.b_px * math.cos(phi)]])
+    return np.array([e.x_px, e.y_px]), circle_to_ellipse
 
 
 def calibrate_plane(
@@ -208,82 +224,91 @@ def calibrate_plane(
             f"self-calibration needs at least {MIN_IMAGES} usable images (reference included), got {len(pairs)}"
         )
     angles = sequence_angles(pairs[0], pairs[1:])
-    raw = np.array([0.0] + [a.angle_deg for a in angles])
-    sweep = float(raw.max() - raw.min())
+    raw_deg = np.array([0.0] + [a.angle_deg for a in angles])
+    sweep = float(raw_deg.max() - raw_deg.min())
     if sweep < min_sweep_deg:
         raise CalibrationError(
             f"the rotation sweep spans {sweep:.1f}°, too short to fit the ellipse of the markers' motion: "
             f"at least {min_sweep_deg:g}° is needed (turn the disk further, e.g. ±{min_sweep_deg / 2:g}°)"
         )
     swapped = [False] + [a.swapped for a in angles]
-    P, W = _centres_and_weights(pairs, swapped)
-    c_arr = None if centre is None else np.asarray(centre, dtype=np.float64)
+    centres_px, whitening = _centres_and_whitening(pairs, swapped)
+    distortion_centre_px = None if centre is None else np.asarray(centre, dtype=np.float64)
     # start: undistort with the known k1, then the affine solution from the ellipse
-    P0 = P if not k1 else np.stack(
-        PlaneCorrection(np.eye(3), k1=k1, centre=centre, focal_length_px=f).undistort(P[..., 0], P[..., 1]), -1
+    undistorted_px = centres_px if not k1 else np.stack(
+        PlaneCorrection(np.eye(3), k1=k1, centre=centre, focal_length_px=f).undistort(centres_px[..., 0],
+                                                                                     centres_px[..., 1]), -1
     )
-    m = P0.reshape(-1, 2).mean(axis=0)
-    s = float(np.sqrt(np.mean(np.sum((P0.reshape(-1, 2) - m) ** 2, axis=-1))))
-    ce, M = _affine_start(P0)
-    q = np.einsum("ab,ijb->ija", np.linalg.inv(M), P0 - ce)
-    psi = np.unwrap(np.arctan2(q[:, 0, 1], q[:, 0, 0]))
-    theta0 = psi - psi[0]
-    A = M @ _rot(psi[0]) / s
-    G0 = np.eye(3)
-    G0[:2, :2] = A
-    G0[:2, 2] = (ce - m) / s
-    a2 = np.mean(np.einsum("iab,ib->ia", np.swapaxes(_rot(psi), -1, -2), q[:, 1]), axis=0)
-    n = len(pairs)
+    # fit in coordinates normalised by the centres' centroid and RMS spread (px)
+    mean_px = undistorted_px.reshape(-1, 2).mean(axis=0)
+    spread_px = float(np.sqrt(np.mean(np.sum((undistorted_px.reshape(-1, 2) - mean_px) ** 2, axis=-1))))
+    ellipse_centre_px, circle_to_ellipse = _affine_start(undistorted_px)
+    on_unit_circle = np.einsum("ab,ijb->ija", np.linalg.inv(circle_to_ellipse), undistorted_px - ellipse_centre_px)
+    phase = np.unwrap(np.arctan2(on_unit_circle[:, 0, 1], on_unit_circle[:, 0, 0]))
+    start_angles = phase - phase[0]
+    plane_to_image_start = np.eye(3)  # disk frame -> normalised image, homogeneous
+    plane_to_image_start[:2, :2] = circle_to_ellipse @ _rotation(phase[0]) / spread_px
+    plane_to_image_start[:2, 2] = (ellipse_centre_px - mean_px) / spread_px
+    second_marker_start = np.mean(np.einsum("iab,ib->ia", np.swapaxes(_rotation(phase), -1, -2),
+                                            on_unit_circle[:, 1]), axis=0)
+    n_images = len(pairs)
 
-    def unpack(x):
-        G = np.append(x[:8], 1.0).reshape(3, 3)
-        return G, x[8:10], np.concatenate([[0.0], x[10 : 9 + n]]), (x[9 + n] if fit_k1 else k1)
+    def unpack(params):
+        """(plane_to_image, second marker's offset a_2, angles θ (rad), k1) from the fit's parameters."""
+        plane_to_image = np.append(params[:8], 1.0).reshape(3, 3)
+        angles_rad = np.concatenate([[0.0], params[10 : 9 + n_images]])
+        return plane_to_image, params[8:10], angles_rad, (params[9 + n_images] if fit_k1 else k1)
 
-    def residuals(x):
-        G, a2_, th, k = unpack(x)
-        a = np.array([[1.0, 0.0], a2_])
-        D = np.einsum("iab,jb->ija", _rot(th), a)
-        h = np.einsum("ab,ijb->ija", G, np.concatenate([D, np.ones(D.shape[:-1] + (1,))], -1))
-        u = m + s * h[..., :2] / h[..., 2:]
-        r = P - _distort(u, k, c_arr, f)
-        return np.einsum("ijab,ijb->ija", W, r).ravel()
+    def residuals(params):
+        plane_to_image, second_marker, angles_rad, k1_now = unpack(params)
+        offsets = np.array([[1.0, 0.0], second_marker])  # a_1 = (1, 0) fixes the gauge
+        on_disk = np.einsum("iab,jb->ija", _rotation(angles_rad), offsets)
+        projected = np.einsum("ab,ijb->ija", plane_to_image,
+                              np.concatenate([on_disk, np.ones(on_disk.shape[:-1] + (1,))], -1))
+        model_px = mean_px + spread_px * projected[..., :2] / projected[..., 2:]
+        misfit_px = centres_px - _distort(model_px, k1_now, distortion_centre_px, f)
+        return np.einsum("ijab,ijb->ija", whitening, misfit_px).ravel()
 
-    x0 = np.concatenate([G0.ravel()[:8], a2, theta0[1:]] + ([[k1]] if fit_k1 else []))
+    start = np.concatenate([plane_to_image_start.ravel()[:8], second_marker_start, start_angles[1:]]
+                           + ([[k1]] if fit_k1 else []))
     try:
-        sol = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
+        fit = least_squares(residuals, start, method="lm", x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14,
+                            max_nfev=2000)
     except (ValueError, np.linalg.LinAlgError) as exc:  # pragma: no cover - defensive
         raise CalibrationError(f"the self-calibration fit failed ({exc})") from None
-    if not sol.success or not np.all(np.isfinite(sol.x)):
-        raise CalibrationError(f"the self-calibration fit did not converge ({sol.message})")
-    G, a2_fit, th, k_fit = unpack(sol.x)
-    dof = sol.fun.size - sol.x.size
-    chi2 = float(sol.fun @ sol.fun / max(dof, 1))
+    if not fit.success or not np.all(np.isfinite(fit.x)):
+        raise CalibrationError(f"the self-calibration fit did not converge ({fit.message})")
+    plane_to_image, _, angles_rad, k1_fit = unpack(fit.x)
+    dof = fit.fun.size - fit.x.size
+    chi2 = float(fit.fun @ fit.fun / max(dof, 1))
     try:
-        cov = np.linalg.inv(sol.jac.T @ sol.jac) * max(1.0, chi2)
-        th_std = np.degrees(np.sqrt(np.concatenate([[0.0], np.diag(cov)[10 : 9 + n]])))
+        param_cov = np.linalg.inv(fit.jac.T @ fit.jac) * max(1.0, chi2)
+        angles_std_deg = np.degrees(np.sqrt(np.concatenate([[0.0], np.diag(param_cov)[10 : 9 + n_images]])))
     except np.linalg.LinAlgError:
         raise CalibrationError("the self-calibration is degenerate (singular normal matrix)") from None
-    Nmat = np.array([[1 / s, 0, -m[0] / s], [0, 1 / s, -m[1] / s], [0, 0, 1.0]])
-    H = np.linalg.inv(G) @ Nmat  # undistorted image -> disk frame
-    centre_img = _distort(m + s * G[:2, 2] / G[2, 2], k_fit, c_arr, f)
+    normalise = np.array([[1 / spread_px, 0, -mean_px[0] / spread_px], [0, 1 / spread_px, -mean_px[1] / spread_px],
+                          [0, 0, 1.0]])
+    image_to_disk = np.linalg.inv(plane_to_image) @ normalise  # undistorted image -> disk frame
+    rotation_centre_px = _distort(mean_px + spread_px * plane_to_image[:2, 2] / plane_to_image[2, 2], k1_fit,
+                                  distortion_centre_px, f)
     # The disk frame turns with R(θ) in image axes (y down): CCW as displayed is -θ.
     info = {
-        "n_images": n,
+        "n_images": n_images,
         "sweep_deg": sweep,
-        "residual_rms": float(np.sqrt(np.mean(sol.fun**2))),
+        "residual_rms": float(np.sqrt(np.mean(fit.fun**2))),
         "reduced_chi2": chi2,
-        "rotation_centre_px": [float(v) for v in centre_img],
-        "angles_deg": [float(v) for v in -np.degrees(th)],
-        "angles_std_deg": [float(v) for v in th_std],
+        "rotation_centre_px": [float(v) for v in rotation_centre_px],
+        "angles_deg": [float(v) for v in -np.degrees(angles_rad)],
+        "angles_std_deg": [float(v) for v in angles_std_deg],
     }
     if fit_k1:
-        info["k1_std"] = float(np.sqrt(cov[9 + n, 9 + n]))
-    corr = PlaneCorrection(
-        H,
-        k1=float(k_fit),
-        centre=None if c_arr is None else tuple(c_arr),
-        focal_length_px=f if c_arr is not None else None,
+        info["k1_std"] = float(np.sqrt(param_cov[9 + n_images, 9 + n_images]))
+    correction = PlaneCorrection(
+        image_to_disk,
+        k1=float(k1_fit),
+        centre=None if distortion_centre_px is None else tuple(distortion_centre_px),
+        focal_length_px=f if distortion_centre_px is not None else None,
         method="self-calibration",
         info=info,
     )
-    return normalised(corr, centre_img)
+    return normalised(correction, rotation_centre_px)
