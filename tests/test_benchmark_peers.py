@@ -38,13 +38,27 @@ TOLERANCE_PX = {"hough_alt": 1.5}
 DEFAULT_TOLERANCE_PX = 0.1
 
 
+def _has_new_skimage() -> bool:
+    """scikit-image >= 0.26 (CircleModel.from_estimate): the bench extra; it needs
+    Python >= 3.11, so on 3.10 the scikit-image peer is not tested."""
+    try:
+        from skimage.measure import CircleModel
+    except ImportError:
+        return False
+    return hasattr(CircleModel, "from_estimate")
+
+
+needs_skimage = pytest.mark.skipif(not _has_new_skimage(), reason="scikit-image >= 0.26 not installed")
+
+
 @pytest.fixture(scope="module")
 def standard_image():
     scene = load_scene(Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
     return render(scene, 27.5, seed=np.random.default_rng(8))
 
 
-@pytest.mark.parametrize("peer", peers.PEERS, ids=lambda p: p.name)
+@pytest.mark.parametrize("peer", [pytest.param(p, marks=needs_skimage) if p.name == "canny_circle" else p
+                                  for p in peers.PEERS], ids=lambda p: p.name)
 def test_peer_finds_both_markers(peer, standard_image):
     det = peer.func(standard_image.image)
     truth = standard_image.centres[np.argsort(standard_image.centres[:, 0])]
@@ -57,10 +71,13 @@ def test_peer_finds_both_markers(peer, standard_image):
 def test_peer_failure_is_raised_not_returned():
     blank = np.full((200, 300), 128, dtype=np.uint8)
     for peer in peers.PEERS:
+        if peer.name == "canny_circle" and not _has_new_skimage():
+            continue
         with pytest.raises(peers.PeerFailure):
             peer.func(blank)
 
 
+@needs_skimage
 def test_bench_repeat_and_summary():
     bench = _load("bench_peers")
     rep = bench.run_repeat("standard", 0, 0, [12.5])

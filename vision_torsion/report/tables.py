@@ -45,13 +45,20 @@ def stiffness_table(analysis) -> pd.DataFrame:
             k, k_std, n = _lookup(po, orient, f"k_{phase}")
             rows.append({
                 "orientation_deg": orient, "phase": phase,
-                "torque_from_nm": float(sub["torque_from_nm"].median()) if len(sub) else np.nan,
-                "torque_to_nm": float(sub["torque_to_nm"].median()) if len(sub) else np.nan,
+                "torque_from_nm": _median(sub["torque_from_nm"]),
+                "torque_to_nm": _median(sub["torque_to_nm"]),
                 "n_cycles": n, "stiffness_nm_per_rad": k, "stiffness_std_nm_per_rad": k_std,
                 "stiffness_nm_per_arcmin": k / _ARCMIN_PER_RAD, "stiffness_std_nm_per_arcmin": k_std / _ARCMIN_PER_RAD,
                 "hysteresis_deg": h, "hysteresis_std_deg": h_std,
             })
     return pd.DataFrame(rows, columns=STIFFNESS_TABLE_COLUMNS)
+
+
+def _median(values) -> float:
+    """Median of the finite values, NaN when there are none (without the "mean of
+    empty slice" warning pandas 2 with numpy 2.2 gives, on Python 3.10)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.median()) if len(finite) else np.nan
 
 
 #: (figure, label, unit shown, scale from the analysis unit)
