@@ -35,10 +35,12 @@ def test_table_columns_and_sub_pixel_accuracy(standard_scene):
 
 def test_coarsest_detection_scale_is_as_accurate(standard_scene):
     """Markers of 20 px and more are found on an 8x reduced image (2.5 reduced px of
-    radius at least); the fit from that start lands on the same centres."""
+    radius at least); the fit from that start lands on the same centres. Markers of
+    3-5 px (the default smallest is 3 px) are found at half resolution."""
     from vision_torsion.detect import _reduction
 
-    assert (_reduction(20), _reduction(19.9), _reduction(10), _reduction(4)) == (8, 4, 4, 1)
+    assert (_reduction(20), _reduction(19.9), _reduction(10), _reduction(4), _reduction(3), _reduction(2.9)) == (
+        8, 4, 4, 2, 2, 1)
     r = render(standard_scene, 23.4, seed=5)
     fine = find_markers(r.image, radius_range=(10, 60))
     coarse = find_markers(r.image, radius_range=(20, 60))

@@ -82,12 +82,16 @@ class MarkerPatch:
     xs, ys : numpy.ndarray
         Pixel-centre coordinates (px), float64, flat like `values` (made when
         first asked for: the pixel-model fit works from indices).
+    excluded : numpy.ndarray or None
+        Flags (flat like `values`) of pixels the fits must not use: those of a
+        neighbouring marker reaching into the ring.
     """
 
     values: np.ndarray
     shape: tuple
     x0: int = 0
     y0: int = 0
+    excluded: np.ndarray | None = None
 
     @cached_property
     def xs(self) -> np.ndarray:
@@ -120,15 +124,24 @@ class MarkerPatch:
         return total, x, y
 
 
-def marker_patch(image, cx, cy, extent) -> MarkerPatch:
+def marker_patch(image, cx, cy, extent, *, clip: bool = False) -> MarkerPatch:
     """Pixels within the square of half-size `extent` (px) around (cx, cy).
+
+    With `clip`, a square that leaves the image is cut to it (a marker near the
+    border keeps the pixels there are; the fits model only the pixels they get).
 
     Raises
     ------
     FitError
-        The square leaves the image.
+        The square leaves the image (without `clip`), or nothing of it is inside.
     """
-    roi = marker_roi(image.shape, cx, cy, extent)
+    if clip:
+        h, w = image.shape
+        x0, x1 = max(int(np.floor(cx - extent)), 0), min(int(np.ceil(cx + extent)) + 1, w)
+        y0, y1 = max(int(np.floor(cy - extent)), 0), min(int(np.ceil(cy + extent)) + 1, h)
+        roi = (x0, y0, x1, y1) if x1 > x0 and y1 > y0 else None
+    else:
+        roi = marker_roi(image.shape, cx, cy, extent)
     if roi is None:
         raise FitError("the marker's edge ring leaves the image")
     x0, y0, x1, y1 = roi
@@ -217,9 +230,11 @@ def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
 
 
 def sector_index(psi, radius):
-    """Angular sector (~1 px of arc at `radius` px, at least 24) of each direction
-    `psi` (rad, image axes), and the number of sectors."""
-    n_sec = max(24, int(round(2 * np.pi * radius)))
+    """Angular sector (~1 px of arc at `radius` px, at least 16) of each direction
+    `psi` (rad, image axes), and the number of sectors. (At least 16, not more: the
+    edge of a 3 px marker crosses ~19 pixels, and sectors narrower than a pixel are
+    left without edge pixels.)"""
+    n_sec = max(16, int(round(2 * np.pi * radius)))
     return ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec, n_sec
 
 
@@ -250,8 +265,12 @@ def sector_edge_offsets(sector, n_sec, g, resid, g_cos, g_sin, *, drop=None):
     good = den > 0.1 * fast_median(positive) if positive.size else den > 0
     if drop is not None:
         good &= ~drop
-    if good.sum() < 12:
-        raise FitError(f"only {int(good.sum())} edge sectors carry information (need 12)")
+    # 12 sectors, or half of them on a marker under 4 px (16-24 sectors of ~1 px of
+    # arc, where a blurred JPEG edge leaves a few without information): still
+    # enough for the second harmonic of the circularity
+    need = min(12, max(8, n_sec // 2))
+    if good.sum() < need:
+        raise FitError(f"only {int(good.sum())} edge sectors carry information (need {need})")
     return num[good] / den[good], np.arctan2(sn[good], cs[good]), den[good]
 
 

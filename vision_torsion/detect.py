@@ -16,6 +16,7 @@ top-left pixel.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import cv2
@@ -23,7 +24,9 @@ import numpy as np
 
 from ._ring import fast_median
 
-__all__ = ["Blob", "detect_blobs", "default_radius_range"]
+__all__ = ["Blob", "detect_blobs", "default_radius_range", "DEFAULT_MIN_RADIUS_PX"]
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -52,18 +55,36 @@ class Blob:
     touches_border: bool
 
 
+#: Smallest marker radius (px) looked for by default: a disc of radius 3 px still has
+#: ~28 pixels and an edge all round, the least a person would mark as a round dot.
+DEFAULT_MIN_RADIUS_PX = 3.0
+
+
 def default_radius_range(shape) -> tuple[float, float]:
-    """Default marker radius range (px): 10 px up to a fifth of the shorter image side."""
-    return 10.0, min(shape) / 5.0
+    """Default marker radius range (px) for an image of `shape` (rows, columns):
+    :data:`DEFAULT_MIN_RADIUS_PX` up to a fifth of the shorter image side."""
+    return DEFAULT_MIN_RADIUS_PX, max(min(shape) / 5.0, 2.0 * DEFAULT_MIN_RADIUS_PX)
+
+
+#: Smallest marker radius in reduced pixels at the 4x and 8x detection scales: the
+#: 3x3 opening that cuts wires off the markers (3 reduced px) keeps such a disc whole.
+_MIN_REDUCED_RADIUS = 2.5
+#: ... and at the 2x scale, used for small markers only: area averaging by 2 keeps at
+#: least ~85 % of a disc's contrast at its centre while its reduced radius is 1.5 px
+#: or more, wherever the disc lies on the pixel grid, and the opening keeps its core.
+#: A 3 px marker (the default smallest) is found at half resolution, at a quarter of
+#: the cost of full resolution.
+_MIN_REDUCED_RADIUS_2X = 1.5
 
 
 def _reduction(r_min: float) -> int:
-    """Detection scale (1, 2, 4 or 8: successive 2x area reductions), keeping the
-    smallest marker at least 2.5 reduced pixels in radius."""
+    """Detection scale (1, 2, 4 or 8: successive 2x area reductions) for markers of
+    radius `r_min` (px) and more: the coarsest keeping them
+    :data:`_MIN_REDUCED_RADIUS` reduced px in radius (1.5 px at the 2x scale)."""
     for f in (8, 4, 2):
-        if r_min / f >= 2.5:
+        if r_min / f >= _MIN_REDUCED_RADIUS:
             return f
-    return 1
+    return 2 if r_min / 2 >= _MIN_REDUCED_RADIUS_2X else 1
 
 
 def _noise_sigma(img: np.ndarray) -> float:
@@ -132,14 +153,17 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
     diff = background - small if polarity == "dark" else small - background
     top = float(diff.max())
     if not top > 0:
+        logger.info("no marker candidates: nothing in the image is %s than its surroundings (a constant image?)",
+                    "darker" if polarity == "dark" else "brighter")
         return []
     scaled = np.clip(diff * (255.0 / top), 0, 255).astype(np.uint8)
     otsu, _ = cv2.threshold(scaled, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     noise = _noise_sigma(small)
     level = max(otsu * top / 255.0, 5.0 * noise)
     mask = (diff > level).astype(np.uint8)
-    if r_min / f >= 2.5:
-        # cut thin lines (a wire) away from the markers they cross
+    if r_min / f >= _MIN_REDUCED_RADIUS_2X:
+        # cut thin lines (a wire) away from the markers they cross (a marker of
+        # 1.5 reduced px in radius keeps its core through the 3x3 opening)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     # outer contours, each filled back into its bounding box: the blob's pixels (a
     # hole, such as a highlight, filled). connectedComponentsWithStats gives the same
@@ -160,7 +184,9 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         if area < max(a_min, 4) or area > a_max:
             continue
         cx, cy = m["m10"] / m["m00"], m["m01"] / m["m00"]
-        mu20, mu02, mu11 = m["mu20"] / m["m00"], m["mu02"] / m["m00"], m["mu11"] / m["m00"]
+        # pixels as unit squares (each adds 1/12 px² of its own): a 2x2 blob is a disc
+        # of fill 0.95, not 1.27 as points
+        mu20, mu02, mu11 = m["mu20"] / m["m00"] + 1 / 12, m["mu02"] / m["m00"] + 1 / 12, m["mu11"] / m["m00"]
         common = np.sqrt(max((mu20 - mu02) ** 2 + 4 * mu11**2, 0.0))
         l1, l2 = (mu20 + mu02 + common) / 2, (mu20 + mu02 - common) / 2
         elong = float(np.sqrt(max(l2, 0) / l1)) if l1 > 0 else 0.0
@@ -177,5 +203,8 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
                 touches_border=bool(touches),
             )
         )
+    if not blobs:
+        logger.info("no marker candidates: no %s blob of radius %g-%g px stands out from the background "
+                    "by more than %.3g (5x the noise %.3g)", polarity, r_min, r_max, level, noise)
     blobs.sort(key=lambda b: -b.radius)
     return blobs

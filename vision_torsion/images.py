@@ -394,8 +394,9 @@ def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) ->
     Parameters
     ----------
     image : array_like, GreyImage, str or os.PathLike
-        A 2-D array of grey levels indexed ``[y, x]``, an already loaded image, or a
-        file to load with :func:`load_image`.
+        A 2-D array of grey levels indexed ``[y, x]`` (or an RGB/RGBA colour array
+        ``[y, x, channel]``, converted to grey as colour files are), an already
+        loaded image, or a file to load with :func:`load_image`.
     name : str
         What to call the image in error messages.
     keep_integers : bool
@@ -419,8 +420,14 @@ def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) ->
     if isinstance(image, (str, os.PathLike)):
         return load_image(image, keep_integers=keep_integers).data
     arr = np.asarray(image)
-    if arr.ndim == 3 and arr.shape[2] in (3, 4):
-        raise ImageReadError(f"{name}: colour array given; pass a grey image or a file path")
+    if arr.ndim == 3 and arr.shape[2] in (3, 4) and min(arr.shape[:2]) >= 8 and arr.dtype.kind in "uif":
+        # as a colour file is: converted to grey, with a logged notice. Arrays come in
+        # RGB(A) order, as NumPy readers (imageio, PIL, scikit-image) give them.
+        code = cv2.COLOR_RGB2GRAY if arr.shape[2] == 3 else cv2.COLOR_RGBA2GRAY
+        if arr.dtype not in (np.uint8, np.uint16, np.float32):
+            arr = arr.astype(np.float32)
+        arr = cv2.cvtColor(np.ascontiguousarray(arr), code)
+        logger.info("%s: colour array converted to grey (BT.601 weights, RGB order)", name)
     if arr.ndim != 2:
         raise ImageReadError(f"{name}: expected a 2-D grey image, got shape {arr.shape}")
     if min(arr.shape) < 8:

@@ -24,7 +24,7 @@ Failure modes (reported per marker in the ``status`` column, with a ``message``)
 from __future__ import annotations
 
 import logging
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import sys
 from typing import TYPE_CHECKING
@@ -33,7 +33,7 @@ import numpy as np
 
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch, marker_roi
+from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
 from .edges import edge_points
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
@@ -139,15 +139,45 @@ def _rejected(blob: Blob, status: str, message: str) -> Marker:
     return Marker(x_px=blob.x, y_px=blob.y, radius_px=blob.radius, status=status, message=message)
 
 
+#: Coarse shape limits of a candidate (moments of its thresholded pixels): only gross
+#: non-discs are rejected here (two touching discs have an axis ratio of 0.45, a wire
+#: far less); roundness is judged on the fitted edge (:func:`min_circularity`).
+_MIN_AXIS_RATIO = {"ellipse": 0.4}
+_MIN_AXIS_RATIO_CIRCLE = 0.55
+_FILL_RANGE = (0.7, 1.3)
+#: Margin (px) the fitted disc must keep inside the image to count as whole.
+_BORDER_MARGIN_PX = 1.0
+
+
+def min_circularity(radius: float) -> float:
+    """Smallest edge axis ratio (minor/major, :attr:`Marker.circularity`) of a marker
+    judged round, for a fitted `radius` (px): 1 - max(0.2, 1 px / radius).
+
+    0.8 passes a disc seen 35° off-axis and rejects anything visibly oval. Below
+    5 px the limit is an absolute 0.5 px of second-harmonic edge deviation: on
+    small discs pixelation, blur and JPEG blocks move sector edge points by a
+    few tenths of a pixel whatever the radius, which a relative limit would
+    call "not round" (photographs of 4-5 px dots were 50-60 % rejected at 0.9).
+    """
+    return 1.0 - max(0.2, 1.0 / max(float(radius), 1e-9))
+
+
+def _inside(shape, x, y, r, margin=_BORDER_MARGIN_PX) -> bool:
+    """True when the disc of radius `r` (px) at (x, y), widened by `margin` px, lies
+    within the image (whose pixels span -0.5 .. size - 0.5)."""
+    h, w = shape
+    return x - r - margin >= -0.5 and y - r - margin >= -0.5 and x + r + margin <= w - 0.5 and y + r + margin <= h - 0.5
+
+
 def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
-    if blob.touches_border or marker_roi(shape, blob.x, blob.y, blob.radius + 8) is None:
+    if blob.touches_border or not _inside(shape, blob.x, blob.y, blob.radius):
         return _rejected(blob, "border", "cut by the image border")
     if blob.radius < 0.8 * r_min:
         return _rejected(blob, "too_small", f"radius {blob.radius:.1f} px is below the smallest {r_min:g} px")
     if blob.radius > 1.2 * r_max:
         return _rejected(blob, "too_large", f"radius {blob.radius:.1f} px is above the largest {r_max:g} px")
-    min_elong = 0.5 if fit == "ellipse" else 0.75
-    if blob.elongation < min_elong or not 0.8 <= blob.fill <= 1.2:
+    min_elong = _MIN_AXIS_RATIO.get(fit, _MIN_AXIS_RATIO_CIRCLE)
+    if blob.elongation < min_elong or not _FILL_RANGE[0] <= blob.fill <= _FILL_RANGE[1]:
         return _rejected(
             blob,
             "not_round",
@@ -170,7 +200,11 @@ def _start(patch: MarkerPatch, blob: Blob):
     d2 = patch.squared_distance(blob.x, blob.y)
     r_in = 1.15 * r0 + 3  # generous: the coarse radius is good to about a pixel
     beyond = d2 > r_in**2
-    outside = patch.values[beyond & (d2 < (r_in + 4.0) ** 2)]
+    if patch.excluded is not None:
+        beyond |= patch.excluded  # a neighbour's pixels: left out like the background
+        outside = patch.values[beyond & ~patch.excluded & (d2 < (r_in + 4.0) ** 2)]
+    else:
+        outside = patch.values[beyond & (d2 < (r_in + 4.0) ** 2)]
     inside = patch.values[d2 < (0.6 * r0) ** 2]
     if outside.size < 8 or inside.size < 4:
         raise FitError("too few pixels around the marker to start the fit")
@@ -195,8 +229,20 @@ def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
     return harmonic_circularity(dist - radius, dx / dist, dy / dist, radius)
 
 
+def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width) -> MarkerPatch:
+    """`patch` with the pixels of neighbouring candidates flagged as excluded: within
+    1.15 times their coarse radius (good to ~10 %) plus their blurred edge (3s + 1 px)."""
+    if neighbours is None or len(neighbours) == 0:
+        return patch
+    excluded = np.zeros(patch.values.size, bool)
+    reach = 3.0 * max(float(edge_width), 1.0) + 1.0
+    for x, y, r in neighbours:
+        excluded |= patch.squared_distance(x, y) < (1.15 * r + reach) ** 2
+    return replace(patch, excluded=excluded) if excluded.any() else patch
+
+
 def fit_marker(
-    image, blob: Blob, *, fit: str = "pixels", max_iter: int = 10, edge_width: float = 1.2
+    image, blob: Blob, *, fit: str = "pixels", max_iter: int = 10, edge_width: float = 1.2, neighbours=None
 ) -> Marker:
     """Fit one marker candidate to sub-pixel accuracy.
 
@@ -215,6 +261,11 @@ def fit_marker(
     edge_width : float
         Starting edge width s (px); a neighbouring marker's fitted width saves
         iterations.
+    neighbours : array_like, optional
+        (k, 3) coarse circles (x, y, radius in px) of other candidates close enough
+        to reach into this marker's ring: their pixels are left out of the
+        default fit (``fit="pixels"``; dense dot grids). The edge-point fits use
+        a narrower band and ignore it.
 
     Returns
     -------
@@ -225,10 +276,14 @@ def fit_marker(
     try:
         # one patch for the start and every iteration: wide enough for the start's
         # outer ring and for the edge ring at the widest edge
-        patch = marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width))
+        # cut to the image near its border: the fits model the pixels there are
+        patch = marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width), clip=True)
+        if fit == "pixels":
+            patch = _exclude_neighbours(patch, neighbours, edge_width)
         cx, cy, r, levels = _start(patch, blob)
         if fit == "pixels":
-            return _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch))
+            return _whole(_pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
+                          image.shape)
         s = float(edge_width)
         shape = None
         for _ in range(max_iter):
@@ -259,9 +314,9 @@ def fit_marker(
     except FitError as exc:
         return _failed(blob, exc)
     circ = _harmonic_circularity(ep.x_px, ep.y_px, cx, cy, r)
-    if fit != "ellipse" and circ < 0.9:
+    if fit != "ellipse" and circ < min_circularity(r):
         return _not_round(cx, cy, r, circ)
-    return Marker(
+    return _whole(Marker(
         x_px=float(cx),
         y_px=float(cy),
         radius_px=float(r),
@@ -274,7 +329,15 @@ def fit_marker(
         contrast_dn=float(ep.foreground_dn - ep.background_dn),
         circularity=circ,
         edge_width_px=float(s),
-    )
+    ), image.shape)
+
+
+def _whole(marker: Marker, shape) -> Marker:
+    """`marker`, or status ``border`` when its fitted disc is not whole in the image."""
+    if marker.ok and not _inside(shape, marker.x_px, marker.y_px, marker.radius_px):
+        return Marker(x_px=marker.x_px, y_px=marker.y_px, radius_px=marker.radius_px, status="border",
+                      message="cut by the image border")
+    return marker
 
 
 def _failed(blob: Blob, exc: FitError) -> Marker:
@@ -283,13 +346,14 @@ def _failed(blob: Blob, exc: FitError) -> Marker:
 
 
 def _not_round(cx, cy, r, circ) -> Marker:
-    return Marker(x_px=cx, y_px=cy, radius_px=r, status="not_round", message=f"edge is not circular (axis ratio {circ:.3f})")
+    return Marker(x_px=cx, y_px=cy, radius_px=r, status="not_round",
+                  message=f"edge is not circular (axis ratio {circ:.3f}, below {min_circularity(r):.3f})")
 
 
 def _pixels_marker(f: DiscFit) -> Marker:
     """A :class:`Marker` from the pixel-model fit (``fit="pixels"``)."""
     circ = f.circularity
-    if circ < 0.9:
+    if circ < min_circularity(f.radius_px):
         return _not_round(f.x_px, f.y_px, f.radius_px, circ)
     return Marker(
         x_px=f.x_px,
@@ -384,6 +448,18 @@ def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, fl
     return settings.radius_range or default_radius_range(img.shape)
 
 
+def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
+    """The coarse circles (rows of (x, y, r), px) other than row `i` whose blurred
+    disc reaches into the square of pixels marker `i`'s fit uses."""
+    if len(circles) < 2:
+        return circles[:0]
+    x, y, r = circles[i]
+    reach = _patch_extent(r, edge_width) + 1.15 * circles[:, 2] + 3.0 * max(edge_width, 1.0) + 1.0
+    near = (np.abs(circles[:, 0] - x) < reach) & (np.abs(circles[:, 1] - y) < reach)
+    near[i] = False
+    return circles[near]
+
+
 def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
     """Coarse marker candidates of a validated image, largest first:
     :func:`~vision_torsion.detect.detect_blobs` with the polarity and radius range of
@@ -412,12 +488,14 @@ def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None,
     fit = settings.fit
     markers = []
     width = 1.2  # the optics are the same for every marker: pass the fitted width on
-    for blob in find_candidates(img, settings) if candidates is None else candidates:
+    blobs = find_candidates(img, settings) if candidates is None else candidates
+    circles = np.array([(b.x, b.y, b.radius) for b in blobs], dtype=np.float64).reshape(-1, 3)
+    for i, blob in enumerate(blobs):
         if enough is not None and enough(markers, blob):
             break
         marker = _judge(blob, img.shape, r_min, r_max, fit)
         if marker is None:
-            marker = fit_marker(img, blob, fit=fit, edge_width=width)
+            marker = fit_marker(img, blob, fit=fit, edge_width=width, neighbours=_neighbours(circles, i, width))
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)

@@ -199,7 +199,10 @@ def _ring(patch: MarkerPatch, cx, cy, R, s, margin=0.0):
     d2 = patch.squared_distance(cx, cy)
     inner = max(R - 3.0 * s - _INNER_PX - margin, 0.0)
     outer = R + 3.0 * s + _OUTER_PX + margin
-    index = np.flatnonzero((d2 > inner * inner) & (d2 < outer * outer))
+    inside = (d2 > inner * inner) & (d2 < outer * outer)
+    if patch.excluded is not None:
+        inside &= ~patch.excluded  # a neighbouring marker's pixels
+    index = np.flatnonzero(inside)
     if index.size < 30:
         raise FitError("too few pixels around the marker's edge")
     return index
@@ -243,7 +246,13 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     # the cut was made against a settled fit, so even a wire lying along the edge
     # for 90° of arc (~40 % of the sectors with their neighbours) is occlusion
     lost = lost_sectors(sector[~keep & edge_zone], n_sec, most=0.5)
-    return keep & ~(lost[sector] & edge_zone)
+    keep = keep & ~(lost[sector] & edge_zone)
+    if np.unique(sector[keep & edge_zone]).size < max(16, n_sec // 2):
+        # a cut grown by 2 px each side takes much of a small marker's edge: on a
+        # 3-5 px disc (16-31 sectors) that is JPEG ringing or pixelation, not an
+        # occluder to cut (the diagnostics need 12 sectors with edge pixels)
+        return None
+    return keep
 
 
 def _edge_diagnostics(p, resid, J, u):

@@ -1,0 +1,114 @@
+"""Detection at the default settings: small, blurred and JPEG-compressed discs, a
+constant image, many markers, markers cut by the border, shapes that are not round.
+
+Truth comes from the renderer (exact area coverage, known centres).
+"""
+
+import logging
+
+import numpy as np
+import pytest
+
+from vision_torsion.detect import DEFAULT_MIN_RADIUS_PX, default_radius_range
+from vision_torsion.markers import find_markers, min_circularity
+from vision_torsion.synthetic import Scene, render
+
+
+def _ring_scene(radius, blur, jpeg, n=12, width=320, height=240, distance=80.0):
+    return Scene().replace(
+        image={"width": width, "height": height},
+        disk={"center_x": width / 2 + 0.3, "center_y": height / 2 + 0.6},
+        markers={"radius_px": radius, "distance_px": distance, "positions_deg": tuple(np.arange(0, 360, 360 / n))},
+        optics={"blur_sigma_px": blur},
+        noise={"jpeg_quality": jpeg},
+    )
+
+
+def _nearest_error(table, centres):
+    """Distance (px) from each true centre to the nearest fitted ok centre."""
+    ok = table[table["status"] == "ok"]
+    d = np.hypot(ok["x_px"].to_numpy()[:, None] - centres[:, 0], ok["y_px"].to_numpy()[:, None] - centres[:, 1])
+    return d.min(axis=0)
+
+
+def test_default_radius_range_starts_at_3_px():
+    assert DEFAULT_MIN_RADIUS_PX == 3.0
+    assert default_radius_range((480, 640)) == (3.0, 96.0)
+
+
+@pytest.mark.parametrize("radius", [3.0, 4.5, 8.0])
+@pytest.mark.parametrize("blur, jpeg", [(0.6, 0), (0.6, 75), (1.5, 0), (1.2, 75)])
+def test_small_blurred_and_jpeg_discs_are_found_by_default(radius, blur, jpeg):
+    """Every disc of 3-8 px, sharp or blurred, raw or JPEG (quality 75), is found ok
+    at the default settings, within 0.08 px of the truth. (Noise-only error is
+    ~0.02 px here; JPEG's 8x8 blocks add up to ~0.05 px on such small discs.)"""
+    scene = _ring_scene(radius, blur, jpeg)
+    for seed in (0, 1):
+        r = render(scene, 7.0, seed=seed)
+        table = find_markers(r.image)
+        assert list(table["status"]).count("ok") == 12, table[table["status"] != "ok"][["status", "message"]]
+        assert len(table) == 12
+        assert _nearest_error(table, r.centres).max() < 0.08
+
+
+def test_roundness_limit_holds_for_small_discs():
+    """The limit is 0.8 for markers of 5 px and more, and 0.5 px of harmonic
+    deviation below: a 3 px marker passes down to an axis ratio of 2/3."""
+    assert min_circularity(35.0) == pytest.approx(0.8)
+    assert min_circularity(5.0) == pytest.approx(0.8)
+    assert min_circularity(3.0) == pytest.approx(2 / 3)
+
+
+@pytest.mark.parametrize("value", [0, 200, 65535])
+def test_constant_image_gives_an_empty_table_and_a_logged_reason(value, caplog):
+    img = np.full((120, 160), value, np.uint16 if value > 255 else np.uint8)
+    with caplog.at_level(logging.INFO, logger="vision_torsion.detect"):
+        table = find_markers(img)
+    assert len(table) == 0 and list(table.columns)[:2] == ["x_px", "y_px"]
+    assert "no marker candidates: nothing in the image is darker than its surroundings" in caplog.text
+
+
+def test_noise_only_image_gives_an_empty_table_and_a_logged_reason(caplog):
+    img = np.random.default_rng(2).normal(128, 2, (200, 260)).astype(np.float32)
+    with caplog.at_level(logging.INFO, logger="vision_torsion.detect"):
+        table = find_markers(img)
+    assert len(table) == 0
+    assert "no marker candidates: no dark blob of radius 3-40 px stands out" in caplog.text
+
+
+def test_hundreds_of_markers_each_get_a_status():
+    """A 20 x 15 grid of 4 px dots, the frame cutting through the outer ones: every
+    dot is a row of the table, whole ones ok, cut ones `border`; none dropped."""
+    rng = np.random.default_rng(7)
+    ys, xs = np.mgrid[0:15, 0:20]
+    cx, cy = xs.ravel() * 16.0 + 3.3, ys.ravel() * 16.0 + 2.7  # first row and column cut
+    img = np.full((230, 310), 200.0)
+    yy, xx = np.mgrid[0:230, 0:310]
+    for x, y in zip(cx, cy):
+        img[(xx - x) ** 2 + (yy - y) ** 2 <= 16.0] = 40.0
+    img = np.clip(img + rng.normal(0, 2, img.shape), 0, 255).astype(np.uint8)
+    table = find_markers(img)
+    whole = (cx - 4 >= 0.5) & (cy - 4 >= 0.5) & (cx + 4 <= 308.5) & (cy + 4 <= 228.5)
+    inside = (cx - 4 < 309.5) & (cy - 4 < 229.5)  # at least partly in the frame
+    assert (table["status"] == "ok").sum() == whole.sum()
+    assert set(table["status"]) == {"ok", "border"}
+    assert len(table) == inside.sum()
+    assert (table.loc[table["status"] == "border", "message"] == "cut by the image border").all()
+
+
+def test_shapes_that_are_not_round_are_reported_not_dropped():
+    img = np.full((200, 300), 200.0, np.float32)
+    yy, xx = np.mgrid[0:200, 0:300]
+    img[(xx - 60) ** 2 / 30**2 + (yy - 100) ** 2 / 15**2 < 1] = 40  # an ellipse, axis ratio 0.5
+    img[40:160, 150:190] = 40  # a bar
+    img[(xx - 240) ** 2 + (yy - 100) ** 2 < 10**2] = 40  # a round one, r = 10
+    img[(xx - 257) ** 2 + (yy - 100) ** 2 < 10**2] = 40  # overlapping it: a figure 8
+    table = find_markers(img)
+    assert list(table["status"]) == ["not_round"] * 3
+    assert all(m.startswith("not round (axis ratio") or m.startswith("edge is not circular") for m in table["message"])
+
+
+def test_colour_array_is_measured_like_its_grey_image():
+    r = render(_ring_scene(5.0, 1.0, 0, n=4), 3.0, seed=1)
+    colour = np.dstack([r.image] * 3)
+    np.testing.assert_allclose(find_markers(colour)[["x_px", "y_px"]], find_markers(r.image)[["x_px", "y_px"]])
