@@ -11,12 +11,20 @@ pointing up), so with image coordinates (y down) the direction of v = p₂ - p�
 atan2(-v_y, v_x).
 
 Marker identity. Two markers of equal size are interchangeable: swapping them turns
-the line by 180°. The angle is therefore taken as the candidate nearest a predicted
-angle (0° for a single image, the previous angle in a sequence), which both keeps
-identity and unwraps the sequence; rotations between consecutive images must stay
-below 90°. When the two markers differ in radius by clearly more than their
-uncertainty, identity follows the radius and any rotation below 180° between
-consecutive images is tracked.
+the line by 180°, so an image gives two candidate angles, θ and θ + 180°. The angle
+is the candidate nearest a predicted angle: 0° for a single image, the previous
+angle in a sequence (``order="sequence"``), the reference (``order="independent"``:
+the smallest rotation from it), or a given prediction (a check against reference
+angles). In a sequence the choice is only as good as the assumption that the disk
+turned less than 90° since the previous image; when the nearer candidate is more
+than ``max_step_deg`` (default :data:`MAX_STEP_DEG`, 30°) from the previous angle the
+image is flagged ambiguous (:attr:`AngleResult.ambiguous` gives the reason and both
+candidates) rather than guessed, and tracking continues from the last certain
+angle. A wrong (swapped) answer then needs a true turn of more than 180° - 30° =
+150° between consecutive images. When the two markers differ in radius by clearly
+more than their uncertainty, identity follows the radius, is certain at any angle,
+and any rotation below 180° between consecutive images is tracked: the target to
+use when images are not taken in small steps.
 
 Uncertainty. With centre covariances Σ₁, Σ₂ and g = (v_y, -v_x)/|v|², the variance of
 a line's direction is gᵀ(Σ₁ + Σ₂)g (first-order propagation; centres of different
@@ -38,12 +46,23 @@ from .settings import MeasureSettings
 
 __all__ = [
     "AngleResult",
+    "MAX_STEP_DEG",
+    "ORDERS",
     "line_direction_deg",
     "paper_angle_deg",
     "pair_angle",
     "sequence_angles",
     "rotation_angle",
 ]
+
+
+#: Largest turn (deg) between consecutive images of a sequence with two equal markers
+#: that counts as certain: beyond it the image is flagged ambiguous. A swapped pair
+#: passes only after a true turn of more than 180° minus this.
+MAX_STEP_DEG = 30.0
+#: How images of a folder relate: ``sequence`` (taken in small steps, tracked and
+#: unwrapped) or ``independent`` (each the smallest rotation from the reference).
+ORDERS = ("sequence", "independent")
 
 
 @dataclass(frozen=True)
@@ -59,11 +78,16 @@ class AngleResult:
         Standard uncertainty (1σ) in degrees.
     swapped : bool
         True when the current image's markers were matched crosswise to the reference's.
+    ambiguous : str
+        Empty when identity is certain (within the limits of the order used);
+        otherwise why it is not, with both candidate angles. An ambiguous result's
+        angle is a guess and must not be used as a measurement.
     """
 
     angle_deg: float
     angle_std_deg: float
     swapped: bool = False
+    ambiguous: str = ""
 
 
 def line_direction_deg(p1, p2) -> float:
@@ -118,7 +142,8 @@ def _distinct_radii(p: PairMeasurement) -> float:
 
 
 def pair_angle(
-    reference: PairMeasurement, current: PairMeasurement, *, near_deg: float = 0.0, correction=None
+    reference: PairMeasurement, current: PairMeasurement, *, near_deg: float = 0.0, correction=None,
+    max_step_deg: float | None = None,
 ) -> AngleResult:
     """Rotation of `current` against `reference`, the candidate nearest `near_deg`.
 
@@ -128,6 +153,9 @@ def pair_angle(
         The target found in the reference and in the current image.
     near_deg : float
         Predicted angle (deg): the previous angle of a sequence, 0 for one image.
+    max_step_deg : float, optional
+        With two equal markers, flag the result ambiguous when the chosen candidate
+        is more than this (deg) from `near_deg`; None never flags.
     correction : PlaneCorrection, optional
         Plane/lens correction (:mod:`vision_torsion.calibration`) applied to both
         pairs first, so the angle is the disk's rotation rather than the image's;
@@ -143,6 +171,7 @@ def pair_angle(
     dr_ref, dr_cur = _distinct_radii(reference), _distinct_radii(current)
     phi_cur, var_cur = _direction_and_var(current.first, current.second)
     raw = np.degrees(phi_cur - phi_ref)
+    ambiguous = ""
     if dr_ref and dr_cur:
         # identity from the radii: flip the current line if its order disagrees
         swapped = np.sign(dr_ref) != np.sign(dr_cur)
@@ -151,15 +180,27 @@ def pair_angle(
     else:
         angle = near_deg + _wrap(raw - near_deg, 180.0)
         swapped = bool(round((angle - raw) / 180.0) % 2)
+        step = abs(angle - near_deg)
+        if max_step_deg is not None and step > max_step_deg:
+            other = angle - 180.0 if angle > near_deg else angle + 180.0
+            ambiguous = (
+                f"ambiguous marker identity: with two equal markers the image is at {angle:.3f}° or "
+                f"{other:.3f}°, and the nearer is {step:.1f}° from the predicted {near_deg:.3f}° "
+                f"(more than the {max_step_deg:g}° limit); measure independent rotations with "
+                f"order 'independent', or use a target with two markers of different radii"
+            )
     return AngleResult(
         angle_deg=float(angle),
         angle_std_deg=float(np.degrees(np.sqrt(var_ref + var_cur))),
         swapped=bool(swapped),
+        ambiguous=ambiguous,
     )
 
 
-def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0, correction=None) -> list:
-    """Angles of a sequence of images against a reference, identity tracked and unwrapped.
+def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0, correction=None,
+                    order: str = "sequence", max_step_deg: float | None = MAX_STEP_DEG,
+                    predictions=None) -> list:
+    """Angles of images against a reference, marker identity resolved.
 
     Parameters
     ----------
@@ -168,23 +209,52 @@ def sequence_angles(reference: PairMeasurement, pairs, *, start_deg: float = 0.0
     pairs : sequence of PairMeasurement or None
         The images in order; None marks an image that failed (skipped, gives None).
     start_deg : float
-        Predicted angle of the first image.
+        Predicted angle of the first image (``sequence``).
     correction : PlaneCorrection, optional
         Plane/lens correction applied to every pair (see :func:`pair_angle`).
+    order : {"sequence", "independent"}
+        ``sequence``: images taken in small steps; each angle is the candidate
+        nearest the previous certain angle, and the sequence is unwrapped; with two
+        equal markers, an image more than `max_step_deg` from it is flagged
+        ambiguous. ``independent``: each image is the smallest rotation from the
+        reference (identity certain only within ±90°; with markers of different
+        radii, within ±180°).
+    max_step_deg : float or None
+        The ``sequence`` limit (deg), :data:`MAX_STEP_DEG` by default; None never flags.
+    predictions : sequence of float, optional
+        A predicted angle (deg) per image, e.g. a check's reference angles relative to
+        its reference image: each angle is the candidate nearest its prediction,
+        which settles identity (`order` and `max_step_deg` are then unused).
 
     Returns
     -------
     list of AngleResult or None
-        One entry per input, continuous across the sequence (angles may pass ±180°).
+        One entry per input (angles may pass ±180° in a sequence). Check
+        :attr:`AngleResult.ambiguous` before using an angle.
+
+    Raises
+    ------
+    ValueError
+        Unknown `order`, or `predictions` of the wrong length.
     """
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
+    if predictions is not None and len(predictions) != len(pairs):
+        raise ValueError(f"{len(predictions)} predictions for {len(pairs)} images")
     out = []
     near = float(start_deg)
-    for p in pairs:
+    for k, p in enumerate(pairs):
         if p is None:
             out.append(None)
             continue
-        res = pair_angle(reference, p, near_deg=near, correction=correction)
-        near = res.angle_deg
+        if predictions is not None:
+            res = pair_angle(reference, p, near_deg=float(predictions[k]), correction=correction)
+        elif order == "independent":
+            res = pair_angle(reference, p, near_deg=0.0, correction=correction)
+        else:
+            res = pair_angle(reference, p, near_deg=near, correction=correction, max_step_deg=max_step_deg)
+            if not res.ambiguous:
+                near = res.angle_deg
         out.append(res)
     return out
 

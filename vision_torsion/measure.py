@@ -1,9 +1,14 @@
 """Measuring a folder of images against a reference image: ``vision-torsion measure``.
 
-Images are measured in file-name order (numbers in names compare as numbers), which
-is taken as the order they were taken in: marker identity is tracked and the angle
-unwrapped along it. One bad image gets its own status and message and the run goes
-on. The table is written atomically to ``angles.csv`` in the output folder, which is
+Images are measured in file-name order (numbers in names compare as numbers). With
+``order="sequence"`` (the default) that is taken as the order they were taken in:
+marker identity is tracked and the angle unwrapped along it, and with two equal
+markers an image that turned more than ``max_step_deg`` (30° by default) from the
+previous one gets status ``ambiguous`` instead of a guess
+(:func:`vision_torsion.angle.sequence_angles`). With ``order="independent"`` every
+image is the smallest rotation from the reference (for independent rotations within
+±90°, such as a rotary-stage check shot in any order). One bad image gets its own
+status and message and the run goes on. The table is written atomically to ``angles.csv`` in the output folder, which is
 the only place anything is written.
 """
 
@@ -17,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .angle import sequence_angles
+from .angle import MAX_STEP_DEG, ORDERS, sequence_angles
 from .batch import measure_each
 from .correction import load_correction
-from .errors import ImageReadError, OutputError
+from .errors import ImageReadError, OutputError, VisionTorsionError
 from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
 from .pair import measure_pair
@@ -88,7 +93,8 @@ def pair_columns(pair, swapped: bool) -> dict:
     return {f"marker{k}_{f}": getattr(m, f) for k, m in ((1, a), (2, b)) for f in _MARKER_FIELDS}
 
 
-def measure_sequence(reference_pair, images, *, settings, correction=None, progress=False, measure=measure_pair):
+def measure_sequence(reference_pair, images, *, settings, correction=None, progress=False, measure=measure_pair,
+                     order: str = "sequence", max_step_deg: float | None = MAX_STEP_DEG, predictions=None):
     """Measure images in order against a reference pair; one bad image never stops it.
 
     Parameters
@@ -107,12 +113,14 @@ def measure_sequence(reference_pair, images, *, settings, correction=None, progr
         Measures one image: ``measure(path, settings=..., name=...)`` returns its
         :class:`~vision_torsion.pair.PairMeasurement`
         (:func:`~vision_torsion.pair.measure_pair` by default).
+    order, max_step_deg, predictions
+        How marker identity is resolved: see :func:`~vision_torsion.angle.sequence_angles`.
 
     Returns
     -------
     (list, list, list)
-        Per image: the PairMeasurement or None, the AngleResult or None (identity
-        tracked, unwrapped), and the failure message or "" (see
+        Per image: the PairMeasurement or None, the AngleResult or None (check its
+        ``ambiguous``), and the failure message or "" (see
         :func:`vision_torsion.batch.attempt` for what counts as a failure).
     """
     images = list(images)
@@ -121,7 +129,9 @@ def measure_sequence(reference_pair, images, *, settings, correction=None, progr
     pairs = [d.value for d in done]
     # an internal error's message does not name the image (a bug's text rarely does)
     messages = [f"{name}: {d.message}" if d.unexpected else d.message for (_, name), d in zip(images, done)]
-    return pairs, sequence_angles(reference_pair, pairs, correction=correction), messages
+    angles = sequence_angles(reference_pair, pairs, correction=correction, order=order,
+                             max_step_deg=max_step_deg, predictions=predictions)
+    return pairs, angles, messages
 
 
 def measure_folder(
@@ -131,6 +141,8 @@ def measure_folder(
     out_dir=None,
     settings: MeasureSettings | None = None,
     progress: bool = False,
+    order: str = "sequence",
+    max_step_deg: float | None = MAX_STEP_DEG,
 ) -> MeasureResult:
     """Measure every image of a folder against a reference image.
 
@@ -147,6 +159,13 @@ def measure_folder(
         saved plane/lens correction (``settings.correction``) applied to the centres.
     progress : bool
         Show a progress bar.
+    order : {"sequence", "independent"}
+        ``sequence``: images in name order are a sequence of small steps (identity
+        tracked, angles unwrapped); ``independent``: each image is the smallest
+        rotation from the reference.
+    max_step_deg : float or None
+        In ``sequence`` order with two equal markers, an image more than this (deg)
+        from the previous certain angle gets status ``ambiguous``; None never flags.
 
     Returns
     -------
@@ -154,16 +173,23 @@ def measure_folder(
         The table (:data:`ANGLE_COLUMNS`): angle in degrees counter-clockwise as
         displayed with its standard uncertainty, status ``ok``/``failed``/``suspect``
         (measured, but a marker's fit residual is far above the folder's typical one:
-        :mod:`vision_torsion.quality`; counted in ``n_failed``), message,
+        :mod:`vision_torsion.quality`; counted in ``n_failed``)/``ambiguous`` (marker
+        identity not certain: angle withheld, both candidates in the message), message,
         and both markers' centres (px), radii, uncertainties and residuals.
 
     Raises
     ------
     ImageReadError, MarkerError
         The folder has no images, or the reference image is unusable.
+    VisionTorsionError
+        Unknown `order`, or `max_step_deg` not in (0°, 90°).
     CalibrationError
         ``settings.correction`` cannot be loaded.
     """
+    if order not in ORDERS:
+        raise VisionTorsionError(f"order must be one of {ORDERS}, got {order!r}")
+    if max_step_deg is not None and not 0 < max_step_deg < 90:
+        raise VisionTorsionError(f"max_step_deg must be between 0 and 90 degrees, got {max_step_deg!r}")
     settings = settings or MeasureSettings()
     correction = load_correction(settings.correction)
     files = list_images(image_dir)
@@ -174,13 +200,17 @@ def measure_folder(
     check_output_dir(out)
     ref_pair = measure_pair(reference, settings=settings, name=f"reference {reference}")
     pairs, angles, messages = measure_sequence(
-        ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress
+        ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress,
+        order=order, max_step_deg=max_step_deg,
     )
     flags = residual_flags([ref_pair, *pairs])[1:]  # the reference counts towards the typical residual
     rows = []
     for f, pair, ang, msg, flag in zip(files, pairs, angles, messages, flags):
         row = {"image": printable_name(f.name), "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}
-        if ang is not None:
+        if ang is not None and ang.ambiguous:
+            logger.warning("%s: %s", f.name, ang.ambiguous)
+            row.update(status="ambiguous", message=ang.ambiguous)
+        elif ang is not None:
             row.update(angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg,
                        status=SUSPECT if flag else "ok", message=flag)
             row.update(pair_columns(pair, ang.swapped))

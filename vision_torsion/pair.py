@@ -5,6 +5,12 @@ third marker of the same size is present the choice would be a guess, so it is a
 error instead (the right pair or a clear error, never a wrong pair): narrow
 ``radius_range`` in the settings, or cover the extra circle.
 
+With ``pair="distinct"`` the target is two markers of clearly different radii (the
+largest usable marker and the next largest, at most :data:`DISTINCT_RATIO` of its
+radius): marker identity then follows the radius and is certain at any angle
+(:mod:`vision_torsion.angle`). The recommended target when images are not taken in
+small steps.
+
 Coordinates are image pixels (x, y), origin at the centre of the top-left pixel,
 y downwards.
 """
@@ -22,7 +28,14 @@ from .images import as_grey_array
 from .markers import Marker, find_marker_list, is_frame
 from .settings import MeasureSettings
 
-__all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance"]
+__all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance", "DISTINCT_RATIO", "PAIR_CHOICES"]
+
+#: Largest radius ratio (small/large) of a ``pair="distinct"`` target: 0.85 keeps the
+#: two radii apart by many times their uncertainty (~0.01 px) and by more than the
+#: matching tolerance (6 %) at any size.
+DISTINCT_RATIO = 0.85
+#: Named pair choices (a tuple of two row indices is also accepted).
+PAIR_CHOICES = ("largest", "distinct")
 
 
 def radius_tolerance(r: float) -> float:
@@ -99,9 +112,11 @@ def select_pair(markers, *, pair="largest", name: str = "image") -> PairMeasurem
     ----------
     markers : pandas.DataFrame or list of Marker
         Output of :func:`~vision_torsion.markers.find_markers`.
-    pair : "largest" or tuple of int
+    pair : "largest", "distinct" or tuple of int
         ``"largest"``: the two largest ``ok`` markers of matching radius (within
-        :func:`radius_tolerance`); a tuple picks rows by position.
+        :func:`radius_tolerance`); ``"distinct"``: the largest ``ok`` marker and the
+        next largest, which must be at most :data:`DISTINCT_RATIO` of its radius; a
+        tuple picks rows by position.
     name : str
         What to call the image in messages.
 
@@ -127,6 +142,8 @@ def select_pair(markers, *, pair="largest", name: str = "image") -> PairMeasurem
         bad = [m for m in chosen if not m.ok]
         if bad:
             raise MarkerError(f"{name}: chosen marker is unusable ({bad[0].status}: {bad[0].message})")
+    elif pair == "distinct":
+        chosen = _distinct_pair(ms, name)
     elif pair == "largest":
         ok = sorted((m for m in ms if m.ok), key=lambda m: -m.radius_px)
         if len(ok) < 2:
@@ -148,9 +165,32 @@ def select_pair(markers, *, pair="largest", name: str = "image") -> PairMeasurem
             radii = ", ".join(f"{m.radius_px:.1f}" for m in ok)
             raise MarkerError(f"{name}: no two markers of matching radius (radii {radii} px)")
     else:
-        raise MarkerError(f"{name}: pair must be 'largest' or two indices, got {pair!r}")
+        raise MarkerError(f"{name}: pair must be 'largest', 'distinct' or two indices, got {pair!r}")
     chosen.sort(key=lambda m: (m.x_px, m.y_px))
     return PairMeasurement(first=chosen[0], second=chosen[1], n_candidates=len(ms))
+
+
+def _distinct_pair(ms, name):
+    """The largest usable marker and the next largest of clearly smaller radius
+    (``pair="distinct"``), or MarkerError."""
+    ok = sorted((m for m in ms if m.ok), key=lambda m: -m.radius_px)
+    if len(ok) < 2:
+        rejected = [f"{m.status} at ({m.x_px:.0f}, {m.y_px:.0f}): {m.message}" for m in ms if not m.ok]
+        why = f"; rejected: {'; '.join(rejected)}" if rejected else ""
+        raise MarkerError(f"{name}: found {len(ok)} usable marker(s), need 2{why}")
+    big, small = ok[0], ok[1]
+    if small.radius_px > DISTINCT_RATIO * big.radius_px:
+        raise MarkerError(
+            f"{name}: pair 'distinct' needs two markers of clearly different radii, but the two largest are "
+            f"{big.radius_px:.1f} and {small.radius_px:.1f} px (the smaller must be at most "
+            f"{DISTINCT_RATIO:g}x the larger)"
+        )
+    if len(ok) > 2 and abs(ok[2].radius_px - small.radius_px) <= radius_tolerance(small.radius_px):
+        raise MarkerError(
+            f"{name}: ambiguous target: more than one marker of radius ≈{small.radius_px:.1f} px beside the "
+            f"{big.radius_px:.1f} px one; narrow radius_range to pick two"
+        )
+    return [big, small]
 
 
 def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | None = None,
@@ -184,7 +224,8 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     settings = settings or MeasureSettings()
     if name is None:
         name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
-    enough = _pair_settled if settings.pair == "largest" else None
+    enough = {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair) if isinstance(
+        settings.pair, str) else None
     markers = find_marker_list(as_grey_array(image, name=name, keep_integers=True), settings, enough=enough,
                                candidates=candidates)
     return select_pair(markers, pair=settings.pair, name=name)
@@ -199,5 +240,15 @@ def _pair_settled(markers, blob) -> bool:
     """
     ok = sorted((m.radius_px for m in markers if m.ok), reverse=True)
     if len(ok) < 2 or ok[0] - ok[1] > radius_tolerance(ok[0]):
+        return False
+    return blob.radius < ok[1] - radius_tolerance(ok[1]) - 2.0
+
+
+def _distinct_settled(markers, blob) -> bool:
+    """True when no smaller candidate can change the "distinct" choice: the two
+    largest usable markers differ clearly and the next candidate is clearly too
+    small to match the smaller one (so cannot make it ambiguous)."""
+    ok = sorted((m.radius_px for m in markers if m.ok), reverse=True)
+    if len(ok) < 2 or ok[1] > DISTINCT_RATIO * ok[0]:
         return False
     return blob.radius < ok[1] - radius_tolerance(ok[1]) - 2.0

@@ -32,13 +32,15 @@ class MeasureSettings:
     polarity : {"dark", "bright"}
         Dark markers on a bright disk, or bright markers on a dark disk.
     radius_range : tuple of float, optional
-        (smallest, largest) marker radius in pixels; None accepts 4 px up to a fifth
-        of the shorter image side.
+        (smallest, largest) marker radius in pixels; None accepts 3 px up to a fifth
+        of the shorter image side (:func:`vision_torsion.detect.default_radius_range`).
     fit : {"pixels", "geometric", "algebraic", "ellipse"}
         Marker-fit method (see :data:`FIT_METHODS`).
-    pair : {"largest"} or tuple of int
+    pair : {"largest", "distinct"} or tuple of int
         Which two markers make the target: ``"largest"`` picks the two largest
-        round markers of matching radius.
+        round markers of matching radius; ``"distinct"`` the largest and the next
+        largest of clearly smaller radius (a two-radii target, whose identity is
+        certain at any angle; see :mod:`vision_torsion.pair`).
     correction : str, optional
         Path of a saved plane/lens correction (TOML or JSON) applied to the marker
         centres before the angle is computed.

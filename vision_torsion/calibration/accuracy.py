@@ -2,10 +2,13 @@
 
 A check folder holds images and ``reference.csv`` (``image,reference_angle_deg``;
 the first row is the reference image; angles in degrees, counter-clockwise positive
-as displayed). Every other row's image is measured against the first row's image in
-table order (marker identity tracked and the angle unwrapped along the table, as
-``measure`` does along a folder), and its measured angle is
-``reference_angle_deg[0] + rotation``. One bad image gets status ``failed`` and the
+as displayed). Every other row's image is measured against the first row's image,
+and its measured angle is ``reference_angle_deg[0] + rotation``. Marker identity
+(which of two equal markers is which) is settled by the reference angles
+themselves: the rotation is the candidate nearest ``reference_angle_deg -
+reference_angle_deg[0]`` (:func:`vision_torsion.angle.sequence_angles` with
+predictions), so rows may come in any order and rotations may be large; an error
+of 90° or more would be read as a swap (the check's tolerance is far smaller). One bad image gets status ``failed`` and the
 run goes on.
 
 Outputs (written atomically and as a set to the output folder, ``DIR/results`` by
@@ -352,7 +355,8 @@ def check_accuracy(
     names, refs = list(table["image"]), table["reference_angle_deg"].to_numpy()
     ref_pair = measure_pair(folder / names[0], settings=settings, name=f"reference {names[0]}")
     _, angles, reasons = measure_sequence(
-        ref_pair, [(folder / name, name) for name in names[1:]], settings=settings, correction=corr, progress=progress
+        ref_pair, [(folder / name, name) for name in names[1:]], settings=settings, correction=corr, progress=progress,
+        predictions=refs[1:] - refs[0],
     )
     rows = [dict(image=names[0], reference_angle_deg=refs[0], measured_angle_deg=refs[0], error_deg=0.0, angle_std_deg=np.nan, status="reference")]
     for name, ref, ang, why in zip(names[1:], refs[1:], angles, reasons):

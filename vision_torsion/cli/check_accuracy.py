@@ -26,7 +26,7 @@ def register(sub) -> None:
     p.add_argument("--spec", metavar="FILE", help="a check spec (TOML file), or the name of a ready one: rotary_stage, synthetic_selfcheck")
     add_marker_options(p)
     # marker options given on the command line override the spec's; unset ones do not
-    p.set_defaults(polarity=None, fit=None, func=run)
+    p.set_defaults(polarity=None, fit=None, pair=None, func=run)
     add_common_options(p)
 
 
@@ -35,7 +35,7 @@ def run(args) -> int:
     from ..settings import MeasureSettings
 
     spec = load_spec(args.spec) if args.spec else AccuracySpec()
-    given = {k: v for k, v in (("polarity", args.polarity), ("fit", args.fit)) if v is not None}
+    given = {k: v for k, v in (("polarity", args.polarity), ("fit", args.fit), ("pair", args.pair)) if v is not None}
     if args.radius_range:
         given["radius_range"] = tuple(args.radius_range)
     settings = replace(spec.settings or MeasureSettings(), **given)

@@ -1,4 +1,4 @@
-"""``vision-torsion measure IMAGE_DIR --reference FILE [-o OUT_DIR]``."""
+"""``vision-torsion measure IMAGE_DIR --reference FILE [-o OUT_DIR] [--order sequence|independent]``."""
 
 from __future__ import annotations
 
@@ -15,12 +15,20 @@ def register(sub) -> None:
         description=(
             "Measure every image of IMAGE_DIR (natural name order) against the reference image "
             "and write angles.csv (image, angle_deg, angle_std_deg, status, message, marker "
-            "centres, radii and residuals). Exit status 1 if any image failed."
+            "centres, radii and residuals). Exit status 1 if any image failed or is ambiguous."
         ),
     )
     p.add_argument("image_dir", metavar="IMAGE_DIR", help="folder of images")
     p.add_argument("--reference", required=True, metavar="FILE", help="the reference image (angle 0)")
     add_output_option(p, "IMAGE_DIR/results; not IMAGE_DIR itself")
+    p.add_argument(
+        "--order", choices=("sequence", "independent"), default="sequence",
+        help="sequence (default): images in name order were taken in small steps; identity is tracked, and "
+             "with two equal markers an image that turned more than --max-step from the previous one is "
+             "'ambiguous'. independent: each image is the smallest rotation from the reference (within ±90°)",
+    )
+    p.add_argument("--max-step", type=float, default=30.0, metavar="DEG",
+                   help="sequence order: the largest turn between consecutive images taken as certain (default 30)")
     add_marker_options(p)
     add_common_options(p)
     p.set_defaults(func=run)
@@ -35,6 +43,8 @@ def run(args) -> int:
         out_dir=args.out_dir,
         settings=settings_from_args(args),
         progress=progress_enabled(args),
+        order=args.order,
+        max_step_deg=args.max_step,
     )
     print(f"{res.n_ok} of {res.n_ok + res.n_failed} images measured; wrote {res.path}")
     for row in res.table.itertuples():

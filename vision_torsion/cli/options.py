@@ -16,7 +16,7 @@ __all__ = ["add_marker_options", "add_jobs_option", "settings_from_args", "add_o
 
 
 def add_marker_options(parser) -> None:
-    """--polarity, --radius-range, --fit and --correction."""
+    """--polarity, --radius-range, --fit, --pair and --correction."""
     g = parser.add_argument_group("markers")
     g.add_argument("--polarity", choices=POLARITIES, default="dark", help="dark markers on a bright disk (default) or bright on dark")
     g.add_argument(
@@ -25,6 +25,9 @@ def add_marker_options(parser) -> None:
     g.add_argument("--fit", choices=FIT_METHODS, default="pixels",
                    help="marker fit: pixels (default: the disc model fitted to the pixels), or a fit to "
                         "edge points: geometric, algebraic (the paper's), ellipse")
+    g.add_argument("--pair", choices=("largest", "distinct"), default="largest",
+                   help="the target: the two largest markers of equal radius (default), or two of "
+                        "clearly different radii (identity certain at any angle)")
     g.add_argument(
         "--correction", metavar="FILE", help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres"
     )
@@ -43,6 +46,7 @@ def settings_from_args(args) -> MeasureSettings:
         polarity=args.polarity,
         radius_range=tuple(args.radius_range) if args.radius_range else None,
         fit=args.fit,
+        pair=getattr(args, "pair", "largest") or "largest",
         correction=getattr(args, "correction", None),
     )
 

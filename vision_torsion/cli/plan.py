@@ -47,6 +47,9 @@ def register(subparsers) -> None:
                    help="dark markers on a bright disk, or the reverse")
     p.add_argument("--radius-range", type=float, nargs=2, metavar=("MIN", "MAX"),
                    help="marker radius range in pixels")
+    p.add_argument("--target", choices=("equal", "distinct"), default="equal",
+                   help="two equal markers, or two of clearly different radii (recommended: "
+                        "which marker is which is then certain at any angle)")
     p.add_argument("--angle-sign", type=int, choices=(1, -1), default=1,
                    help="factor making positive torque give a positive angle")
     p.add_argument("--image-type", default=".png", metavar="SUFFIX",
@@ -68,7 +71,8 @@ def run(args) -> int:
         gravity_std_m_per_s2=args.gravity_std, arm_radius_std_m=args.arm_radius_std,
         mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
         polarity=args.polarity, radius_range=args.radius_range,
-        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force)
+        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
+        target=args.target)
     print(f"{plan.folder}: {len(plan.rows)} images in "
           f"{len(plan.config.protocol.orientations_deg)} orientations, "
           f"{plan.steps_per_phase} steps per phase, max torque "

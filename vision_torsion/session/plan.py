@@ -159,6 +159,13 @@ def _capture_sheet(plan: SessionPlan) -> str:
         "under the file name given (relative to this folder).",
         "",
     ]
+    if cfg.markers.pair == "distinct":
+        lines += ["Target: two markers of clearly different radii (the smaller at most 0.85× the "
+                  "larger), so which marker is which is certain at any angle.", ""]
+    else:
+        lines += ["Target: two equal markers. Which is which is tracked from image to image: keep "
+                  "the turn between consecutive photographs small (under 30°), or use a target "
+                  "with two markers of clearly different radii (`plan --target distinct`).", ""]
     current = None
     number = 0
     for row in plan.rows:
@@ -192,7 +199,8 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
                  mass_tolerance_kg: float = 1e-4, friction_torque_std_nm: float = 0.0,
                  arm_radius_std_m: float = 0.0, gravity_std_m_per_s2: float = 0.0,
                  polarity: str = "dark", radius_range=None, angle_sign: int = 1,
-                 image_suffix: str = ".png", overwrite: bool = False) -> SessionPlan:
+                 image_suffix: str = ".png", overwrite: bool = False,
+                 target: str = "equal") -> SessionPlan:
     """Write a new session folder: session.toml, manifest.csv, capture_sheet.md, images/.
 
     Parameters
@@ -216,6 +224,10 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
         by default).
     polarity, radius_range :
         Marker settings written to ``[markers]``.
+    target : {"equal", "distinct"}
+        Two equal markers (identity tracked between images), or two markers of
+        clearly different radii (``pair = "distinct"`` in ``[markers]``: identity
+        certain at any angle, recommended).
     angle_sign : {1, -1}
         Written to ``angle_sign``.
     image_suffix : str
@@ -243,6 +255,10 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
     """
     folder = Path(out_dir)
     markers = {"polarity": polarity}
+    if target not in ("equal", "distinct"):
+        raise SessionError(f"plan_session: target must be 'equal' or 'distinct', got {target!r}")
+    if target == "distinct":
+        markers["pair"] = "distinct"
     if radius_range is not None:
         markers["radius_range"] = list(radius_range)
     doc = {

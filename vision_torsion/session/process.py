@@ -303,7 +303,9 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
             reason = "no angle relative to the reference (marker identity lost)"
         flags = residual_flags(pairs)
         for i, angle, flag in zip(idx, angles, flags):
-            if angle is not None:
+            if angle is not None and angle.ambiguous:
+                out[i] = (math.nan, math.nan, angle.ambiguous, "failed")
+            elif angle is not None:
                 out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, flag, SUSPECT if flag else "ok")
             elif entries[i]["status"] == "pending":
                 out[i] = (math.nan, math.nan, entries[i]["message"], "pending")

@@ -79,13 +79,13 @@ def centre_covariance_bound(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
     mapping = CameraMapping(scene)
     mk, nz = scene.markers, scene.noise
     out = []
-    for X, Y in marker_centres_disk(scene, angle_deg):
+    for (X, Y), radius in zip(marker_centres_disk(scene, angle_deg), mk.radii()):
         cx, cy = mapping.to_image(X, Y)
-        half = mk.radius_px * 1.2 + 4 * scene.optics.blur_sigma_px + 6
+        half = radius * 1.2 + 4 * scene.optics.blur_sigma_px + 6
         x0, y0 = int(np.floor(cx - half)), int(np.floor(cy - half))
         x1, y1 = int(np.ceil(cx + half)) + 1, int(np.ceil(cy + half)) + 1
         box = (max(x0, 0), max(y0, 0), min(x1, scene.image.width), min(y1, scene.image.height))
-        p0 = np.array([X, Y, mk.radius_px, scene.disk.background_level, mk.level], dtype=np.float64)
+        p0 = np.array([X, Y, radius, scene.disk.background_level, mk.level], dtype=np.float64)
         steps = np.array([1e-3, 1e-3, 1e-3, 1e-2, 1e-2])
         mu = _marker_patch(scene, mapping, p0, box)
         var = nz.read_noise_dn**2 + 1.0 / 12.0

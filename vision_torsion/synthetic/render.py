@@ -157,8 +157,8 @@ def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
     d = scene.distractors
     for cx, cy in bolt_hole_centres_disk(scene, angle_deg):
         _paint_circle(canvas, mapping, cx, cy, d.bolt_hole_radius_px, d.bolt_level)
-    for cx, cy in marker_centres_disk(scene, angle_deg):
-        _paint_circle(canvas, mapping, cx, cy, scene.markers.radius_px, scene.markers.level)
+    for (cx, cy), r in zip(marker_centres_disk(scene, angle_deg), scene.markers.radii()):
+        _paint_circle(canvas, mapping, cx, cy, r, scene.markers.level)
     if d.wire:
         ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
         cov = band_coverage(xs, ys, point=(disk.center_x + d.wire_offset_px, disk.center_y), direction_deg=d.wire_angle_deg, width=d.wire_width_px)

@@ -9,7 +9,7 @@ output bit depth, angles in degrees counter-clockwise as displayed)::
 
     [image]            width, height, bit_depth
     [disk]             center_x*, center_y*, background_level*, radius_px, outside_level
-    [markers]          polarity*, level*, radius_px*, distance_px*, positions_deg
+    [markers]          polarity*, level*, radius_px*, distance_px*, positions_deg, radii_px
     [optics]           blur_sigma_px, tilt_deg, tilt_axis_deg, focal_length_px, radial_k1
     [noise]            read_noise_dn, shot_noise, electrons_per_dn, jpeg_quality
     [lighting]         gradient_x, gradient_y, vignetting
@@ -71,10 +71,13 @@ class DiskSpec:
 
 @dataclass(frozen=True)
 class MarkerSpec:
-    """The circular markers: all share radius, distance from the centre and polarity.
+    """The circular markers: all share distance from the centre and polarity.
 
     ``positions_deg`` are the markers' angular positions on the disk at rotation 0,
-    counter-clockwise as displayed from the +x axis.
+    counter-clockwise as displayed from the +x axis. ``radii_px``, when given, is
+    each marker's own radius (one per position), e.g. ``[35, 25]`` for a target
+    whose two markers can never be mistaken for each other; otherwise every
+    marker has ``radius_px``.
     """
 
     polarity: str = "dark"
@@ -82,6 +85,11 @@ class MarkerSpec:
     radius_px: float = 35.0
     distance_px: float = 300.0
     positions_deg: tuple = (0.0, 180.0)
+    radii_px: tuple = ()
+
+    def radii(self) -> tuple:
+        """Radius (px) of each marker, in the order of ``positions_deg``."""
+        return tuple(self.radii_px) if self.radii_px else (self.radius_px,) * len(self.positions_deg)
 
 
 @dataclass(frozen=True)
@@ -327,6 +335,12 @@ def validate_scene(scene: Scene, *, where: str = "") -> None:
         )
     if mk.radius_px <= 0:
         raise SceneError(f"{p}[markers] radius_px must be positive, got {mk.radius_px}")
+    if mk.radii_px and len(mk.radii_px) != len(mk.positions_deg):
+        raise SceneError(
+            f"{p}[markers] radii_px has {len(mk.radii_px)} value(s) for {len(mk.positions_deg)} positions_deg"
+        )
+    if any(r <= 0 for r in mk.radii_px):
+        raise SceneError(f"{p}[markers] radii_px must all be positive, got {list(mk.radii_px)}")
     if mk.distance_px < 0:
         raise SceneError(f"{p}[markers] distance_px must not be negative, got {mk.distance_px}")
     if len(mk.positions_deg) < 1:
@@ -351,15 +365,15 @@ def validate_scene(scene: Scene, *, where: str = "") -> None:
     if d.bolt_hole_radius_px <= 0 or d.dust_radius_px <= 0 or d.wire_width_px <= 0:
         raise SceneError(f"{p}[distractors] radii and widths must be positive")
     # marker overlap (on the disk, rotation-invariant)
-    pos = mk.positions_deg
+    pos, radii = mk.positions_deg, mk.radii()
     for i in range(len(pos)):
         for j in range(i + 1, len(pos)):
             dphi = math.radians(pos[i] - pos[j])
             sep = 2 * mk.distance_px * abs(math.sin(dphi / 2))
-            if sep < 2 * mk.radius_px + 2:
+            if sep < radii[i] + radii[j] + 2:
                 raise SceneError(
                     f"{p}[markers] markers {i + 1} and {j + 1} overlap "
-                    f"(centres {sep:.1f} px apart, radius {mk.radius_px} px)"
+                    f"(centres {sep:.1f} px apart, radii {radii[i]:g} and {radii[j]:g} px)"
                 )
     check_markers_in_frame(scene, 0.0, where=where)
 
@@ -370,8 +384,8 @@ def check_markers_in_frame(scene: Scene, angle_deg: float, *, where: str = "") -
 
     p = f"{where}: " if where else ""
     mk = scene.markers
-    margin = mk.radius_px + 3 * scene.optics.blur_sigma_px + 2
-    for k, (x, y) in enumerate(marker_centres_disk(scene, angle_deg)):
+    for k, ((x, y), r) in enumerate(zip(marker_centres_disk(scene, angle_deg), mk.radii())):
+        margin = r + 3 * scene.optics.blur_sigma_px + 2
         if not (margin <= x <= scene.image.width - 1 - margin and margin <= y <= scene.image.height - 1 - margin):
             raise SceneError(
                 f"{p}[markers] marker {k + 1} at rotation {angle_deg:g}° lies outside the "
