@@ -168,9 +168,10 @@ def test_correction_is_applied_by_check_and_measure(folder, tmp_path):
     with_shear = check_accuracy(folder, out_dir=tmp_path / "r", correction=shear)
     np.testing.assert_allclose(with_sim.table["measured_angle_deg"], plain.table["measured_angle_deg"], atol=1e-9)
     assert np.abs(with_shear.table["measured_angle_deg"] - plain.table["measured_angle_deg"]).max() > 0.05
-    m0 = measure_folder(folder, reference=folder / "reference.png", out_dir=tmp_path / "m0")
+    # independent rotations (a check folder): each the smallest turn from the reference
+    m0 = measure_folder(folder, reference=folder / "reference.png", out_dir=tmp_path / "m0", order="independent")
     m1 = measure_folder(folder, reference=folder / "reference.png", out_dir=tmp_path / "m1",
-                        settings=MeasureSettings(correction=str(shear)))
+                        settings=MeasureSettings(correction=str(shear)), order="independent")
     ok = m0.table["image"] != "reference.png"
     assert np.abs(m1.table["angle_deg"][ok] - m0.table["angle_deg"][ok]).max() > 0.05
     assert main(["measure", str(folder), "--reference", str(folder / "reference.png"), "-o", str(tmp_path / "m2"),

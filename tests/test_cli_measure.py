@@ -60,7 +60,9 @@ def test_measure_writes_angles_and_continues_past_a_bad_image(accuracy_dir, tmp_
     (images / "img_002.png").write_bytes(b"\x89PNG\r\n\x1a\n broken")  # corrupt one image
     before = _tree_digest(images)
     out = tmp_path / "out"
-    code = main(["measure", str(images), "--reference", str(images / "reference.png"), "-o", str(out), "-q"])
+    # an accuracy folder holds independent rotations (-30°, 12.5°, 45°): not a sequence of small steps
+    code = main(["measure", str(images), "--reference", str(images / "reference.png"), "-o", str(out), "-q",
+                 "--order", "independent"])
     assert code == 1  # one image failed
     table = pd.read_csv(out / "angles.csv")
     truth = pd.read_csv(accuracy_dir / "reference.csv").set_index("image")["reference_angle_deg"]

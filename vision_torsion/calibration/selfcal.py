@@ -223,7 +223,9 @@ def calibrate_plane(
         raise CalibrationError(
             f"self-calibration needs at least {MIN_IMAGES} usable images (reference included), got {len(pairs)}"
         )
-    angles = sequence_angles(pairs[0], pairs[1:])
+    # a sweep is taken in order, in steps under 90° (as before): tracked without the
+    # 30° ambiguity limit of measure's sequence order
+    angles = sequence_angles(pairs[0], pairs[1:], max_step_deg=None)
     raw_deg = np.array([0.0] + [a.angle_deg for a in angles])
     sweep = float(raw_deg.max() - raw_deg.min())
     if sweep < min_sweep_deg:

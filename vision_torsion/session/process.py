@@ -262,6 +262,13 @@ def _relative_message(message: str, absolute: Path, relative: str) -> str:
     return message.replace(str(absolute), relative)
 
 
+#: Largest turn (deg) between consecutive images of one orientation taken as certain
+#: with two equal markers; beyond it the image fails as ambiguous. A real gear winds up
+#: by well under a degree; the first loaded image after the reference (at +Tmax) is
+#: the largest step. Wider than measure's 30°: a swap still needs a true turn of 120°.
+SESSION_MAX_STEP_DEG = 60.0
+
+
 def _angles(session: Session, entries: list[dict], correction=None) -> list[tuple[float, float, str, str]]:
     """Per row: (angle_deg, angle_std_deg, message or "", status).
 
@@ -295,7 +302,8 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
                           "pending" if pending else "failed")
             continue
         try:
-            angles = sequence_angles(pairs[idx.index(ref)], pairs, correction=correction)
+            angles = sequence_angles(pairs[idx.index(ref)], pairs, correction=correction,
+                                     max_step_deg=SESSION_MAX_STEP_DEG)
         except VisionTorsionError as exc:
             angles = [None] * len(idx)
             reason = f"angles of orientation {orientation:g} failed: {exc}"
