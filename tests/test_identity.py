@@ -158,7 +158,8 @@ def test_measure_command_order_independent(shuffled_folder, tmp_path, capsys):
     assert main(["measure", str(shuffled_folder), "--reference", ref, "-o", str(tmp_path / "a"), "-q",
                  "--order", "independent"]) == 0
     assert main(["measure", str(shuffled_folder), "--reference", ref, "-o", str(tmp_path / "b"), "-q"]) == 1
-    assert "ambiguous marker identity" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "ambiguous marker identity" in captured.out + captured.err
 
 
 def test_plan_target_distinct_writes_the_pair_and_says_why(tmp_path):
