@@ -91,3 +91,24 @@ def test_print_rules_unclip_scrolling_tables(analysed, tmp_path):
     css = page[page.index("@media print"):page.index("</style>")]
     assert ".scroll{max-height:none;overflow:visible" in css
     assert "@page{size:A4" in page and "break-inside:avoid" in css
+
+
+def test_session_metadata_from_gear_and_test_tables():
+    # What session.toml's optional [gear]/[test] tables give (a dict or a dataclass
+    # on the configuration): flat entries present are shown, empty ones are not.
+    from dataclasses import dataclass
+    from types import SimpleNamespace
+
+    from vision_torsion.report.session_report import _test_metadata
+
+    @dataclass
+    class Gear:
+        gear: str = "CSF-17-100"
+        serial: str | None = None
+        rated_torque_nm: float = 24.0
+
+    config = SimpleNamespace(gear=Gear(), test={"operator": "M. Li", "temperature_c": 21.5, "notes": ""})
+    meta = _test_metadata(SimpleNamespace(config=config))
+    assert meta == {"gear": "CSF-17-100", "rated_torque_nm": 24.0, "operator": "M. Li", "temperature_c": 21.5,
+                    "notes": ""}
+    assert _test_metadata(SimpleNamespace(config=SimpleNamespace())) == {}
