@@ -654,3 +654,18 @@ def test_clean_sequences_of_every_ready_scene_raise_no_flag():
         pairs = [measure_pair(render(scene, angle, seed=7 + k).image, settings=settings)
                  for k, angle in enumerate((0.0, 3.0, 11.0, 27.0))]
         assert residual_flags(pairs) == [""] * 4, name
+
+
+def test_the_pandas_free_csv_writer_writes_what_pandas_writes(tmp_path):
+    columns = ["image", "mass_kg", "torque_nm", "angle_deg", "status", "message"]
+    records = [
+        {"image": "images/a.png", "mass_kg": "0.36", "torque_nm": 0.36 * 0.981, "angle_deg": float("nan"),
+         "status": "failed", "message": 'a "quoted", comma message'},
+        {"image": "images/b.png", "mass_kg": "0", "torque_nm": -0.0, "angle_deg": 1e-20,
+         "status": "ok", "message": ""},
+        {"image": "images/c.png", "mass_kg": "", "torque_nm": 12345.678901234567, "angle_deg": -3.5,
+         "status": "suspect", "message": "line one\nline two"},
+    ]
+    fast = fileio.write_records_csv(tmp_path / "fast.csv", columns, records).read_bytes()
+    slow = fileio.write_csv(tmp_path / "pandas.csv", pd.DataFrame.from_records(records, columns=columns)).read_bytes()
+    assert fast == slow

@@ -41,6 +41,7 @@ __all__ = [
     "check_output_dir",
     "os_reason",
     "format_float",
+    "write_records_csv",
     "MIN_FREE_BYTES",
 ]
 
@@ -317,3 +318,28 @@ def write_csv(path, frame) -> Path:
         for c in floats:
             frame[c] = [float(f"{x:.15g}") for x in frame[c].to_numpy()]
     return atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n"))
+
+
+def write_records_csv(path, columns, records) -> Path:
+    """Write dict `records` under `columns` as CSV atomically, without pandas.
+
+    The same text :func:`write_csv` writes for the same table (floats by
+    :func:`format_float`, NaN and None empty, minimal quoting, ``\\n`` line ends), for
+    commands that need no other part of pandas (``process`` saves its ~0.4 s import).
+    """
+    import csv
+    import io
+
+    def cell(value):
+        if value is None:
+            return ""
+        if isinstance(value, float):
+            return format_float(value) if math.isfinite(value) else ("" if math.isnan(value) else format_float(value))
+        return value
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    for rec in records:
+        writer.writerow([cell(rec.get(c)) for c in columns])
+    return atomic_write_text(path, buf.getvalue())

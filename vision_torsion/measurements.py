@@ -26,7 +26,6 @@ from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from .errors import MeasurementsError, RigError
 
@@ -231,6 +230,8 @@ def csv_line(position: int) -> int:
 
 
 def _read_csv(path: Path, name: str) -> pd.DataFrame:
+    import pandas as pd  # here, not at the top: `process` uses this module without pandas
+
     try:
         # blank cells are missing values; text such as "NA" is not silently one
         return pd.read_csv(path, keep_default_na=False, na_values=[""])
@@ -293,6 +294,8 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
     vision_torsion.errors.MeasurementsError: measurements table: 1 problem(s) (line numbers are CSV lines, the header is line 1)
       line 3: column angle_deg is not a number ('x')
     """
+    import pandas as pd
+
     if isinstance(source, (str, os.PathLike)):
         path = Path(source)
         name = name or path.name

@@ -43,13 +43,12 @@ from itertools import islice
 from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
 from tqdm import tqdm
 
 from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
-from ..fileio import check_output_dir, write_csv
+from ..fileio import check_output_dir, write_records_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
@@ -322,7 +321,8 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
     return out
 
 
-def _table(session: Session, entries: list[dict], correction=None) -> pd.DataFrame:
+def _table(session: Session, entries: list[dict], correction=None) -> tuple[list[str], list[dict]]:
+    """The columns and rows of measurements.csv (manifest columns, then the results)."""
     manifest = session.manifest
     keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
     records = []
@@ -336,7 +336,7 @@ def _table(session: Session, entries: list[dict], correction=None) -> pd.DataFra
                    status=status,
                    message=_relative_message(why, manifest.image_path(row), row.image))
         records.append(rec)
-    return pd.DataFrame.from_records(records, columns=keep + list(OUTPUT_COLUMNS))
+    return keep + list(OUTPUT_COLUMNS), records
 
 
 def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
@@ -414,24 +414,24 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     found = iter(measured)
     entries = [{"status": "pending", "message": f"not photographed yet ({row.image}: no such file)"}
                if row.line in pending else next(found) for row in session.manifest.rows]
-    table = _table(session, entries, correction)
-    path = write_csv(out / MEASUREMENTS_NAME, table)
+    columns, records = _table(session, entries, correction)
+    path = write_records_csv(out / MEASUREMENTS_NAME, columns, records)
     new_logs = CacheLog(cache_dir, run).files()
     if new_logs or len(logs) > 1:
         # one log for the next run; the old logs' entries were read at the start
         merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=_valid_entry)}, logs + new_logs)
-    failed = table[table["status"].isin(("failed", SUSPECT))]  # a suspect angle is not good data
-    waiting = table[table["status"] == "pending"]
-    failures = tuple(zip(failed["image"], failed["message"]))
+    failed = [r for r in records if r["status"] in ("failed", SUSPECT)]  # a suspect angle is not good data
+    waiting = [r for r in records if r["status"] == "pending"]
+    failures = tuple((r["image"], r["message"]) for r in failed)
     unlisted = tuple(unlisted_images(session, exclude=[out]))
-    n_ok = len(table) - len(failed) - len(waiting)
+    n_ok = len(records) - len(failed) - len(waiting)
     logger.info("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
-                path, len(table), n_ok, len(failed), len(waiting),
+                path, len(records), n_ok, len(failed), len(waiting),
                 sources.count("measured"), sources.count("cached"))
-    return ProcessResult(measurements_path=path, n_images=len(table),
+    return ProcessResult(measurements_path=path, n_images=len(records),
                          n_ok=n_ok, n_failed=len(failed),
                          n_measured=sources.count("measured"),
                          n_cached=sources.count("cached"),
                          failures=failures,
-                         pending=tuple(zip(waiting["image"], waiting["message"])),
+                         pending=tuple((r["image"], r["message"]) for r in waiting),
                          unlisted=unlisted)
