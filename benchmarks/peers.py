@@ -80,6 +80,9 @@ __all__ = [
     "moments",
     "canny_circle",
     "ml_disc",
+    "moments_centre",
+    "canny_centre",
+    "ml_disc_centre",
     "ours_algebraic",
     "ours_default",
 ]
@@ -193,56 +196,75 @@ def _window(image, x, y, half):
     return image[y0:y1, x0:x1].astype(np.float64), xs, ys
 
 
+def _neighbours_mask(xs, ys, others):
+    """Pixels within 3 px of a neighbouring dot's disc (`others`: rows of (x, y, r) in
+    px), which a careful user leaves out of a dot's window on a dense grid."""
+    mask = np.zeros(xs.shape, bool)
+    for ox, oy, orad in (() if others is None else others):
+        mask |= np.hypot(xs - ox, ys - oy) < orad + 3.0
+    return mask
+
+
+def moments_centre(image: np.ndarray, x: float, y: float, r: float, others=None) -> tuple[float, float]:
+    """Background-subtracted intensity-weighted centroid (px) of a dark dot started at
+    (x, y), radius r (px); pixels of neighbouring dots (`others`) left out."""
+    patch, xs, ys = _window(image, x, y, r + 9)
+    d = np.hypot(xs - x, ys - y)
+    away = ~_neighbours_mask(xs, ys, others)
+    ring = (d > r + 3) & (d <= r + 9) & away
+    if ring.sum() < 8:
+        raise PeerFailure("too few background pixels around the dot")
+    A = np.column_stack([np.ones(ring.sum()), xs[ring] - x, ys[ring] - y])
+    coef, *_ = np.linalg.lstsq(A, patch[ring], rcond=None)
+    background = coef[0] + coef[1] * (xs - x) + coef[2] * (ys - y)
+    wgt = np.clip(background - patch, 0.0, None) * ((d <= r + 3) & away)
+    total = wgt.sum()
+    if not total > 0:
+        raise PeerFailure("no contrast in the marker window")
+    return (wgt * xs).sum() / total, (wgt * ys).sum() / total
+
+
 def moments(image: np.ndarray) -> Detection:
     """Background-subtracted intensity-weighted centroid of each of the two largest blobs."""
-    circles = []
-    for _, (x, y, r) in _blobs(image):
-        patch, xs, ys = _window(image, x, y, r + 9)
-        d = np.hypot(xs - x, ys - y)
-        ring = (d > r + 3) & (d <= r + 9)
-        A = np.column_stack([np.ones(ring.sum()), xs[ring] - x, ys[ring] - y])
-        coef, *_ = np.linalg.lstsq(A, patch[ring], rcond=None)
-        background = coef[0] + coef[1] * (xs - x) + coef[2] * (ys - y)
-        wgt = np.clip(background - patch, 0.0, None) * (d <= r + 3)
-        total = wgt.sum()
-        if not total > 0:
-            raise PeerFailure("no contrast in the marker window")
-        circles.append(((wgt * xs).sum() / total, (wgt * ys).sum() / total, r))
-    return _two(circles)
+    return _two([(*moments_centre(image, x, y, r), r) for _, (x, y, r) in _blobs(image)])
 
 
 # ----------------------------------------------- scikit-image canny + circle
 
 
-def canny_circle(image: np.ndarray) -> Detection:
-    """scikit-image ``canny`` edge pixels + ``CircleModel.from_estimate`` per blob."""
+def canny_centre(image: np.ndarray, x: float, y: float, r: float, others=None) -> tuple[float, float, float]:
+    """scikit-image ``canny`` edge pixels + ``CircleModel.from_estimate`` of a dot
+    started at (x, y), radius r (px): centre and radius (px); edge pixels of
+    neighbouring dots (`others`) left out."""
     from skimage.feature import canny
     from skimage.measure import CircleModel
 
-    circles = []
-    for _, (x, y, r) in _blobs(image):
-        patch, xs, ys = _window(image, x, y, r + 8)
-        lo, hi = np.percentile(patch, [1, 99])
-        if not hi > lo:
-            raise PeerFailure("no contrast in the marker window")
-        edges = canny((patch - lo) / (hi - lo), sigma=2.0)
-        ex, ey = xs[edges], ys[edges]
-        near = np.abs(np.hypot(ex - x, ey - y) - r) < 4
-        pts = np.column_stack([ex[near], ey[near]])
-        for _ in range(2):
-            if len(pts) < 10:
-                raise PeerFailure(f"only {len(pts)} Canny edge pixels near the marker")
-            model = CircleModel.from_estimate(pts)
-            if not model:
-                raise PeerFailure(f"CircleModel failed: {model}")
-            res = model.residuals(pts)
-            mad = 1.4826 * np.median(np.abs(res - np.median(res)))
-            keep = np.abs(res) <= max(3 * mad, 0.5)
-            if keep.all():
-                break
-            pts = pts[keep]
-        circles.append((model.center[0], model.center[1], model.radius))
-    return _two(circles)
+    patch, xs, ys = _window(image, x, y, r + 8)
+    lo, hi = np.percentile(patch, [1, 99])
+    if not hi > lo:
+        raise PeerFailure("no contrast in the marker window")
+    edges = canny((patch - lo) / (hi - lo), sigma=2.0) & ~_neighbours_mask(xs, ys, others)
+    ex, ey = xs[edges], ys[edges]
+    near = np.abs(np.hypot(ex - x, ey - y) - r) < 4
+    pts = np.column_stack([ex[near], ey[near]])
+    for _ in range(2):
+        if len(pts) < 10:
+            raise PeerFailure(f"only {len(pts)} Canny edge pixels near the marker")
+        model = CircleModel.from_estimate(pts)
+        if not model:
+            raise PeerFailure(f"CircleModel failed: {model}")
+        res = model.residuals(pts)
+        mad = 1.4826 * np.median(np.abs(res - np.median(res)))
+        keep = np.abs(res) <= max(3 * mad, 0.5)
+        if keep.all():
+            break
+        pts = pts[keep]
+    return model.center[0], model.center[1], model.radius
+
+
+def canny_circle(image: np.ndarray) -> Detection:
+    """scikit-image ``canny`` edge pixels + ``CircleModel.from_estimate`` per blob."""
+    return _two([canny_centre(image, x, y, r) for _, (x, y, r) in _blobs(image)])
 
 
 # -------------------------------------------- maximum-likelihood blurred disc
@@ -282,13 +304,17 @@ def _disc_model(p, xs, ys, half):
     return L * base, J
 
 
-def _fit_disc(image, x, y, r):
+def ml_disc_centre(image, x, y, r, others=None):
+    """Maximum-likelihood blurred-disc fit of a dot started at (x, y), radius r (px):
+    centre and radius (px); pixels of neighbouring dots (`others`) left out."""
     half = r + 4 * 1.5 + 5
     patch, xs, ys = _window(image, x, y, half)
-    xs, ys, z = xs.ravel(), ys.ravel(), patch.ravel()
+    away = ~_neighbours_mask(xs, ys, others)
+    xs, ys, z = xs[away], ys[away], patch[away]
     d = np.hypot(xs - x, ys - y)
     B0 = float(np.median(z[d > r + 4]))
-    F0 = float(np.median(z[d < r - 4]))
+    # the inside level from the core (r - 4 px; the inner half of a dot under 8 px)
+    F0 = float(np.median(z[d < max(r - 4, 0.5 * r)]))
     p0 = np.array([x, y, r, 1.2, B0, F0, 0.0, 0.0])
     last = {}
 
@@ -301,6 +327,8 @@ def _fit_disc(image, x, y, r):
             last[key] = _disc_model(p, xs, ys, half)
         return last[key]
 
+    if not np.all(np.isfinite(p0)):
+        raise PeerFailure("no pixels to start the blurred-disc fit")
     res = least_squares(lambda p: model(p)[0] - z, p0, jac=lambda p: model(p)[1], method="lm", x_scale="jac")
     if not res.success or not np.all(np.isfinite(res.x)):
         raise PeerFailure(f"least_squares did not converge: {res.message}")
@@ -312,7 +340,7 @@ def _fit_disc(image, x, y, r):
 
 def ml_disc(image: np.ndarray) -> Detection:
     """Maximum-likelihood blurred-disc fit to the pixels around each of the two largest blobs."""
-    return _two([_fit_disc(image, x, y, r) for _, (x, y, r) in _blobs(image)])
+    return _two([ml_disc_centre(image, x, y, r) for _, (x, y, r) in _blobs(image)])
 
 
 # --------------------------------------------------------------------- ours

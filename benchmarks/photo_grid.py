@@ -1,0 +1,72 @@
+"""The grid of a dot-target photograph without ground truth: reference dots and row triples.
+
+Shared by ``bench_photos.py`` and the photo tests (no side effects at import). See
+``bench_photos.py`` for why these are the reference and the precision measure.
+Coordinates: image pixels (x, y), origin at the centre of the top-left pixel.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+__all__ = ["reference_dots", "grid_triples", "off_line", "SYMMETRY"]
+
+#: A triple's outer dots must be symmetric about the middle one within this fraction
+#: of their spacing to count as grid neighbours on one row.
+SYMMETRY = 0.2
+
+
+def reference_dots(img: np.ndarray) -> np.ndarray:
+    """Grid dots (rows of x, y, r in px) of OpenCV's SimpleBlobDetector (see the
+    docstring of bench_photos.py for its settings and the grid-dot rule)."""
+    g8 = img if img.dtype == np.uint8 else cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX, dtype=cv2.CV_8U)
+    h, w = g8.shape
+    p = cv2.SimpleBlobDetector_Params()
+    p.minThreshold, p.maxThreshold, p.thresholdStep = 10, 250, 10
+    p.filterByColor, p.blobColor = True, 0
+    p.filterByArea, p.minArea, p.maxArea = True, np.pi * 2.0**2, np.pi * (min(h, w) / 5) ** 2
+    p.filterByCircularity, p.minCircularity = True, 0.7
+    p.filterByConvexity, p.minConvexity = True, 0.85
+    p.filterByInertia, p.minInertiaRatio = True, 0.3
+    kps = cv2.SimpleBlobDetector_create(p).detect(g8)
+    if not kps:
+        return np.zeros((0, 3))
+    dots = np.array([(k.pt[0], k.pt[1], k.size / 2) for k in kps])
+    med = np.median(dots[:, 2])
+    keep = (dots[:, 2] > 0.6 * med) & (dots[:, 2] < 1.6 * med)
+    x, y, r = dots[:, 0], dots[:, 1], dots[:, 2]
+    keep &= (x - r - 2 >= -0.5) & (y - r - 2 >= -0.5) & (x + r + 2 <= w - 0.5) & (y + r + 2 <= h - 0.5)
+    return dots[keep]
+
+
+def grid_triples(xy: np.ndarray) -> np.ndarray:
+    """(k, 3) indices (a, p, b): p's two grid neighbours a and b on one row or column."""
+    if len(xy) < 3:
+        return np.zeros((0, 3), int)
+    tree = cKDTree(xy)
+    _, nn = tree.query(xy, k=min(7, len(xy)))
+    out = set()
+    for p, cand in enumerate(nn):
+        cand = cand[1:]
+        spacing = np.linalg.norm(xy[cand[0]] - xy[p])
+        for i, a in enumerate(cand):
+            va = xy[a] - xy[p]
+            if np.linalg.norm(va) > 1.5 * spacing:
+                continue
+            for b in cand[i + 1:]:
+                vb = xy[b] - xy[p]
+                if np.linalg.norm(va + vb) < SYMMETRY * np.linalg.norm(va):
+                    out.add((min(a, b), p, max(a, b)))
+    return np.array(sorted(out), int).reshape(-1, 3)
+
+
+def off_line(c: np.ndarray, triples: np.ndarray) -> np.ndarray:
+    """Distance (px) of each triple's middle centre from the line through its outer two."""
+    a, p, b = c[triples[:, 0]], c[triples[:, 1]], c[triples[:, 2]]
+    ab = b - a
+    cross = ab[:, 0] * (p - a)[:, 1] - ab[:, 1] * (p - a)[:, 0]
+    return np.abs(cross) / np.linalg.norm(ab, axis=1)
+
+
