@@ -35,7 +35,7 @@ td{overflow-wrap:break-word}
 @media print{
 body{background:#fff;font-size:11px}main{max-width:none;padding:0}
 h1{font-size:20px}h2{font-size:15px;margin:16px 0 6px;break-after:avoid}h3{break-after:avoid}
-p,li{font-size:11px}
+p,li{font-size:11px}.muted,figcaption{font-size:10px}
 table{font-size:9px;width:100%;table-layout:auto}th,td{padding:2px 3px}
 thead{display:table-header-group}tr,figure,img{break-inside:avoid}
 .scroll{max-height:none;overflow:visible;border:0}
