@@ -183,7 +183,7 @@ def test_integer_and_float_images_give_the_same_markers(small_scene):
 
 def test_candidates_found_beforehand_give_the_same_pair(scene_file):
     """measure_pair with the candidates of find_candidates (as a session's reading
-    threads find them) measures exactly what it measures alone, for the default
+    threads find them) measures what it measures alone (to 1e-8 px), for the default
     radius range and a given one, among bolt holes and dust."""
     from vision_torsion.markers import find_candidates
 
@@ -192,7 +192,12 @@ def test_candidates_found_beforehand_give_the_same_pair(scene_file):
     for settings in (MeasureSettings(), MeasureSettings(radius_range=(20, 60))):
         candidates = find_candidates(image, settings)
         alone = measure_pair(image, settings=settings)
-        assert measure_pair(image, settings=settings, candidates=candidates) == alone
+        given = measure_pair(image, settings=settings, candidates=candidates)
+        # alone, the default range first looks at a quarter of the resolution for large
+        # markers: the same fit from a start a fraction of a pixel away, equal to 1e-8 px
+        for a, b in zip(given.markers, alone.markers):
+            assert (a.status, a.n_edge_points) == (b.status, b.n_edge_points)
+            np.testing.assert_allclose([a.x_px, a.y_px, a.radius_px], [b.x_px, b.y_px, b.radius_px], atol=1e-8)
         with pytest.raises(MarkerError):  # they are what is used: none given, none found
             measure_pair(image, settings=settings, candidates=[])
 
