@@ -62,6 +62,8 @@ _LAZY = {
     "PHASES": "measurements",
     "TorqueRig": "measurements",
     "read_measurements": "measurements",
+    "bind_session": "session",
+    "BindResult": "session",
     # hysteresis analysis and the report
     "analyze_session": "analysis",
     "SessionAnalysis": "analysis",

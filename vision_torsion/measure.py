@@ -32,7 +32,8 @@ from .pair import measure_pair
 from .quality import SUSPECT, residual_flags
 from .settings import MeasureSettings
 
-__all__ = ["MeasureResult", "measure_folder", "measure_sequence", "list_images", "ANGLE_COLUMNS", "pair_columns"]
+__all__ = ["MeasureResult", "measure_folder", "measure_sequence", "list_images", "natural_key", "ANGLE_COLUMNS",
+           "pair_columns"]
 
 logger = logging.getLogger(__name__)
 
@@ -54,7 +55,12 @@ class MeasureResult:
     n_failed: int
 
 
-def _natural_key(name: str):
+def natural_key(name: str):
+    """Sort key of a file name with numbers compared as numbers (IMG_2 < IMG_10).
+
+    >>> sorted(["IMG_10.png", "IMG_2.png", "img_1.png"], key=natural_key)
+    ['img_1.png', 'IMG_2.png', 'IMG_10.png']
+    """
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", name)]
 
 
@@ -72,7 +78,7 @@ def list_images(folder) -> list[Path]:
     files = [f for f in p.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_SUFFIXES]
     if not files:
         raise ImageReadError(f"{p}: no image files ({', '.join(IMAGE_SUFFIXES)})")
-    return sorted(files, key=lambda f: _natural_key(f.name))
+    return sorted(files, key=lambda f: natural_key(f.name))
 
 
 def printable_name(name: str) -> str:

@@ -49,6 +49,7 @@ _COMMAND_MODULES = [
     "synth",
     "plan",
     "process",
+    "bind",
     "report",
     "demo",
     "check_accuracy",

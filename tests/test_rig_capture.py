@@ -1,0 +1,123 @@
+"""At the rig: a scripted camera with an extra shot, a missed shot and a forgotten
+weight; ``bind`` finds them and proposes the fix; after binding, measurements.csv is
+the same as the same photographs' under the planned names.
+
+The session: the synthetic renderer (:mod:`vision_torsion.synthetic.camera`) on a
+small 320×240 scene, two orientations of four steps per phase (36 rows), the
+paper's bilinear model (k_u = 4.4, k_l = 0.3 N·m/rad, τ_c = 0.15 N·m): steps of
+0.255° on the stiff branch and 3.75° on the soft one, angle noise ~0.001°.
+"""
+
+import shutil
+
+import pytest
+
+from vision_torsion.cli import main
+from vision_torsion.images import write_image
+from vision_torsion.session import process_session
+from vision_torsion.session.bind import bind_session
+from vision_torsion.session.steps import StepPoint, check_steps
+from vision_torsion.synthetic import Scene
+from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
+from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.session import SessionSpec
+
+SCENE = Scene(image=ImageSpec(320, 240),
+              disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),
+              markers=MarkerSpec(radius_px=10.0, distance_px=90.0, positions_deg=(10.0, 190.0)),
+              name="tiny")
+SPEC = SessionSpec(max_torque_nm=0.0785, orientations_deg=(0.0, 60.0))
+# rows (0-based): 3 = o0 positive_unloading s2 (CSV line 5), 7 = o0 negative_loading s2
+# (line 9), 25 = o60 negative_loading s2 (line 27)
+FORGOTTEN, EXTRA_AFTER, MISSED = 3, 7, 25
+
+
+@pytest.fixture(scope="module")
+def script(tmp_path_factory):
+    root = tmp_path_factory.mktemp("rig")
+    plan, shots = capture_script(SCENE, SPEC, root / "planned", seed=3, forgotten=FORGOTTEN,
+                                 extra_after=EXTRA_AFTER, missed=MISSED)
+    return root, plan, shots
+
+
+def copy_session(root, name):
+    dst = root / name
+    if dst.exists():
+        shutil.rmtree(dst)
+    shutil.copytree(root / "planned", dst, ignore=shutil.ignore_patterns("results", "images"))
+    return dst
+
+
+def test_bind_finds_the_extra_and_the_missed_shot_and_the_forgotten_weight(script, capsys):
+    root, plan, shots = script
+    camera = root / "camera_a"
+    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
+    session = copy_session(root, "bound")
+    res = bind_session(session, camera)
+    assert res.n_files == res.n_rows == 36  # the count fits: only the angles tell
+    assert [(f.kind, f.file, f.line) for f in res.fixes] == [
+        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27)]
+    assert res.command.endswith("--by time --skip IMG_0009.png --missing 27")
+    assert len(res.remaining) == 1 and res.remaining[0].startswith(
+        "IMG_0004.png (line 5: orientation 0, cycle 1, positive_unloading, step 2): step out "
+        "of line") and "forgotten" in res.remaining[0]
+    assert not res.ok
+    # apply the fix from the command line
+    assert main(["bind", str(session), str(camera), "--skip", "IMG_0009.png",
+                 "--missing", "27"]) == 1  # still 1: the forgotten weight is listed
+    out, err = capsys.readouterr()
+    assert "proposed fix" not in out
+    assert "step does not fit: IMG_0004.png (line 5: orientation 0, cycle 1, positive_unloading" in err
+    assert "a weight piece forgotten on a pan?" in err
+    bound = process_session(session, jobs=1)
+    # the same photographs under the planned names
+    named = copy_session(root, "named")
+    files = [s for s in shots if s.kind != "extra"]
+    for shot in files:
+        (named / plan.rows[shot.row]["image"]).parent.mkdir(exist_ok=True)
+        (named / plan.rows[shot.row]["image"]).write_bytes(shot.png)
+    reference = process_session(named, jobs=1)
+    assert bound.n_pending == reference.n_pending == 1
+    assert bound.measurements_path.read_bytes() == reference.measurements_path.read_bytes()
+    assert bound.unlisted == ()  # IMG_0009.png was left out on purpose (--skip)
+
+
+def test_clean_capture_binds_without_warnings(script):
+    root, plan, _ = script
+    _, shots = capture_script(SCENE, SPEC, root / "clean", seed=4)
+    camera = root / "camera_clean"
+    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
+    res = bind_session(root / "clean", camera)
+    assert res.ok and not res.fixes and not res.warnings
+
+
+def test_bind_by_name_and_the_camera_folder_is_never_written(script):
+    root, plan, shots = script
+    camera = root / "camera_name"
+    # written in reverse time: capture order by time would reverse them
+    cam = ScriptedCamera(camera, [s.png for s in shots[:5]], start_time=1.7e9, interval_s=-10.0)
+    cam.run(chunk_delay_s=0, photo_delay_s=0)
+    (camera / "IMG_0003.THM").write_bytes(b"thumbnail")
+    shutil.copy(camera / "IMG_0002.png", camera / "IMG_0002 copy.png")
+    before = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in camera.iterdir()}
+    session = copy_session(root, "by_name")
+    res = bind_session(session, camera, by="name")
+    assert [res.binding.images[plan.rows[i]["image"]] for i in range(5)] == [
+        f"IMG_{k:04d}.png" for k in range(1, 6)]
+    assert dict(res.ignored) == {
+        "IMG_0002 copy.png": "the same bytes as IMG_0002.png (a copy, not a new photograph); not bound",
+        "IMG_0003.THM": "not an image file (expected .png, .tif, .tiff, .bmp, .jpg, .jpeg); not bound"}
+    assert len(res.unphotographed) == 31 and not res.leftovers
+    by_time = bind_session(session, camera, write=False)
+    assert by_time.binding.images[plan.rows[0]["image"]] == "IMG_0005.png"
+    assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in camera.iterdir()} == before
+
+
+def test_bind_lists_leftover_files(script):
+    root, plan, shots = script
+    camera = root / "camera_more"
+    ScriptedCamera(camera, [s.png for s in shots] + [shots[-1].png[:-1] + b"\0"]).run(
+        chunk_delay_s=0, photo_delay_s=0)
+    res = bind_session(copy_session(root, "more"), camera, write=False)
+    assert res.leftovers == ("IMG_0037.png",)
+

@@ -1,0 +1,287 @@
+"""Bind a camera's files to the manifest rows: ``vision-torsion bind``.
+
+The camera's photographs (:mod:`.camera`: in capture order, copies and non-images
+set aside) are assigned to the manifest rows in protocol (file) order, the first
+photograph to the first row. Rows the user says were not photographed
+(``missing``, CSV line numbers) get no file; files the user says are extra shots
+(``skip``) get no row. The result is written to ``SESSION_DIR/binding.json``
+(:mod:`.binding`); nothing is renamed, copied or written in the camera folder.
+
+A count that matches is not enough: one extra shot and one missed shot cancel in
+the count and mislabel every row between them. So every photograph is measured
+(sharing ``process``'s cache) and the angle steps are checked against the plan
+(:func:`~vision_torsion.session.steps.check_steps`). When a step does not fit,
+the fixes that could explain it are tried on the whole session: a step without
+movement (or in the wrong direction) may be an extra shot, so the file is left
+out; a step twice as large as its neighbours (or in the wrong direction) may be a
+missed shot, so the row is marked as not photographed. A fix is proposed, naming
+the file and the row, with the command line that applies it, when it removes that
+misfit and leaves fewer misfits in the whole session; then the next misfit, and so
+on. Misfits no re-binding explains (a step half as large as its neighbours: a
+weight piece forgotten on a pan) are listed with the file and the row.
+"""
+
+from __future__ import annotations
+
+import logging
+import shlex
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import SessionError
+from .binding import Binding, write_binding
+from .camera import list_camera_files
+from .load import Session, load_session
+from .steps import StepPoint, check_steps
+
+__all__ = ["BindResult", "Fix", "bind_session", "row_text", "step_warnings"]
+
+logger = logging.getLogger(__name__)
+_MAX_FIXES = 8
+
+
+@dataclass(frozen=True)
+class Fix:
+    """A proposed change to the binding.
+
+    Attributes
+    ----------
+    kind : str
+        "skip" (leave the camera file out: an extra shot) or "missing" (the row was
+        not photographed: a missed shot).
+    file : str
+        The camera file (the extra shot, or the first file after the gap).
+    line : int
+        The manifest CSV line concerned.
+    message : str
+        The proposal in words.
+    """
+
+    kind: str
+    file: str
+    line: int
+    message: str
+
+
+@dataclass(frozen=True)
+class BindResult:
+    """What :func:`bind_session` found and wrote.
+
+    Attributes
+    ----------
+    binding : Binding
+        The binding written (the files as ordered, with the user's skip/missing).
+    binding_path : pathlib.Path or None
+        Where it was written (None with ``write=False``).
+    n_files, n_rows : int
+        Photographs found (after copies and non-images) and manifest rows.
+    leftovers : tuple of str
+        Camera files left over after the last row.
+    unphotographed : tuple of (int, str)
+        (CSV line, image) of rows with no file.
+    ignored : tuple of (str, str)
+        Camera files set aside, with why.
+    warnings : tuple of str
+        Steps of the binding as written that do not fit the plan, each naming the
+        file and the row.
+    fixes : tuple of Fix
+        Proposed changes, in capture order.
+    remaining : tuple of str
+        Misfits still there after the proposed fixes (not explained by binding; the
+        same as `warnings` when no fix is proposed).
+    command : str or None
+        The ``vision-torsion bind`` command line applying the fixes.
+    """
+
+    binding: Binding
+    binding_path: Path | None
+    n_files: int
+    n_rows: int
+    leftovers: tuple[str, ...]
+    unphotographed: tuple[tuple[int, str], ...]
+    ignored: tuple[tuple[str, str], ...]
+    warnings: tuple[str, ...]
+    fixes: tuple[Fix, ...]
+    remaining: tuple[str, ...]
+    command: str | None
+
+    @property
+    def ok(self) -> bool:
+        """Every row has a file (or was declared missing), every file a row, and
+        every step fits the plan. Files set aside (copies, non-images) are listed
+        but do not count."""
+        declared = set(self.binding.missing)
+        return not (self.leftovers or self.warnings
+                    or any(line not in declared for line, _ in self.unphotographed))
+
+
+def row_text(row) -> str:
+    """How messages name a manifest row: its CSV line and place in the protocol."""
+    return (f"line {row.line}: orientation {row.orientation_deg:g}, cycle {row.cycle}, "
+            f"{row.phase}, step {row.step}")
+
+
+def _assign(rows, files, skip, missing):
+    """[(row, file or None)] in row order, and the files left over."""
+    usable = iter([f for f in files if f.name not in skip])
+    out = []
+    for row in rows:
+        out.append((row, None if row.line in missing else next(usable, None)))
+    return out, list(usable)
+
+
+def step_warnings(session: Session, bound, pairs) -> list[tuple[int, object]]:
+    """Step warnings of a bound session: [(position in `bound`, StepWarning)].
+
+    Parameters
+    ----------
+    session : Session
+    bound : sequence of (ManifestRow, object or None)
+        Rows in manifest order with what was photographed for them (None: nothing).
+    pairs : mapping
+        What was photographed -> its PairMeasurement (or None when it failed).
+    """
+    from ..angle import sequence_angles
+
+    sign = session.config.angle_sign
+    proto, rig = session.config.protocol, session.config.rig
+    step_torque = 2.0 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m
+    groups = defaultdict(list)
+    for pos, (row, shot) in enumerate(bound):
+        if shot is not None and pairs.get(shot) is not None:
+            groups[row.orientation_deg].append(pos)
+    out = []
+    for positions in groups.values():
+        ref = next((p for p in positions if bound[p][0].phase == "reference"), positions[0])
+        seq = [p for p in positions if p >= ref]  # images taken before the reference: not checked
+        angles = sequence_angles(pairs[bound[ref][1]], [pairs[bound[p][1]] for p in seq])
+        points = [StepPoint(session.torque(bound[p][0]).torque_nm,
+                            None if a is None else sign * a.angle_deg,
+                            0.0 if a is None else a.angle_std_deg) for p, a in zip(seq, angles)]
+        out += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=step_torque)]
+    return sorted(out, key=lambda t: t[0])
+
+
+def _describe(bound, warns) -> list[str]:
+    return [f"{bound[pos][1].name} ({row_text(bound[pos][0])}): {w.message}" for pos, w in warns]
+
+
+def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=(),
+                 write: bool = True, out_dir=None) -> BindResult:
+    """Bind the camera's photographs to the manifest rows (see the module docstring).
+
+    Parameters
+    ----------
+    session_dir : str or os.PathLike
+        The session folder (session.toml, manifest.csv).
+    camera_dir : str or os.PathLike
+        The camera's folder; read only. Naming it is what allows the session's
+        images to live outside the session folder.
+    by : {"time", "name"}
+        Capture order by EXIF time (then file time), or natural name order.
+    skip : iterable of str
+        Camera file names to leave out (extra shots).
+    missing : iterable of int
+        Manifest CSV lines that were not photographed (missed shots).
+    write : bool
+        Write ``binding.json`` (False: only check and propose).
+    out_dir : path-like, optional
+        The output folder whose cache is shared with ``process``
+        (``SESSION_DIR/results`` by default).
+
+    Returns
+    -------
+    BindResult
+
+    Raises
+    ------
+    SessionError
+        The session or camera folder is unusable, `by` is unknown, a `skip` name is
+        not a photograph of the camera folder, or a `missing` line is not a row.
+    ManifestError
+        manifest.csv is invalid.
+    """
+    from .shots import ShotMeasurer
+
+    session = load_session(session_dir, check_files=False)
+    camera = Path(camera_dir).absolute()
+    listing = list_camera_files(camera, by=by)
+    files = listing.files
+    rows = session.manifest.rows
+    names = {f.name for f in files}
+    skip, missing = tuple(skip), tuple(int(x) for x in missing)
+    for name in skip:
+        if name not in names:
+            raise SessionError(f"skip: {name!r} is not a photograph in {camera}")
+    lines = {row.line for row in rows}
+    for line in missing:
+        if line not in lines:
+            raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
+    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    pairs = {}
+    with ShotMeasurer(session, out) as measurer:
+        for f in files:
+            shot = measurer.measure(f.path)
+            pairs[f] = shot.pair
+            if shot.pair is None:
+                logger.warning("%s: %s", f.name, shot.message)
+
+    def evaluate(sk, mi):
+        bound, left = _assign(rows, files, set(sk), set(mi))
+        return bound, left, step_warnings(session, bound, pairs)
+
+    bound, leftovers, warns = evaluate(skip, missing)
+    fixes, cur_skip, cur_missing, cur = [], list(skip), list(missing), (bound, warns)
+    unexplained: set[str] = set()  # files whose misfit no re-binding explains
+    for _ in range(_MAX_FIXES):
+        b, w = cur
+        todo = [(pos, warning) for pos, warning in w if b[pos][1].name not in unexplained]
+        if not todo:
+            break
+        pos, first = todo[0]
+        row, f = b[pos]
+        candidates = []
+        if first.kind in ("no_movement", "wrong_direction"):
+            candidates.append(("skip", f, row))  # an extra shot: the same load again
+        if first.kind in ("large_step", "wrong_direction"):
+            candidates.append(("missing", f, row))  # a missed shot: two steps in one
+        best = None
+        for kind, file, r in candidates:
+            sk = cur_skip + [file.name] if kind == "skip" else cur_skip
+            mi = cur_missing + [r.line] if kind == "missing" else cur_missing
+            nb, _, nw = evaluate(sk, mi)
+            still = any(nb[p][1] is file for p, _ in nw)
+            if len(nw) < len(w) and not still and (best is None or len(nw) < len(best[3])):
+                best = (kind, file, r, nw, nb, sk, mi)
+        if best is None:
+            unexplained.add(f.name)
+            continue
+        kind, file, r, nw, nb, cur_skip, cur_missing = best
+        if kind == "skip":
+            msg = (f"{file.name} looks like an extra shot: bound to {row_text(r)}, it shows "
+                   f"{first.message}; leave it out (--skip {file.name})")
+        else:
+            nxt = next((x for x, y in nb if y is file), None)
+            msg = (f"{row_text(r)} looks missed: {file.name}, bound to it, shows {first.message}; "
+                   f"mark the row as not photographed (--missing {r.line}) so that {file.name} "
+                   f"binds to line {nxt.line if nxt else '?'}")
+        fixes.append(Fix(kind, file.name, r.line, msg))
+        cur = (nb, nw)
+    command = None
+    if fixes:
+        parts = ["vision-torsion", "bind", str(session_dir), str(camera_dir), "--by", by]
+        for name in cur_skip:
+            parts += ["--skip", name]
+        for line in cur_missing:
+            parts += ["--missing", str(line)]
+        command = shlex.join(parts)
+    binding = Binding(camera_dir=camera, by=by, skipped=skip, missing=missing,
+                      images={row.image: f.name for row, f in bound if f is not None})
+    path = write_binding(session.folder, binding) if write else None
+    return BindResult(
+        binding=binding, binding_path=path, n_files=len(files), n_rows=len(rows),
+        leftovers=tuple(f.name for f in leftovers),
+        unphotographed=tuple((row.line, row.image) for row, f in bound if f is None),
+        ignored=listing.ignored, warnings=tuple(_describe(bound, warns)), fixes=tuple(fixes),
+        remaining=tuple(_describe(cur[0], cur[1])), command=command)

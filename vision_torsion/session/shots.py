@@ -1,0 +1,128 @@
+"""Measure single photographs the way ``process`` does, sharing its cache.
+
+``bind`` measures a camera folder before the files are bound to rows, and
+``watch`` measures each photograph as soon as the camera has finished writing it.
+Both go through :class:`ShotMeasurer`: the same settings, the same cache key (image
+content hash + settings + measuring code) and the same cache folder as
+:func:`~vision_torsion.session.process_session`, so a photograph measured at the rig
+is never measured again by ``process`` or ``report``, and the other way round.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..images import GreyImage, decode_image
+from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
+from .load import Session
+
+__all__ = ["Shot", "ShotMeasurer"]
+
+
+@dataclass(frozen=True)
+class Shot:
+    """One photograph measured.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    pair : PairMeasurement or None
+        The target found, None when measuring failed.
+    message : str
+        Why it failed ("" when it did not).
+    image : GreyImage or None
+        The decoded image when it was measured now (None when cached or unreadable).
+    cached : bool
+        The result came from the cache.
+    timings : dict
+        Seconds spent: ``read`` (file read and hash), ``decode``, ``measure``.
+    """
+
+    path: Path
+    pair: object | None
+    message: str
+    image: GreyImage | None = None
+    cached: bool = False
+    timings: dict = field(default_factory=dict)
+
+
+class ShotMeasurer:
+    """Measures photographs of a session one at a time (use as a context manager).
+
+    Parameters
+    ----------
+    session : Session
+    out_dir : path-like
+        The output folder whose ``.cache`` is shared with ``process``.
+    """
+
+    def __init__(self, session: Session, out_dir):
+        from .process import _settings_key  # the one cache key of process
+
+        self.settings = session.settings
+        self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
+        self.key = _settings_key(self.settings)
+        self.cache_dir = Path(out_dir) / CACHE_DIRNAME
+        self.cached, self._logs = read_cache(self.cache_dir)
+        self._run = CacheLog.new_run()
+        self._stack = ExitStack()
+
+    def __enter__(self):
+        from .worker import in_process
+
+        self._stack.enter_context(in_process(str(self.cache_dir), self._run, frozenset(self.cached)))
+        return self
+
+    def __exit__(self, *exc):
+        self._stack.close()
+        new = CacheLog(self.cache_dir, self._run).files()
+        if new or len(self._logs) > 1:
+            merge_cache(self.cache_dir, {**self.cached, **read_logs(new)}, self._logs + new)
+        return False
+
+    def measure(self, path) -> Shot:
+        """Measure the photograph at `path` (or take its result from the cache).
+
+        Never raises for a bad image: an unreadable, undecodable or unmeasurable
+        file gives a Shot with ``pair=None`` and the reason.
+        """
+        from ..markers import find_candidates
+        from ..pair import PairMeasurement
+        from .worker import ReadImage, content_hash, digest, finish_task
+
+        path = Path(path)
+        t0 = time.perf_counter()
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            return Shot(path, None, f"{path.name}: cannot be read ({exc.strerror or exc})")
+        image_hash = content_hash(data)
+        key = digest(f"{image_hash}\n{self.key}".encode())
+        t1 = time.perf_counter()
+        entry = self.cached.get(key)
+        image, cached = None, entry is not None
+        t2 = t1
+        if entry is None:
+            task = (str(path), self.settings_json, self.key)
+            try:
+                image = decode_image(data, name=str(path), keep_integers=True)
+                t2 = time.perf_counter()
+                read = ReadImage(key, image_hash, image=image,
+                                 candidates=find_candidates(image.data, self.settings))
+            except Exception as exc:  # noqa: BLE001 - finish_task reports it as a failure
+                t2 = time.perf_counter()
+                read = ReadImage(key, image_hash, error=exc)
+            _, text, _ = finish_task(read, task)
+            entry = json.loads(text)
+            if entry["status"] in ("ok", "failed") and "internal error" not in entry.get("message", ""):
+                self.cached[key] = entry
+        t3 = time.perf_counter()
+        timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
+        if entry["status"] != "ok":
+            message = entry.get("message", "").replace(str(path), path.name)
+            return Shot(path, None, message, image, cached, timings)
+        return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings)

@@ -1,0 +1,178 @@
+"""A scripted camera: a session's photographs as a camera takes them, mistakes included.
+
+:func:`capture_script` plans a session (:func:`~vision_torsion.session.plan.plan_session`,
+no images) and renders the photographs a test engineer would take following it,
+with the capture mistakes of the rig on request:
+
+- ``forgotten=i``: at row ``i`` a weight piece was forgotten on one pan (one piece
+  too few while loading, one too many while unloading): the torque is off by half a
+  step for that photograph, and right again at the next row;
+- ``extra_after=j``: after row ``j``'s photograph, a second one of the same load
+  (new noise: a new exposure, not a copy);
+- ``missed=m``: row ``m``'s load was applied but not photographed.
+
+Angles follow the paper's bilinear model (:func:`~vision_torsion.analysis.models.bilinear_response`)
+for the nominal torque sequence of every row (a missed row's load was applied),
+relative to each orientation's reference. :class:`ScriptedCamera` then writes the
+photographs into a folder as ``IMG_0001.png, ...`` in chunks, as a camera writing
+to a card or a tethering program does, so that a watcher sees half-written files;
+its :meth:`ScriptedCamera.steps` yields after every chunk (a test interleaves its
+own polling without waiting), :meth:`ScriptedCamera.run` sleeps between chunks.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .render import render
+from .scene import Scene
+
+__all__ = ["CameraShot", "capture_script", "ScriptedCamera"]
+
+_SIGN = {"reference": 0, "positive_unloading": 1, "negative_loading": -1,
+         "negative_unloading": -1, "positive_loading": 1, "closing": 0}
+
+
+@dataclass(frozen=True)
+class CameraShot:
+    """One photograph of the script.
+
+    Attributes
+    ----------
+    row : int
+        Index of the manifest row whose load it shows.
+    kind : str
+        "planned", "extra" (a second photograph of row's load) or "forgotten"
+        (row's load with a piece missing on one pan).
+    torque_nm, angle_deg : float
+        True torque (N·m) and angle (deg, positive with positive torque, relative to
+        the orientation's reference).
+    png : bytes
+        The encoded photograph.
+    """
+
+    row: int
+    kind: str
+    torque_nm: float
+    angle_deg: float
+    png: bytes
+
+
+def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=None,
+                   extra_after=None, missed=None):
+    """Plan a session into `session_dir` and render its photographs with mistakes.
+
+    Parameters
+    ----------
+    scene : Scene
+        The camera's view (8-bit PNG output).
+    spec : vision_torsion.synthetic.session.SessionSpec
+        Rig, protocol and bilinear model (orientation variation is not applied).
+    session_dir : path-like
+        Where the session (session.toml, manifest.csv; no images) is planned.
+    seed : int
+        Seed of the image noise.
+    forgotten, extra_after, missed : int, optional
+        Row indices of the mistakes (module docstring).
+
+    Returns
+    -------
+    (SessionPlan, list of CameraShot)
+        The plan, and the photographs in the order they were taken.
+    """
+    from ..analysis.models import bilinear_response
+    from ..session.plan import plan_session
+
+    plan = plan_session(session_dir, max_torque_nm=spec.max_torque_nm, step_mass_kg=spec.step_mass_kg,
+                        arm_radius_m=spec.arm_radius_m, orientations_deg=spec.orientations_deg,
+                        cycles=spec.cycles, gravity_m_per_s2=spec.gravity_m_per_s2,
+                        mass_tolerance_kg=spec.mass_tolerance_kg, polarity=scene.markers.polarity,
+                        angle_sign=spec.angle_sign)
+    rows = plan.rows
+    g_r = spec.gravity_m_per_s2 * spec.arm_radius_m
+    torque = np.array([_SIGN[r["phase"]] * 2 * float(r["mass_kg"]) * g_r for r in rows])
+    actual = torque.copy()
+    if forgotten is not None:
+        unloading = rows[forgotten]["phase"].endswith("unloading")
+        sign = _SIGN[rows[forgotten]["phase"]]
+        actual[forgotten] += sign * (1 if unloading else -1) * spec.step_mass_kg * g_r
+    angles = np.zeros(len(rows))
+    orient = np.array([float(r["orientation_deg"]) for r in rows])
+    for o in dict.fromkeys(orient):
+        idx = np.flatnonzero(orient == o)
+        th = np.degrees(bilinear_response(actual[idx], k_u=spec.k_u_nm_per_rad,
+                                          k_l=spec.k_l_nm_per_rad, tau_c=spec.tau_c_nm))
+        angles[idx] = th - th[0]
+    rngs = np.random.SeedSequence(seed).spawn(len(rows) + 1)
+    shots = []
+
+    def shoot(i, kind, rng):
+        r = render(scene, spec.angle_sign * angles[i], seed=np.random.default_rng(rng))
+        ok, buf = cv2.imencode(".png", r.image)
+        shots.append(CameraShot(i, kind, float(actual[i]), float(angles[i]), buf.tobytes()))
+
+    for i in range(len(rows)):
+        if i != missed:
+            shoot(i, "forgotten" if i == forgotten else "planned", rngs[i])
+        if i == extra_after:
+            shoot(i, "extra", rngs[-1])
+    return plan, shots
+
+
+class ScriptedCamera:
+    """Writes photographs into a folder the way a camera does: in chunks.
+
+    Parameters
+    ----------
+    folder : path-like
+        The camera folder (created).
+    photos : sequence of bytes
+        The encoded photographs, in the order taken.
+    chunk_bytes : int
+        Bytes per write; a file is complete after its last chunk.
+    name : str
+        File name pattern, formatted with the 1-based photograph number.
+    start_time : float
+        Modification time given to the first photograph (s since the epoch); each
+        next one is `interval_s` later, as if taken at the rig's pace.
+    """
+
+    def __init__(self, folder, photos, *, chunk_bytes: int = 16384, name: str = "IMG_{:04d}.png",
+                 start_time: float = 1.7e9, interval_s: float = 20.0):
+        self.folder = Path(folder)
+        self.photos = list(photos)
+        self.chunk_bytes = chunk_bytes
+        self.name = name
+        self.start_time = start_time
+        self.interval_s = interval_s
+        self.written: list[Path] = []
+
+    def steps(self):
+        """Write everything; yield (path, complete) after every chunk."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        for k, data in enumerate(self.photos):
+            path = self.folder / self.name.format(k + 1)
+            with open(path, "wb") as fh:
+                for start in range(0, len(data), self.chunk_bytes):
+                    fh.write(data[start:start + self.chunk_bytes])
+                    fh.flush()
+                    done = start + self.chunk_bytes >= len(data)
+                    if done:
+                        break
+                    yield path, False
+            when = self.start_time + k * self.interval_s
+            os.utime(path, (when, when))
+            self.written.append(path)
+            yield path, True
+
+    def run(self, *, chunk_delay_s: float = 0.005, photo_delay_s: float = 0.02) -> None:
+        """Write everything in real time: `chunk_delay_s` between chunks,
+        `photo_delay_s` between photographs."""
+        for _, complete in self.steps():
+            time.sleep(photo_delay_s if complete else chunk_delay_s)
