@@ -121,3 +121,88 @@ def test_bind_lists_leftover_files(script):
     res = bind_session(copy_session(root, "more"), camera, write=False)
     assert res.leftovers == ("IMG_0037.png",)
 
+
+
+# -- watch -------------------------------------------------------------------------
+
+def watch_script(watcher, camera, photos, clock, *, pause_in=None):
+    """Let the scripted camera write `photos` in 4 kB chunks, one watcher tick per
+    chunk, 0.3 s of (fake) time apart; in photograph `pause_in` the camera stalls for
+    3 s half-way (the file looks settled but is not complete)."""
+    events = []
+    cam = ScriptedCamera(camera, photos, chunk_bytes=4096)
+    for path, complete in cam.steps():
+        clock[0] += 0.3
+        if pause_in is not None and path.name == f"IMG_{pause_in:04d}.png" and not complete \
+                and path.stat().st_size == 8192:
+            for _ in range(10):
+                clock[0] += 0.3
+                events += watcher.tick()
+        events += watcher.tick()
+    for _ in range(3):
+        clock[0] += 1.0
+        events += watcher.tick()
+    return events
+
+
+def test_watch_flags_each_mistake_on_the_image_where_it_happens(script):
+    root, plan, shots = script
+    from vision_torsion.session.watch import Watcher
+
+    session, camera, clock = copy_session(root, "watched"), root / "camera_w", [0.0]
+    with Watcher(session, camera_dir=camera, settle_s=1.0, clock=lambda: clock[0]) as w:
+        events = watch_script(w, camera, [s.png for s in shots], clock, pause_in=6)
+    bound = [e for e in events if e.kind == "shot"]
+    assert [e.file for e in bound] == [f"IMG_{k:04d}.png" for k in range(1, 37)]  # each once, in order
+    assert not [e for e in events if e.kind in ("ignored", "deleted", "leftover")]
+    warned = [e for e in events if e.kind == "warning"]
+    first = {}
+    for e in warned:
+        first.setdefault(e.file, e.message)
+    # nothing before the forgotten weight; then each mistake on its own image
+    assert min(first) == "IMG_0004.png"
+    assert "a weight piece forgotten on a pan?" in first["IMG_0004.png"]
+    assert "no movement" in first["IMG_0009.png"]
+    assert "(a missed shot, or an extra weight piece?" in first["IMG_0027.png"]
+    # every warning comes with the image's own event, right after it
+    for k, e in enumerate(events):
+        if e.kind == "warning":
+            j = max(i for i in range(k) if events[i].kind == "shot")
+            assert events[j].file == e.file
+    assert not [e for e in events if e.kind == "retracted" and e.file == "IMG_0004.png"]
+    page = (session / "results" / "live.html").read_text()
+    assert "IMG_0027.png" in page and "Every planned image is in." in page
+    # bind afterwards proposes the fix; the camera folder was never written
+    res = bind_session(session, camera, write=False)
+    assert [(f.kind, f.file, f.line) for f in res.fixes] == [
+        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27)]
+
+
+def test_watch_in_real_time_and_resume(script, tmp_path):
+    import threading
+
+    from vision_torsion.session.watch import watch_session
+
+    root, plan, shots = script
+    session, camera = copy_session(root, "live"), tmp_path / "cam"
+    cam = ScriptedCamera(camera, [s.png for s in shots[:5]], chunk_bytes=8192)
+    stop = threading.Event()
+    seen = []
+
+    def shoot():
+        cam.run(chunk_delay_s=0.002, photo_delay_s=0.01)
+        threading.Timer(1.0, stop.set).start()
+
+    threading.Thread(target=shoot).start()
+    res = watch_session(session, camera_dir=camera, poll_s=0.02, settle_s=0.1, report=False,
+                        stop=stop, echo=seen.append)
+    assert res.n_bound == 5 and not res.interrupted
+    # resumed: the same five files, from the cache, bound to the same rows
+    again = []
+    stop.set()
+    from vision_torsion.session.watch import Watcher
+
+    with Watcher(session, camera_dir=camera, settle_s=0.1) as w:
+        again = [e.file for e in w.tick() if e.kind == "shot"]
+        assert all(t["cached"] for t in w.timings)
+    assert again == [f"IMG_{k:04d}.png" for k in range(1, 6)]

@@ -63,6 +63,7 @@ _LAZY = {
     "TorqueRig": "measurements",
     "read_measurements": "measurements",
     "bind_session": "session",
+    "watch_session": "session",
     "BindResult": "session",
     # hysteresis analysis and the report
     "analyze_session": "analysis",

@@ -50,6 +50,7 @@ _COMMAND_MODULES = [
     "plan",
     "process",
     "bind",
+    "watch",
     "report",
     "demo",
     "check_accuracy",

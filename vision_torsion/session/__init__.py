@@ -22,6 +22,8 @@ _LAZY = {
     "SessionPlan": "plan",
     "TorqueValue": "torque",
     "bind_session": "bind",
+    "watch_session": "watch",
+    "Watcher": "watch",
     "BindResult": "bind",
     "Binding": "binding",
     "load_binding": "binding",

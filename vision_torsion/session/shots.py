@@ -16,6 +16,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..errors import ImageReadError
 from ..images import GreyImage, decode_image
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session
@@ -38,6 +39,9 @@ class Shot:
         The decoded image when it was measured now (None when cached or unreadable).
     cached : bool
         The result came from the cache.
+    undecodable : bool
+        The file could not be decoded (truncated, still being written, or not an
+        image); nothing was cached for it.
     timings : dict
         Seconds spent: ``read`` (file read and hash), ``decode``, ``measure``.
     """
@@ -48,6 +52,7 @@ class Shot:
     image: GreyImage | None = None
     cached: bool = False
     timings: dict = field(default_factory=dict)
+    undecodable: bool = False
 
 
 class ShotMeasurer:
@@ -110,11 +115,15 @@ class ShotMeasurer:
             task = (str(path), self.settings_json, self.key)
             try:
                 image = decode_image(data, name=str(path), keep_integers=True)
-                t2 = time.perf_counter()
+            except ImageReadError as exc:  # not cached: it may be a file still being written
+                message = str(exc).replace(str(path), path.name)
+                return Shot(path, None, message, undecodable=True,
+                            timings={"read": t1 - t0, "decode": time.perf_counter() - t1, "measure": 0.0})
+            t2 = time.perf_counter()
+            try:
                 read = ReadImage(key, image_hash, image=image,
                                  candidates=find_candidates(image.data, self.settings))
             except Exception as exc:  # noqa: BLE001 - finish_task reports it as a failure
-                t2 = time.perf_counter()
                 read = ReadImage(key, image_hash, error=exc)
             _, text, _ = finish_task(read, task)
             entry = json.loads(text)

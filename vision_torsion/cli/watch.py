@@ -1,0 +1,48 @@
+"""``vision-torsion watch SESSION_DIR [--camera-dir DIR]``."""
+
+from __future__ import annotations
+
+from . import add_common_options
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    """Add the ``watch`` subcommand."""
+    p = subparsers.add_parser(
+        "watch",
+        help="follow a test while it is shot: each photograph measured, checked and shown live",
+        description="Follow the camera's folder (--camera-dir, else SESSION_DIR/images) while the "
+        "test is shot. Each photograph is measured as soon as the camera has finished writing "
+        "it, bound to the next planned row, printed (row, torque, angle, Δangle) and drawn on a "
+        "live page, OUT_DIR/live.html, that reloads itself. Warnings come at once, on the image "
+        "where it happens: no movement or the wrong direction, a step out of line with its "
+        "neighbours (a forgotten or extra weight, a missed shot), markers not found, a blurred "
+        "or saturated image. The camera folder is only read. Ctrl-C stops (run it again to "
+        "resume; measurements are shared with process through its cache) and the report is "
+        "written. Exit status (after Ctrl-C too): 0 no photograph had a warning, 1 some did, "
+        "2 unusable input.",
+    )
+    p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
+    p.add_argument("--camera-dir", metavar="DIR",
+                   help="the camera's folder (read only); default SESSION_DIR/images")
+    p.add_argument("-o", "--out-dir", metavar="OUT_DIR",
+                   help="output folder (default: SESSION_DIR/results)")
+    p.add_argument("--poll", type=float, default=0.5, metavar="S",
+                   help="seconds between looks at the folder")
+    p.add_argument("--settle", type=float, default=1.0, metavar="S",
+                   help="seconds a file must stay unchanged before it is read")
+    p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
+    add_common_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Watch until Ctrl-C or every planned image is in; 1 when a photograph had a warning."""
+    from ..session.watch import watch_session
+
+    res = watch_session(args.session_dir, camera_dir=args.camera_dir, out_dir=args.out_dir,
+                        poll_s=args.poll, settle_s=args.settle, report=not args.no_report)
+    print(f"{res.n_bound} of {res.n_rows} planned images bound; {res.n_warnings} with warnings; "
+          f"live page {res.page}")
+    return 1 if res.n_warnings else 0

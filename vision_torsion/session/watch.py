@@ -1,0 +1,508 @@
+"""Follow a test as it is shot: ``vision-torsion watch``.
+
+:class:`Watcher` is the testable core: each :meth:`Watcher.tick` looks at the
+camera folder once (no sleeping, the clock passed in), and returns what happened
+as :class:`WatchEvent` values. :func:`watch_session` calls it in a loop, prints the
+events, and ends on Ctrl-C (or when every planned image is in) with the report.
+
+A tick:
+
+1. lists the camera folder (``--camera-dir``, else ``SESSION_DIR/images``). Gone?
+   Says so once, and waits for it to come back.
+2. A file is complete when its size and modification time have not changed for
+   `settle_s` (a camera writes in chunks) and it decodes (a PNG without its IEND
+   chunk, a JPEG without its end marker is waited for, not measured). A file
+   that stays undecodable for `give_up_s` is reported and set aside. Files whose
+   time is already older than `settle_s` when first seen (a resumed watch) are
+   complete at once.
+3. Each complete file, in capture order (file time, then natural name order), is
+   measured (:class:`~.shots.ShotMeasurer`: ``process``'s cache, shared) and bound
+   to the next planned row not yet photographed (with no ``--camera-dir``, a file
+   saved under a row's planned name is bound to that row). Non-images, copies
+   (the same bytes as an earlier file) and files beyond the last row are set
+   aside with a message naming them; nothing is ever written in the camera folder.
+4. Its angle (against its orientation's reference image, ``angle_sign`` applied),
+   Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
+   blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
+   one (> 0.5 % of the pixels at full scale), are returned at once as events.
+5. ``binding.json`` (unless every file is under its planned name) and the live page ``OUT_DIR/live.html``
+   (:mod:`.live`) are rewritten atomically.
+
+Resuming is running it again: the complete files are bound in the same order, from
+the cache, and a ``binding.json`` written by ``bind`` keeps its skipped files and
+missing rows.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import sys
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SessionError
+from ..fileio import atomic_write_text
+from ..images import IMAGE_SUFFIXES
+from ..measure import natural_key
+from .binding import Binding, load_binding, write_binding
+from .bind import row_text
+from .live import LIVE_PAGE_NAME, LivePoint, live_page
+from .load import load_session
+from .steps import StepPoint, check_steps
+
+__all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult"]
+
+logger = logging.getLogger(__name__)
+
+_BLUR_RATIO = 1.5
+_SATURATED_FRACTION = 0.005
+
+
+@dataclass(frozen=True)
+class WatchEvent:
+    """Something a tick saw.
+
+    Attributes
+    ----------
+    kind : str
+        "shot" (a photograph bound and measured), "warning" (about a photograph),
+        "retracted" (a warning the next image showed to be the gear), "ignored" (a
+        file set aside), "leftover" (a photograph beyond the last row), "deleted",
+        "folder_gone", "folder_back", "complete" (every row has its photograph).
+    file : str
+        The file concerned ("" for folder events).
+    message : str
+        One line for the terminal, naming the file (and the row).
+    line : int or None
+        The manifest CSV line concerned.
+    """
+
+    kind: str
+    file: str
+    message: str
+    line: int | None = None
+
+
+@dataclass
+class _Seen:
+    size: int
+    mtime_ns: int
+    since: float  # clock time the size and time were first seen as they are
+    first_undecodable: float | None = None
+
+
+@dataclass
+class _Bound:
+    row: object
+    file: str
+    pair: object | None
+    message: str
+    warnings: list
+    angle: float = math.nan
+    delta: float = math.nan
+    edge_width: float = math.nan
+
+
+class Watcher:
+    """The core of ``watch``: one :meth:`tick` at a time (see the module docstring).
+
+    Parameters
+    ----------
+    session_dir : path-like
+        The session folder (session.toml, manifest.csv).
+    camera_dir : path-like, optional
+        The camera's folder; ``SESSION_DIR/images`` by default.
+    out_dir : path-like, optional
+        Output folder (``SESSION_DIR/results``): the shared cache and live.html.
+    settle_s : float
+        Seconds a file's size and time must stay the same before it is read.
+    give_up_s : float
+        Seconds a settled file may stay undecodable before it is set aside.
+    page : bool
+        Write the live page.
+    clock : callable
+        Monotonic clock (seconds); tests pass their own.
+
+    Use as a context manager (or call :meth:`close`): closing merges the cache.
+    """
+
+    def __init__(self, session_dir, *, camera_dir=None, out_dir=None, settle_s: float = 1.0,
+                 give_up_s: float = 10.0, page: bool = True, clock=time.monotonic):
+        from .shots import ShotMeasurer
+
+        self.session = load_session(session_dir, check_files=False)
+        folder = self.session.folder
+        self.camera_mode = camera_dir is not None
+        self.camera = Path(camera_dir).absolute() if camera_dir is not None else folder / "images"
+        self.out = Path(out_dir) if out_dir is not None else folder / "results"
+        if self.camera.resolve() == self.out.resolve():
+            raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
+        self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
+        rows = self.session.manifest.rows
+        self.rows = rows
+        prior = load_binding(folder) if self.camera_mode else None
+        same = prior is not None and prior.camera_dir.resolve() == self.camera.resolve()
+        self.skipped = set(prior.skipped) if same else set()
+        self.missing = set(prior.missing) if same else set()
+        self.by_name = {row.image: row for row in rows} if not self.camera_mode else {}
+        self.seen: dict[str, _Seen] = {}
+        self.done: set[str] = set()
+        self.set_aside: dict[str, str] = {}
+        self.hashes: dict[str, str] = {}
+        self.bound: dict[int, _Bound] = {}  # manifest position -> photograph
+        self.order: list[int] = []  # positions in capture order
+        self.notices: list[str] = []
+        self.folder_gone = False
+        self.timings: list[dict] = []
+        cfg = self.session.config
+        self.step_torque = 2.0 * cfg.protocol.step_mass_kg * cfg.rig.gravity_m_per_s2 * cfg.rig.arm_radius_m
+        self.torques = [self.session.torque(row).torque_nm for row in rows]
+        self.measurer = ShotMeasurer(self.session, self.out).__enter__()
+        self._closed = False
+
+    # -- the public face ---------------------------------------------------------
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self) -> None:
+        """Merge the cache logs and write the final page (once)."""
+        if not self._closed:
+            self._closed = True
+            self.measurer.__exit__(None, None, None)
+            if self.page:
+                self.write_page(finished=True)
+
+    @property
+    def complete(self) -> bool:
+        """Every row has its photograph (or was declared missing)."""
+        return all(i in self.bound or row.line in self.missing for i, row in enumerate(self.rows))
+
+    def next_row(self):
+        """(position, row) of the next row to photograph, or None."""
+        for i, row in enumerate(self.rows):
+            if i not in self.bound and row.line not in self.missing:
+                return i, row
+        return None
+
+    def tick(self, now: float | None = None) -> list[WatchEvent]:
+        """Look at the camera folder once; return what happened (module docstring)."""
+        now = self.clock() if now is None else now
+        events: list[WatchEvent] = []
+        try:
+            entries = [e for e in os.scandir(self.camera) if e.is_file()]
+        except (FileNotFoundError, NotADirectoryError):
+            if not self.folder_gone:
+                self.folder_gone = True
+                events.append(self._notice("folder_gone", "", f"{self.camera}: the camera folder "
+                                           "has disappeared; waiting for it to come back "
+                                           "(nothing measured so far is lost; Ctrl-C to stop)"))
+            return events
+        if self.folder_gone:
+            self.folder_gone = False
+            events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is back"))
+        names = {e.name for e in entries}
+        for name in sorted(set(self.seen) - names):
+            info = self.seen.pop(name)
+            if name in self.done:
+                pos = next((p for p, b in self.bound.items() if b.file == name), None)
+                where = f", bound to {row_text(self.rows[pos])}" if pos is not None else ""
+                events.append(self._notice("deleted", name, f"{name} was deleted after it was "
+                                           f"measured{where}; its measurement is kept (cache), "
+                                           "but process and bind will need the file back"))
+            elif info is not None:
+                events.append(self._notice("deleted", name, f"{name} was deleted before it was "
+                                           "complete; not bound"))
+        ready = []
+        wall = time.time()
+        for e in entries:
+            name = e.name
+            if name in self.done or name in self.set_aside:
+                continue
+            if Path(name).suffix.lower() not in IMAGE_SUFFIXES:
+                self.set_aside[name] = "not an image"
+                events.append(self._notice("ignored", name, f"{name}: not an image file (expected "
+                                           f"{', '.join(IMAGE_SUFFIXES)}); not bound"))
+                continue
+            if name in self.skipped:
+                self.set_aside[name] = "skipped"
+                continue
+            st = e.stat()
+            info = self.seen.get(name)
+            if info is None or (info.size, info.mtime_ns) != (st.st_size, st.st_mtime_ns):
+                old = wall - st.st_mtime > self.settle_s
+                self.seen[name] = info = _Seen(st.st_size, st.st_mtime_ns,
+                                               -math.inf if old else now)
+            if st.st_size > 0 and now - info.since >= self.settle_s:
+                ready.append((st.st_mtime_ns, natural_key(name), name))
+        changed = False
+        for _, _, name in sorted(ready):
+            new = self._handle(name, now)
+            changed = changed or bool(new)
+            events += new
+        if changed and self.complete:
+            events.append(WatchEvent("complete", "", f"all {len(self.rows)} planned images are in"))
+        if changed:
+            self._save()
+        return events
+
+    # -- one file ----------------------------------------------------------------
+
+    def _notice(self, kind, name, message, line=None) -> WatchEvent:
+        self.notices.append(message)
+        return WatchEvent(kind, name, message, line)
+
+    def _handle(self, name: str, now: float) -> list[WatchEvent]:
+        """A file that looks complete: measure it and bind it, or wait, or set it aside."""
+        t0 = time.perf_counter()
+        path = self.camera / name
+        shot = self.measurer.measure(path)
+        info = self.seen.get(name)
+        if shot.undecodable:
+            if info is not None and info.first_undecodable is None:
+                info.first_undecodable = now
+            if info is not None and now - info.first_undecodable < self.give_up_s:
+                return []  # still being written, most likely: wait
+            self.set_aside[name] = "undecodable"
+            return [self._notice("ignored", name, f"{shot.message}; still so after "
+                                 f"{self.give_up_s:g} s: set aside, not bound")]
+        if not path.exists():
+            return []  # deleted meanwhile: the next tick says so
+        from .worker import content_hash
+
+        try:
+            digest = content_hash(path.read_bytes())
+        except OSError:
+            return []
+        if digest in self.hashes:
+            self.set_aside[name] = "copy"
+            return [self._notice("ignored", name, f"{name}: the same bytes as {self.hashes[digest]} "
+                                 "(a copy, not a new photograph); not bound")]
+        self.hashes[digest] = name
+        self.done.add(name)
+        pos = None
+        if not self.camera_mode:
+            row = self.by_name.get(f"images/{name}")
+            pos = self.rows.index(row) if row is not None and self.rows.index(row) not in self.bound else None
+        if pos is None:
+            nxt = self.next_row()
+            if nxt is None:
+                return [self._notice("leftover", name, f"{name}: every planned row already has its "
+                                     f"photograph ({len(self.rows)} rows); not bound (an extra shot?)")]
+            pos = nxt[0]
+        row = self.rows[pos]
+        edge = math.nan
+        if shot.pair is not None:
+            widths = [getattr(m, "edge_width_px", math.nan) for m in (shot.pair.first, shot.pair.second)]
+            edge = float(np.nanmean(widths)) if np.isfinite(widths).any() else math.nan
+        b = _Bound(row, name, shot.pair, shot.message, [], edge_width=edge)
+        self.bound[pos] = b
+        self.order.append(pos)
+        events = self._check(pos, shot)
+        self.timings.append({**shot.timings, "live": time.perf_counter() - t0 - shot.timings.get("decode", 0.0),
+                             "file": name, "cached": shot.cached})
+        return events
+
+    def _check(self, pos: int, shot) -> list[WatchEvent]:
+        """Angles of the orientation, the step checks, the image checks; events."""
+        from ..angle import sequence_angles
+
+        b = self.bound[pos]
+        row = b.row
+        warnings: list[str] = []
+        if shot.pair is None:
+            warnings.append(f"marker not found: {shot.message}")
+        if shot.image is not None:
+            data = shot.image.data
+            frac = np.count_nonzero(data >= shot.image.full_scale) / data.size
+            if frac > _SATURATED_FRACTION:
+                warnings.append(f"saturated: {100 * frac:.1f} % of the pixels at full scale "
+                                "(shorten the exposure or dim the light)")
+        same = sorted(p for p, x in self.bound.items() if x.row.orientation_deg == row.orientation_deg)
+        ref = next((p for p in same if self.bound[p].row.phase == "reference"), None)
+        retracted: list[WatchEvent] = []
+        if ref is not None and self.bound[ref].pair is not None:
+            rb = self.bound[ref]
+            if (pos != ref and math.isfinite(b.edge_width) and math.isfinite(rb.edge_width)
+                    and b.edge_width > _BLUR_RATIO * rb.edge_width):
+                warnings.append(f"blurred: marker edges {b.edge_width:.1f} px wide against "
+                                f"{rb.edge_width:.1f} px in the reference (camera shake, or focus?)")
+            seq = [p for p in same if p >= ref]
+            seq.sort(key=self.order.index)
+            ok = [p for p in seq if self.bound[p].pair is not None]
+            angles = sequence_angles(rb.pair, [self.bound[p].pair for p in ok])
+            sign = self.session.config.angle_sign
+            prev = math.nan
+            for p, a in zip(ok, angles):
+                x = self.bound[p]
+                x.angle = math.nan if a is None else sign * a.angle_deg
+                x.delta = x.angle - prev
+                prev = x.angle
+            points = [StepPoint(self.torques[p], self.bound[p].angle,
+                                0.0 if a is None else a.angle_std_deg) for p, a in zip(ok, angles)]
+            current = {ok[w.index]: w for w in check_steps(points, step_torque_nm=self.step_torque)}
+            for p in ok:
+                x = self.bound[p]
+                old = [w for w in x.warnings if w.startswith("step:")]
+                if p != pos and old and p not in current:
+                    x.warnings = [w for w in x.warnings if not w.startswith("step:")]
+                    retracted.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
+                                                "not a mistake after all: the next image goes on at "
+                                                "the new stiffness (the gear switching branch)", x.row.line))
+            if pos in current:
+                warnings.append("step: " + current[pos].message)
+        b.warnings = warnings
+        number = self.order.index(pos) + 1
+        line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
+                f"τ={self.torques[pos]:+.5f} N·m  "
+                + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
+                )
+        events = [WatchEvent("shot", b.file, line, row.line)] + retracted
+        events += [WatchEvent("warning", b.file, f"{b.file} ({row_text(row)}): {w.removeprefix('step: ')}",
+                              row.line) for w in warnings]
+        return events
+
+    # -- outputs -----------------------------------------------------------------
+
+    def _save(self) -> None:
+        images = {self.bound[p].row.image: self.bound[p].file for p in sorted(self.bound)
+                  if self.camera_mode or f"images/{self.bound[p].file}" != self.bound[p].row.image}
+        if images or self.camera_mode:  # files under their planned names need no binding
+            write_binding(self.session.folder, Binding(camera_dir=self.camera, images=images, by="watch",
+                                                       skipped=tuple(sorted(self.skipped)),
+                                                       missing=tuple(sorted(self.missing))))
+        if self.page:
+            self.write_page()
+
+    def live_points(self) -> list[LivePoint]:
+        """The photographed rows for the page, in capture order."""
+        out = []
+        for p in self.order:
+            b = self.bound[p]
+            out.append(LivePoint(p + 1, b.file, b.row.line, b.row.orientation_deg,
+                                 f"{b.row.phase} s{b.row.step}", self.torques[p], b.angle, b.delta,
+                                 tuple(w.removeprefix("step: ") for w in b.warnings)))
+        return out
+
+    def next_step_text(self) -> tuple[str | None, float | None]:
+        """What to load next, in words, and its planned torque."""
+        nxt = self.next_row()
+        if nxt is None:
+            return None, None
+        pos, row = nxt
+        step_mass = self.session.config.protocol.step_mass_kg
+        pieces = 0 if row.mass_kg is None else round(row.mass_kg / step_mass)
+        pans = "no weights" if pieces == 0 else (
+            f"{'+' if row.phase.startswith('positive') else '−'} pans {1000 * row.mass_kg:g} g each "
+            f"({pieces} × {1000 * step_mass:g} g)")
+        return (f"{row_text(row)} · {pans} · τ = {self.torques[pos]:+.5f} N·m", self.torques[pos])
+
+    def write_page(self, *, finished: bool = False) -> Path:
+        """Write ``OUT_DIR/live.html`` atomically; return its path."""
+        text, torque = self.next_step_text()
+        page = live_page(title=str(self.session.folder.name), points=self.live_points(),
+                         planned_torques=self.torques, next_step=text, next_torque_nm=torque,
+                         messages=self.notices, finished=finished)
+        return atomic_write_text(self.out / LIVE_PAGE_NAME, page, durable=False)
+
+
+@dataclass(frozen=True)
+class WatchResult:
+    """How a watch ended.
+
+    Attributes
+    ----------
+    n_bound, n_rows : int
+        Photographs bound, manifest rows.
+    n_warnings : int
+        Photographs with a warning.
+    page : pathlib.Path or None
+        The live page.
+    report : SessionReport or None
+        The report written at the end (None with ``report=False`` or when nothing
+        could be reported).
+    interrupted : bool
+        Ended by Ctrl-C.
+    """
+
+    n_bound: int
+    n_rows: int
+    n_warnings: int
+    page: Path | None
+    report: object | None
+    interrupted: bool
+
+
+def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float = 0.5,
+                  settle_s: float = 1.0, give_up_s: float = 10.0, report: bool = True,
+                  stop=None, echo=None) -> WatchResult:
+    """Follow a session while it is shot; end with the report.
+
+    Parameters
+    ----------
+    session_dir : path-like
+        The session folder.
+    camera_dir : path-like, optional
+        The camera's folder (read only); ``SESSION_DIR/images`` by default.
+    out_dir : path-like, optional
+        Output folder (``SESSION_DIR/results``).
+    poll_s : float
+        Seconds between looks at the folder.
+    settle_s, give_up_s : float
+        See :class:`Watcher`.
+    report : bool
+        Write the report (:func:`~vision_torsion.report.session_report.report_session`) at the end.
+    stop : threading.Event, optional
+        Set it to end the watch (besides Ctrl-C, and every row having its image).
+    echo : callable, optional
+        Called with each event (default: print its message; warnings to stderr).
+
+    Returns
+    -------
+    WatchResult
+    """
+    def default_echo(event):
+        stream = sys.stderr if event.kind in ("warning", "ignored", "deleted", "folder_gone",
+                                              "leftover") else sys.stdout
+        prefix = {"warning": "  ! ", "retracted": "  ✓ "}.get(event.kind, "")
+        print(prefix + event.message, file=stream, flush=True)
+
+    echo = echo or default_echo
+    interrupted = False
+    with Watcher(session_dir, camera_dir=camera_dir, out_dir=out_dir, settle_s=settle_s,
+                 give_up_s=give_up_s) as watcher:
+        echo(WatchEvent("start", "", f"watching {watcher.camera} for {len(watcher.rows)} planned "
+                                     f"images; live page: {watcher.out / LIVE_PAGE_NAME} (Ctrl-C to stop)"))
+        watcher.write_page()
+        try:
+            while not (stop is not None and stop.is_set()):
+                for event in watcher.tick():
+                    echo(event)
+                if watcher.complete:
+                    break
+                if stop is not None:
+                    stop.wait(poll_s)
+                else:
+                    time.sleep(poll_s)
+        except KeyboardInterrupt:
+            interrupted = True
+            echo(WatchEvent("stopped", "", "stopped; run the same command again to resume"))
+    rep = None
+    if report and watcher.bound:
+        from ..report.session_report import report_session
+
+        rep = report_session(watcher.session.folder, out_dir=out_dir, jobs=1)
+        echo(WatchEvent("report", "", f"report: {rep.files.report_html}"))
+    return WatchResult(n_bound=len(watcher.bound), n_rows=len(watcher.rows),
+                       n_warnings=sum(1 for b in watcher.bound.values() if b.warnings),
+                       page=watcher.out / LIVE_PAGE_NAME, report=rep, interrupted=interrupted)
