@@ -110,7 +110,10 @@ def load_binding(session_dir) -> Binding | None:
                    missing=tuple(int(x) for x in doc.get("missing", ())))
 
 
-def write_binding(session_dir, binding: Binding) -> Path:
-    """Write `binding` to ``SESSION_DIR/binding.json`` atomically; return its path."""
+def write_binding(session_dir, binding: Binding, *, durable: bool = True) -> Path:
+    """Write `binding` to ``SESSION_DIR/binding.json`` atomically; return its path.
+
+    `durable` flushes it to the disk first (see :func:`~vision_torsion.fileio.atomic_write_bytes`);
+    ``watch``, which rewrites it at every photograph and can rebuild it, does not."""
     text = json.dumps(binding.to_dict(), indent=1, ensure_ascii=False)
-    return atomic_write_text(Path(session_dir) / BINDING_NAME, text + "\n")
+    return atomic_write_text(Path(session_dir) / BINDING_NAME, text + "\n", durable=durable)

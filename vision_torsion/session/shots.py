@@ -39,6 +39,8 @@ class Shot:
         The decoded image when it was measured now (None when cached or unreadable).
     cached : bool
         The result came from the cache.
+    image_hash : str
+        XXH3-128 of the file's bytes ("" when it could not be read).
     undecodable : bool
         The file could not be decoded (truncated, still being written, or not an
         image); nothing was cached for it.
@@ -53,6 +55,7 @@ class Shot:
     cached: bool = False
     timings: dict = field(default_factory=dict)
     undecodable: bool = False
+    image_hash: str = ""
 
 
 class ShotMeasurer:
@@ -66,13 +69,14 @@ class ShotMeasurer:
     """
 
     def __init__(self, session: Session, out_dir):
-        from .process import _settings_key  # the one cache key of process
+        from .process import _settings_key, _valid_entry  # process's cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
         self.key = _settings_key(self.settings)
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
-        self.cached, self._logs = read_cache(self.cache_dir)
+        self._check = _valid_entry
+        self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
         self._run = CacheLog.new_run()
         self._stack = ExitStack()
 
@@ -86,7 +90,8 @@ class ShotMeasurer:
         self._stack.close()
         new = CacheLog(self.cache_dir, self._run).files()
         if new or len(self._logs) > 1:
-            merge_cache(self.cache_dir, {**self.cached, **read_logs(new)}, self._logs + new)
+            merge_cache(self.cache_dir, {**self.cached, **read_logs(new, check=self._check)},
+                        self._logs + new)
         return False
 
     def measure(self, path) -> Shot:
@@ -117,7 +122,7 @@ class ShotMeasurer:
                 image = decode_image(data, name=str(path), keep_integers=True)
             except ImageReadError as exc:  # not cached: it may be a file still being written
                 message = str(exc).replace(str(path), path.name)
-                return Shot(path, None, message, undecodable=True,
+                return Shot(path, None, message, undecodable=True, image_hash=image_hash,
                             timings={"read": t1 - t0, "decode": time.perf_counter() - t1, "measure": 0.0})
             t2 = time.perf_counter()
             try:
@@ -133,5 +138,6 @@ class ShotMeasurer:
         timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
         if entry["status"] != "ok":
             message = entry.get("message", "").replace(str(path), path.name)
-            return Shot(path, None, message, image, cached, timings)
-        return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings)
+            return Shot(path, None, message, image, cached, timings, image_hash=image_hash)
+        return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings,
+                    image_hash=image_hash)

@@ -25,8 +25,9 @@ A tick:
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
    blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
    one (> 0.5 % of the pixels at full scale), are returned at once as events.
-5. ``binding.json`` (unless every file is under its planned name) and the live page ``OUT_DIR/live.html``
-   (:mod:`.live`) are rewritten atomically.
+5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically, and
+   ``binding.json`` (unless every file is under its planned name) every few
+   seconds and at the end.
 
 Resuming is running it again: the complete files are bound in the same order, from
 the cache, and a ``binding.json`` written by ``bind`` keeps its skipped files and
@@ -107,6 +108,7 @@ class _Bound:
     angle: float = math.nan
     delta: float = math.nan
     edge_width: float = math.nan
+    result: object | None = None  # AngleResult against the orientation's reference
 
 
 class Watcher:
@@ -125,7 +127,10 @@ class Watcher:
     give_up_s : float
         Seconds a settled file may stay undecodable before it is set aside.
     page : bool
-        Write the live page.
+        Write the live page (after every tick that took in a photograph).
+    binding_every_s : float
+        Seconds between rewrites of ``binding.json`` (also written when every row has
+        its photograph, and on closing).
     clock : callable
         Monotonic clock (seconds); tests pass their own.
 
@@ -133,7 +138,8 @@ class Watcher:
     """
 
     def __init__(self, session_dir, *, camera_dir=None, out_dir=None, settle_s: float = 1.0,
-                 give_up_s: float = 10.0, page: bool = True, clock=time.monotonic):
+                 give_up_s: float = 10.0, page: bool = True, binding_every_s: float = 5.0,
+                 clock=time.monotonic):
         from .shots import ShotMeasurer
 
         self.session = load_session(session_dir, check_files=False)
@@ -165,6 +171,8 @@ class Watcher:
         self.torques = [self.session.torque(row).torque_nm for row in rows]
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
         self._closed = False
+        self.binding_every_s = binding_every_s
+        self._binding_written = -math.inf
 
     # -- the public face ---------------------------------------------------------
 
@@ -180,6 +188,8 @@ class Watcher:
         if not self._closed:
             self._closed = True
             self.measurer.__exit__(None, None, None)
+            if self.bound:
+                self._save(force=True)
             if self.page:
                 self.write_page(finished=True)
 
@@ -253,7 +263,7 @@ class Watcher:
         if changed and self.complete:
             events.append(WatchEvent("complete", "", f"all {len(self.rows)} planned images are in"))
         if changed:
-            self._save()
+            self._save(now=now)
         return events
 
     # -- one file ----------------------------------------------------------------
@@ -276,14 +286,9 @@ class Watcher:
             self.set_aside[name] = "undecodable"
             return [self._notice("ignored", name, f"{shot.message}; still so after "
                                  f"{self.give_up_s:g} s: set aside, not bound")]
-        if not path.exists():
-            return []  # deleted meanwhile: the next tick says so
-        from .worker import content_hash
-
-        try:
-            digest = content_hash(path.read_bytes())
-        except OSError:
-            return []
+        if not shot.image_hash:
+            return []  # unreadable: deleted meanwhile (the next tick says so), or no access
+        digest = shot.image_hash
         if digest in self.hashes:
             self.set_aside[name] = "copy"
             return [self._notice("ignored", name, f"{name}: the same bytes as {self.hashes[digest]} "
@@ -315,7 +320,7 @@ class Watcher:
 
     def _check(self, pos: int, shot) -> list[WatchEvent]:
         """Angles of the orientation, the step checks, the image checks; events."""
-        from ..angle import sequence_angles
+        from ..angle import pair_angle
 
         b = self.bound[pos]
         row = b.row
@@ -340,14 +345,19 @@ class Watcher:
             seq = [p for p in same if p >= ref]
             seq.sort(key=self.order.index)
             ok = [p for p in seq if self.bound[p].pair is not None]
-            angles = sequence_angles(rb.pair, [self.bound[p].pair for p in ok])
+            # incremental: the new photograph is the last of its orientation in capture
+            # order, so only its angle is new (the recurrence of sequence_angles)
             sign = self.session.config.angle_sign
             prev = math.nan
-            for p, a in zip(ok, angles):
+            for p in ok:
                 x = self.bound[p]
-                x.angle = math.nan if a is None else sign * a.angle_deg
+                if x.result is None:
+                    near = 0.0 if not math.isfinite(prev) else sign * prev
+                    x.result = pair_angle(rb.pair, x.pair, near_deg=near)
+                    x.angle = sign * x.result.angle_deg
                 x.delta = x.angle - prev
                 prev = x.angle
+            angles = [self.bound[p].result for p in ok]
             points = [StepPoint(self.torques[p], self.bound[p].angle,
                                 0.0 if a is None else a.angle_std_deg) for p, a in zip(ok, angles)]
             current = {ok[w.index]: w for w in check_steps(points, step_torque_nm=self.step_torque)}
@@ -374,15 +384,21 @@ class Watcher:
 
     # -- outputs -----------------------------------------------------------------
 
-    def _save(self) -> None:
+    def _save(self, *, now: float | None = None, force: bool = False) -> None:
+        """binding.json at most every `binding_every_s` (and at the end); the page always."""
+        if self.page:
+            self.write_page()
+        now = self.clock() if now is None else now
+        if not force and now - self._binding_written < self.binding_every_s and not self.complete:
+            return
+        self._binding_written = now
         images = {self.bound[p].row.image: self.bound[p].file for p in sorted(self.bound)
                   if self.camera_mode or f"images/{self.bound[p].file}" != self.bound[p].row.image}
         if images or self.camera_mode:  # files under their planned names need no binding
             write_binding(self.session.folder, Binding(camera_dir=self.camera, images=images, by="watch",
                                                        skipped=tuple(sorted(self.skipped)),
-                                                       missing=tuple(sorted(self.missing))))
-        if self.page:
-            self.write_page()
+                                                       missing=tuple(sorted(self.missing))),
+                          durable=False)  # watch rewrites it, and can rebuild it
 
     def live_points(self) -> list[LivePoint]:
         """The photographed rows for the page, in capture order."""
