@@ -114,7 +114,7 @@ def parser():
 def test_cli_plan(tmp_path, capsys):
     args = parser().parse_args(["plan", str(tmp_path / "s"), "--max-torque", "0.36",
                                 "--step-mass", "0.02", "--arm-radius", "0.05",
-                                "--orientations", "0", "90", "--cycles", "2"])
+                                "--orientations", "0", "90", "--cycles", "2", "--no-pdf"])
     assert args.func(args) == 0
     s = load_session(tmp_path / "s", check_files=False)
     assert s.config.protocol.orientations_deg == (0.0, 90.0)
@@ -128,3 +128,68 @@ def test_cli_plan_help(capsys):
         parser().parse_args(["plan", "--help"])
     assert info.value.code == 0
     assert "--max-torque NM" in capsys.readouterr().out
+
+
+# -- issue 15: --steps, nearest maxima, preconditioning, closing, the HTML sheet ------
+
+
+def test_steps_instead_of_max_torque(tmp_path):
+    p = plan_session(tmp_path, steps=5, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,))
+    assert p.steps_per_phase == 5 and p.exact
+    assert p.max_torque_nm == pytest.approx(5 * 0.01962, rel=1e-12)
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(), r"give either max_torque_nm or steps"),
+    (dict(max_torque_nm=0.36, steps=3), r"give either max_torque_nm or steps"),
+    (dict(steps=0), r"steps must be a whole number >= 1, got 0"),
+    (dict(steps=3, preconditioning_cycles=-1), r"preconditioning_cycles must be a whole number >= 0"),
+])
+def test_plan_size_messages(tmp_path, kw, message):
+    with pytest.raises(SessionError, match=message):
+        plan_session(tmp_path, step_mass_kg=0.02, arm_radius_m=0.05, **kw)
+
+
+def test_nearest_achievable_maxima(tmp_path, capsys):
+    # the paper's 100 g steps at r = 0.05 m: 0.0981 N·m per step; 0.36 N·m is 3.67 steps
+    p = plan(tmp_path / "a", step_mass_kg=0.1, orientations_deg=(0,))
+    assert p.steps_per_phase == 3 and p.nearest_max_torques_nm == (0.2943, 0.3924)
+    args = parser().parse_args(["plan", str(tmp_path / "b"), "--max-torque", "0.36", "--step-mass",
+                                "0.1", "--arm-radius", "0.05", "--no-pdf"])
+    args.func(args)
+    assert ("(requested 0.36 N·m is not a whole number of steps; the nearest achievable maxima are "
+            "0.29430 N·m with 3 steps and 0.39240 N·m with 4; or give --steps)") in capsys.readouterr().out
+
+
+def test_closing_image_per_orientation(tmp_path):
+    p = plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05,
+                     orientations_deg=(0, 60), cycles=2, closing=True)
+    closing = [r for r in p.rows if r["phase"] == "closing"]
+    assert [(r["orientation_deg"], r["cycle"], r["mass_kg"]) for r in closing] == [("0", "2", "0"), ("60", "2", "0")]
+    per = len(p.rows) // 2
+    assert p.rows[per - 1]["phase"] == "closing" and p.rows[per - 2]["phase"] == "positive_loading"
+    s = load_session(tmp_path, check_files=False)
+    assert s.torque(s.manifest.rows[per - 1]).torque_nm == 0.0
+
+
+def test_html_capture_sheet(tmp_path):
+    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                 preconditioning_cycles=2, closing=True, angle_sign=-1,
+                 header={"gear": "CSF-20-100", "operator": "A. Tester"})
+    page = (tmp_path / "capture_sheet.html").read_text()
+    assert "<td>CSF-20-100</td>" in page and "<td>A. Tester</td>" in page
+    assert "<th>Serial number</th><td></td>" in page  # a blank line to fill in
+    assert page.count("<section>") == 2  # one per orientation, each on its own page
+    assert "loading them turns the disk, and the line from one marker to the other, <b>clockwise</b>" in page
+    assert "angle_sign = -1" in page and "positive torque turns it\n clockwise" in page
+    assert page.count("preconditioning, no photographs: load to +0.03924 N·m and −0.03924 N·m 2 time(s)") == 2
+    assert page.count("unload to zero step by step, no photographs") == 2
+
+
+def test_pdf_capture_sheet_where_chromium_is(tmp_path):
+    from vision_torsion.session.sheet import find_chromium
+
+    if find_chromium() is None:
+        pytest.skip("no Chromium on this machine")
+    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), pdf=True)
+    assert (tmp_path / "capture_sheet.pdf").read_bytes().startswith(b"%PDF")

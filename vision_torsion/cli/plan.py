@@ -23,8 +23,12 @@ def register(subparsers) -> None:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument("out_dir", metavar="OUT_DIR", help="session folder to create")
-    p.add_argument("--max-torque", type=float, required=True, metavar="NM",
-                   help="largest torque magnitude in N·m (snapped down to whole steps)")
+    size = p.add_mutually_exclusive_group(required=True)
+    size.add_argument("--max-torque", type=float, metavar="NM",
+                      help="largest torque magnitude in N·m (snapped down to whole steps; the "
+                           "nearest achievable maxima are named)")
+    size.add_argument("--steps", type=int, metavar="N",
+                      help="steps per phase instead of --max-torque")
     p.add_argument("--step-mass", type=float, required=True, metavar="KG",
                    help="mass added to or removed from each pan per step, kg")
     p.add_argument("--arm-radius", type=float, required=True, metavar="M",
@@ -56,6 +60,16 @@ def register(subparsers) -> None:
                    help="file type of the images to save")
     p.add_argument("--force", action="store_true",
                    help="overwrite an existing session.toml and manifest.csv")
+    p.add_argument("--preconditioning", type=int, default=0, metavar="N",
+                   help="full cycles to ±Tmax before each reference image (not photographed)")
+    p.add_argument("--closing", action="store_true",
+                   help="end each orientation with a zero-torque 'closing' image")
+    g = p.add_argument_group("capture sheet header (blank lines on the sheet when not given)")
+    for key in ("gear", "serial", "operator", "date"):
+        g.add_argument(f"--{key}", metavar="TEXT")
+    p.add_argument("--no-pdf", action="store_true",
+                   help="write capture_sheet.html only (default: also capture_sheet.pdf when "
+                        "Chromium is installed)")
     add_common_options(p)
     p.set_defaults(func=run)
 
@@ -72,12 +86,22 @@ def run(args) -> int:
         mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
         polarity=args.polarity, radius_range=args.radius_range,
         angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
-        target=args.target)
+        target=args.target,
+        steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
+        header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date")
+                if getattr(args, k)},
+        pdf=not args.no_pdf)
     print(f"{plan.folder}: {len(plan.rows)} images in "
           f"{len(plan.config.protocol.orientations_deg)} orientations, "
           f"{plan.steps_per_phase} steps per phase, max torque "
           f"{plan.max_torque_nm:.5f} N·m"
-          + ("" if plan.exact else f" (requested {plan.requested_max_torque_nm:g})"))
-    print(f"print {plan.folder / 'capture_sheet.md'} and save each image under the "
-          "name it gives")
+          + ("" if plan.exact else
+             f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of "
+             f"steps; the nearest achievable maxima are {plan.nearest_max_torques_nm[0]:.5f} "
+             f"N·m with {plan.steps_per_phase} steps and {plan.nearest_max_torques_nm[1]:.5f} "
+             f"N·m with {plan.steps_per_phase + 1}; or give --steps)"))
+    pdf = plan.folder / "capture_sheet.pdf"
+    sheet = pdf if pdf.is_file() and not args.no_pdf else plan.folder / "capture_sheet.html"
+    print(f"print {sheet} and save each image under the name it gives (or keep the "
+          "camera's names and run `vision-torsion bind` or `watch`)")
     return 0

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
@@ -62,6 +62,15 @@ class SessionPlan:
         N, the step masses per pan at full torque.
     requested_max_torque_nm, max_torque_nm : float
         The maximum asked for and the one planned (a whole number of steps).
+    torque_per_step_nm : float
+        ``2 m g r`` of one step mass per pan (N·m).
+    preconditioning_cycles : int
+        Full cycles to ±Tmax before each orientation's reference image, not
+        photographed.
+    closing : bool
+        A ``closing`` image at zero torque ends each orientation.
+    header : dict
+        Test metadata for the capture sheet (gear, serial, operator, date).
     """
 
     folder: Path
@@ -70,6 +79,19 @@ class SessionPlan:
     steps_per_phase: int
     requested_max_torque_nm: float
     max_torque_nm: float
+    torque_per_step_nm: float = math.nan
+    preconditioning_cycles: int = 0
+    closing: bool = False
+    header: dict = field(default_factory=dict)
+
+    @property
+    def nearest_max_torques_nm(self) -> tuple[float, float]:
+        """The achievable maxima (whole numbers of steps) at or below and above the
+        requested one (N·m)."""
+        n, step = self.steps_per_phase, self.torque_per_step_nm
+        below = n * step
+        above = below if self.exact else (n + 1) * step
+        return float(f"{below:.12g}"), float(f"{above:.12g}")
 
     @property
     def exact(self) -> bool:
@@ -99,8 +121,8 @@ def _phase_masses(phase: str, n: int, first: bool) -> list[tuple[int, int]]:
     return [(k, n - k if unloading else k) for k in steps]
 
 
-def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".png"
-              ) -> list[dict]:
+def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".png",
+              closing: bool = False) -> list[dict]:
     """Manifest rows of the protocol described in the module docstring, in order.
 
     >>> from vision_torsion.session.config import config_from_dict
@@ -128,6 +150,8 @@ def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".pn
                 first = cycle == 1 and phase == "positive_unloading"
                 for step, pieces in _phase_masses(phase, steps_per_phase, first):
                     add(orientation, cycle, phase, step, pieces)
+        if closing:  # unloaded to zero (not photographed), then one image
+            add(orientation, proto.cycles, "closing", 0, 0)
     return rows
 
 
@@ -151,7 +175,8 @@ def _capture_sheet(plan: SessionPlan) -> str:
         f"Maximum torque {plan.max_torque_nm:.5f} N·m = {n} steps"
         + ("." if plan.exact else
            f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of "
-           "steps; snapped down)."),
+           "steps; snapped down; the nearest achievable maxima are "
+           f"{plan.nearest_max_torques_nm[0]:.5f} and {plan.nearest_max_torques_nm[1]:.5f} N·m)."),
         "",
         "\"+ pans\" are the two pans whose wires turn the disk in the positive direction, "
         "\"− pans\" the other two. Masses are per pan: both pans of a pair always carry "
@@ -186,6 +211,10 @@ def _capture_sheet(plan: SessionPlan) -> str:
         number += 1
         lines.append(f"| {number} | {row['cycle']} | {row['phase']} | {row['step']} | "
                      f"{plus} | {minus} | {torque:+.5f} | `{row['image']}` | ☐ |")
+        if row["phase"] == "reference" and plan.preconditioning_cycles:
+            lines.insert(len(lines) - 1, f"| | | *preconditioning, no photographs* | | load to "
+                         f"+{plan.max_torque_nm:.5f} and −{plan.max_torque_nm:.5f} N·m "
+                         f"{plan.preconditioning_cycles} time(s), then unload | | | | ☐ |")
         if row["phase"] == "reference":
             lines.append(f"| | | *pre-load, no photographs* | | add {_num(step * 1000)} g "
                          f"to each + pan {n} times | empty | → {plan.max_torque_nm:+.5f} | "
@@ -193,26 +222,31 @@ def _capture_sheet(plan: SessionPlan) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
-                 arm_radius_m: float, orientations_deg=DEFAULT_ORIENTATIONS_DEG,
+def plan_session(out_dir, *, max_torque_nm: float | None = None, step_mass_kg: float,
+                 arm_radius_m: float, steps: int | None = None,
+                 orientations_deg=DEFAULT_ORIENTATIONS_DEG,
                  cycles: int = 1, gravity_m_per_s2: float = 9.81,
                  mass_tolerance_kg: float = 1e-4, friction_torque_std_nm: float = 0.0,
                  arm_radius_std_m: float = 0.0, gravity_std_m_per_s2: float = 0.0,
                  polarity: str = "dark", radius_range=None, angle_sign: int = 1,
                  image_suffix: str = ".png", overwrite: bool = False,
-                 target: str = "equal") -> SessionPlan:
-    """Write a new session folder: session.toml, manifest.csv, capture_sheet.md, images/.
+                 target: str = "equal", preconditioning_cycles: int = 0, closing: bool = False,
+                 header: dict | None = None, pdf: bool = False) -> SessionPlan:
+    """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
 
     Parameters
     ----------
     out_dir : str or os.PathLike
         The session folder to create (may exist if it holds no session yet).
-    max_torque_nm : float
-        Largest torque magnitude (N·m); snapped down to whole step masses.
+    max_torque_nm : float, optional
+        Largest torque magnitude (N·m); snapped down to whole step masses (the plan
+        names the nearest achievable maxima below and above).
     step_mass_kg : float
         Mass added to or removed from each pan per step (kg).
     arm_radius_m : float
         Radius of the torque disk at the wires (m).
+    steps : int, optional
+        Steps per phase instead of `max_torque_nm` (give exactly one of the two).
     orientations_deg : sequence of float
         Flexspline orientations (degrees), the paper's six by default.
     cycles : int
@@ -234,6 +268,19 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
         File type of the images to save (".png", ".tif", ...).
     overwrite : bool
         Replace an existing session.toml / manifest.csv in `out_dir`.
+    preconditioning_cycles : int
+        Full cycles to +Tmax and −Tmax before each reference image, to settle the
+        gear; on the capture sheet, not photographed.
+    closing : bool
+        End each orientation with a ``closing`` image at zero torque, after the last
+        cycle is unloaded back to zero (not photographed on the way).
+    header : dict, optional
+        Test metadata printed on the capture sheet (keys ``gear``, ``serial``,
+        ``operator``, ``date``; blank fields to fill in by hand otherwise).
+    pdf : bool
+        Also print the capture sheet to ``capture_sheet.pdf`` with a headless
+        Chromium, when one is installed (:mod:`.sheet`); ``capture_sheet.html`` is
+        always written.
 
     Returns
     -------
@@ -242,8 +289,9 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
     Raises
     ------
     SessionError
-        Invalid parameters (named as their session.toml keys), a maximum torque
-        below one step, or a folder that already holds a session.
+        Invalid parameters (named as their session.toml keys), both or neither of
+        `max_torque_nm` and `steps`, a maximum torque below one step, or a folder
+        that already holds a session.
 
     Examples
     --------
@@ -254,6 +302,16 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
     (18, 0.35316, False, 444)
     """
     folder = Path(out_dir)
+    if (max_torque_nm is None) == (steps is None):
+        raise SessionError("plan_session: give either max_torque_nm or steps (steps per phase), "
+                           "not both or neither")
+    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
+        raise SessionError(f"plan_session: steps must be a whole number >= 1, got {steps!r}")
+    if int(preconditioning_cycles) != preconditioning_cycles or preconditioning_cycles < 0:
+        raise SessionError("plan_session: preconditioning_cycles must be a whole number >= 0, "
+                           f"got {preconditioning_cycles!r}")
+    if steps is not None:
+        max_torque_nm = float(f"{steps * 2.0 * step_mass_kg * gravity_m_per_s2 * arm_radius_m:.12g}")
     markers = {"polarity": polarity}
     if target not in ("equal", "distinct"):
         raise SessionError(f"plan_session: target must be 'equal' or 'distinct', got {target!r}")
@@ -290,17 +348,24 @@ def plan_session(out_dir, *, max_torque_nm: float, step_mass_kg: float,
     planned = config_from_dict({**doc, "protocol": {**doc["protocol"],
                                                     "max_torque_nm": planned_max}})
     plan = SessionPlan(folder=folder, config=planned,
-                       rows=tuple(plan_rows(planned, n, suffix=image_suffix)),
+                       rows=tuple(plan_rows(planned, n, suffix=image_suffix, closing=closing)),
                        steps_per_phase=n, requested_max_torque_nm=float(max_torque_nm),
-                       max_torque_nm=planned_max)
+                       max_torque_nm=planned_max, torque_per_step_nm=per_step,
+                       preconditioning_cycles=int(preconditioning_cycles), closing=bool(closing),
+                       header=dict(header or {}))
     if not plan.exact:
+        below, above = plan.nearest_max_torques_nm
         logger.warning("maximum torque %.6g N·m is not a whole number of %.6g kg steps; "
-                       "planned %d steps = %.6g N·m", max_torque_nm, step_mass_kg, n,
-                       plan.max_torque_nm)
+                       "planned %d steps = %.6g N·m (the nearest achievable maxima are %.6g N·m "
+                       "with %d steps and %.6g N·m with %d; or give --steps)", max_torque_nm,
+                       step_mass_kg, n, plan.max_torque_nm, below, n, above, n + 1)
     (folder / "images").mkdir(parents=True, exist_ok=True)
     write_config(folder / CONFIG_NAME, planned,
                  header="vision-torsion session (written by `vision-torsion plan`).\n"
                         "Units are in the key names; see the README for the format.")
     atomic_write_text(folder / MANIFEST_NAME, manifest_text(REQUIRED_COLUMNS, plan.rows))
     atomic_write_text(folder / CAPTURE_SHEET_NAME, _capture_sheet(plan))
+    from .sheet import write_capture_sheet
+
+    write_capture_sheet(plan, pdf=pdf)
     return plan
