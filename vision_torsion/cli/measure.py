@@ -29,6 +29,9 @@ def register(sub) -> None:
     )
     p.add_argument("--max-step", type=float, default=30.0, metavar="DEG",
                    help="sequence order: the largest turn between consecutive images taken as certain (default 30)")
+    p.add_argument("--overlay", metavar="DIR",
+                   help="also write each image (and the reference) with its detected markers and "
+                        "fitted circles drawn, as DIR/<name>_overlay.png")
     add_marker_options(p)
     add_common_options(p)
     p.set_defaults(func=run)
@@ -47,6 +50,17 @@ def run(args) -> int:
         max_step_deg=args.max_step,
     )
     print(f"{res.n_ok} of {res.n_ok + res.n_failed} images measured; wrote {res.path}")
+    if args.overlay:
+        from pathlib import Path
+
+        from ..measure import list_images
+        from ..overlay import write_overlays
+
+        files = [Path(args.reference)] + [f for f in list_images(args.image_dir)
+                                          if f.resolve() != Path(args.reference).resolve()]
+        written = write_overlays(files, args.overlay, settings=settings_from_args(args),
+                                 inputs=[args.image_dir, Path(args.reference).parent])
+        print(f"wrote {len(written)} overlay(s) to {args.overlay}")
     for row in res.table.itertuples():
         if row.status != "ok":
             print(f"  {failure_line(row.image, row.message)}", file=sys.stderr)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from . import add_common_options
+from .options import add_output_option
 
 __all__ = ["register", "run"]
 
@@ -26,8 +27,7 @@ def register(subparsers) -> None:
     p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
     p.add_argument("--camera-dir", metavar="DIR",
                    help="the camera's folder (read only); default SESSION_DIR/images")
-    p.add_argument("-o", "--out-dir", metavar="OUT_DIR",
-                   help="output folder (default: SESSION_DIR/results)")
+    add_output_option(p, "SESSION_DIR/results")
     p.add_argument("--poll", type=float, default=0.5, metavar="S",
                    help="seconds between looks at the folder")
     p.add_argument("--settle", type=float, default=1.0, metavar="S",

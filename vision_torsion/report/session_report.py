@@ -148,6 +148,22 @@ def _stiffness_section(measurements: pd.DataFrame):
     return _STIFFNESS_TITLE, "\n".join(parts), section.steps
 
 
+def _overlay_section(session):
+    """Each orientation's reference image with its detected markers drawn (issue 15)."""
+    from ..overlay import overlay_section
+
+    rows = session.manifest.rows
+    refs = {}
+    for row in rows:  # the reference row, else the first row, as process measures against
+        if row.phase == "reference":
+            refs[row.orientation_deg] = row
+        else:
+            refs.setdefault(row.orientation_deg, row)
+    images = [(f"orientation {o:g}°: {r.image}", session.manifest.image_path(r)) for o, r in refs.items()
+              if r.line not in set(session.manifest.pending)]
+    return overlay_section(images, settings=session.settings)
+
+
 def _pending_section(waiting: pd.DataFrame, unlisted) -> tuple[str, str]:
     """A partly shot session: the rows still to photograph, and stray files."""
     import html
@@ -209,7 +225,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         rig=session.config.torque_rig,
     )
     title, section_html, *steps = _stiffness_section(measurements)
-    extra = [(title, section_html)]
+    extra = [(title, section_html), _overlay_section(session)]
     if len(waiting) or result.unlisted:
         extra.append(_pending_section(waiting, result.unlisted))
     from ..fileio import output_set
