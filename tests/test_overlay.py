@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from test_session_support import draw_target, make_session
+from helpers import draw_target, make_session
 from vision_torsion.cli import main
 from vision_torsion.errors import OutputError
 from vision_torsion.images import write_image

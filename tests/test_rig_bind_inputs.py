@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from test_session_support import draw_target, make_session
+from helpers import draw_target, make_session
 from vision_torsion.analysis.models import bilinear_response
 from vision_torsion.errors import ManifestError, SessionError
 from vision_torsion.images import write_image

@@ -66,9 +66,12 @@ class ShotMeasurer:
     session : Session
     out_dir : path-like
         The output folder whose ``.cache`` is shared with ``process``.
+    measure : callable, optional
+        The measuring function (:func:`~vision_torsion.pair.measure_pair` by
+        default; the seam ``process_session(measure=...)`` has too).
     """
 
-    def __init__(self, session: Session, out_dir):
+    def __init__(self, session: Session, out_dir, *, measure=None):
         from .process import _settings_key, _valid_entry  # process's cache key and check
 
         self.settings = session.settings
@@ -79,11 +82,13 @@ class ShotMeasurer:
         self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
         self._run = CacheLog.new_run()
         self._stack = ExitStack()
+        self._measure = measure
 
     def __enter__(self):
         from .worker import in_process
 
-        self._stack.enter_context(in_process(str(self.cache_dir), self._run, frozenset(self.cached)))
+        extra = {} if self._measure is None else {"measure": self._measure}
+        self._stack.enter_context(in_process(str(self.cache_dir), self._run, frozenset(self.cached), **extra))
         return self
 
     def __exit__(self, *exc):
@@ -132,7 +137,7 @@ class ShotMeasurer:
                 read = ReadImage(key, image_hash, error=exc)
             _, text, _ = finish_task(read, task)
             entry = json.loads(text)
-            if entry["status"] in ("ok", "failed") and "internal error" not in entry.get("message", ""):
+            if entry["status"] == "ok":
                 self.cached[key] = entry
         t3 = time.perf_counter()
         timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
