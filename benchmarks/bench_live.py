@@ -1,7 +1,7 @@
 """The live path of ``watch``: from a photograph being complete to the loop being updated.
 
 A session is planned and its photographs rendered on the standard scene
-(synthetic/standard.toml: 1400×1000 px, 8 bit; the paper's bilinear model, two
+(the ready scene ``standard``: 1400×1000 px, 8 bit; the paper's bilinear model, two
 orientations of nine steps per phase: 76 photographs). They are written one at a
 time into a camera folder, complete (the waiting for a file being written is not
 part of the path), and after each one :meth:`Watcher.tick` is timed: listing the
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="runs over the same photographs")
     args = ap.parse_args(argv)
-    scene = load_scene(ROOT / "synthetic" / "standard.toml")
+    scene = load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
     spec = SessionSpec(max_torque_nm=0.18, orientations_deg=(0.0, 60.0))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -191,7 +191,7 @@ h1 {{ font-size: 20px; margin: 0 0 4px; }}
 .status {{ color: #555; margin: 0 0 8px; }}
 .next {{ font-size: 18px; background: #eef7ee; border-left: 5px solid #2ca02c; padding: 6px 10px; }}
 .plots {{ display: flex; flex-wrap: wrap; gap: 12px; }}
-figure {{ margin: 0; }}
+figure {{ margin: 0; max-width: {_W}px; }}
 th {{ text-align: left; }}
 table {{ border-collapse: collapse; font-size: 13px; margin-top: 8px; }}
 td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: right; }}
