@@ -170,6 +170,9 @@ def test_watch_flags_each_mistake_on_the_image_where_it_happens(script):
             j = max(i for i in range(k) if events[i].kind == "shot")
             assert events[j].file == e.file
     assert not [e for e in events if e.kind == "retracted" and e.file == "IMG_0004.png"]
+    # confirmed by the next image: the page no longer says "the next step will tell"
+    (kept,) = [p for p in w.live_points() if p.file == "IMG_0004.png"]
+    assert "forgotten on a pan?)" in kept.warnings[0] and "next step will tell" not in kept.warnings[0]
     page = (session / "results" / "live.html").read_text()
     assert "IMG_0027.png" in page and "Every planned image is in." in page
     # bind afterwards proposes the fix; the camera folder was never written

@@ -364,6 +364,9 @@ class Watcher:
             for p in ok:
                 x = self.bound[p]
                 old = [w for w in x.warnings if w.startswith("step:")]
+                if p != pos and old and p in current:  # confirmed by the next image: no hedge now
+                    x.warnings = [w for w in x.warnings if not w.startswith("step:")] + [
+                        "step: " + current[p].message]
                 if p != pos and old and p not in current:
                     x.warnings = [w for w in x.warnings if not w.startswith("step:")]
                     retracted.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
