@@ -9,7 +9,9 @@ folder, reading and hashing the file, decoding it, finding and fitting the
 markers, the angle, the step and image checks, and rewriting binding.json and
 live.html. Decoding is measured inside the tick and subtracted ("excluding
 decoding", the issue's target: ≤ 50 ms median and 95th percentile). One core (one
-BLAS/OpenCV thread); nothing cached (a fresh output folder per run).
+BLAS/OpenCV thread); nothing cached (a fresh output folder per run). The CPU time of
+the tick, less the CPU time of decoding the same file, is printed beside the wall
+time: on a shared machine the wall time also holds the time spent waiting for a core.
 
     python benchmarks/bench_live.py [--runs 3]
 """
@@ -40,7 +42,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def one_run(shots, session_dir: Path, work: Path) -> np.ndarray:
-    """Per photograph: (tick ms excluding decoding, decode ms, tick ms), shape (n, 3)."""
+    """Per photograph: (tick ms excluding decoding, decode ms, tick ms, tick CPU ms
+    excluding decoding CPU ms), shape (n, 4). Wall times are what the target is about;
+    CPU times (this process's) tell how much of them is work and how much waiting for
+    a core on a shared machine."""
+    from vision_torsion.images import decode_image
+
     camera = work / "camera"
     camera.mkdir()
     out = []
@@ -50,12 +57,15 @@ def one_run(shots, session_dir: Path, work: Path) -> np.ndarray:
             path.write_bytes(shot.png)
             os.utime(path, (1.7e9 + 20 * k, 1.7e9 + 20 * k))  # complete: taken a while ago
             n = len(w.timings)
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             w.tick()
-            total = time.perf_counter() - t0
+            total, cpu = time.perf_counter() - t0, time.process_time() - c0
             assert len(w.timings) == n + 1, "the photograph was not taken in by one tick"
             decode = w.timings[-1]["decode"]
-            out.append((1e3 * (total - decode), 1e3 * decode, 1e3 * total))
+            c1 = time.process_time()
+            decode_image(shot.png, name="x.png", keep_integers=True)
+            decode_cpu = time.process_time() - c1
+            out.append((1e3 * (total - decode), 1e3 * decode, 1e3 * total, 1e3 * (cpu - decode_cpu)))
     return np.array(out)
 
 
@@ -78,11 +88,13 @@ def main(argv=None) -> int:
     print(f"live path of watch, standard scene, {len(shots)} photographs per run, one core; "
           f"{stamp}, load average {load:.2f}")
     print()
-    print("| run | median (ms) | 95th pct (ms) | max (ms) | decode median (ms) | tick incl. decode, median (ms) |")
-    print("|---:|---:|---:|---:|---:|---:|")
+    print("| run | median (ms) | 95th pct (ms) | max (ms) | decode median (ms) | tick incl. decode, median (ms) "
+          "| CPU excl. decode, median (ms) | CPU excl. decode, 95th pct (ms) |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for r, a in enumerate(rows, 1):
         print(f"| {r} | {np.median(a[:, 0]):.1f} | {np.percentile(a[:, 0], 95):.1f} | "
-              f"{a[:, 0].max():.1f} | {np.median(a[:, 1]):.1f} | {np.median(a[:, 2]):.1f} |")
+              f"{a[:, 0].max():.1f} | {np.median(a[:, 1]):.1f} | {np.median(a[:, 2]):.1f} | "
+              f"{np.median(a[:, 3]):.1f} | {np.percentile(a[:, 3], 95):.1f} |")
     worst95 = max(np.percentile(a[:, 0], 95) for a in rows)
     worst50 = max(np.median(a[:, 0]) for a in rows)
     verdict = "met" if worst95 <= 50 and worst50 <= 50 else "NOT met"

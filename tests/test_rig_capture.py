@@ -197,7 +197,7 @@ def test_watch_in_real_time_and_resume(script, tmp_path):
         threading.Timer(1.0, stop.set).start()
 
     threading.Thread(target=shoot).start()
-    res = watch_session(session, camera_dir=camera, poll_s=0.02, settle_s=0.1, report=False,
+    res = watch_session(session, camera_dir=camera, poll_s=0.02, settle_s=0.1,
                         stop=stop, echo=seen.append)
     assert res.n_bound == 5 and not res.interrupted
     # resumed: the same five files, from the cache, bound to the same rows

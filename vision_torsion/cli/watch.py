@@ -41,8 +41,16 @@ def run(args) -> int:
     """Watch until Ctrl-C or every planned image is in; 1 when a photograph had a warning."""
     from ..session.watch import watch_session
 
+    def report(session_dir, out_dir):
+        from ..report.session_report import report_session
+
+        rep = report_session(session_dir, out_dir=out_dir, jobs=1)
+        print(f"report: {rep.files.report_html}")
+        return rep
+
     res = watch_session(args.session_dir, camera_dir=args.camera_dir, out_dir=args.out_dir,
-                        poll_s=args.poll, settle_s=args.settle, report=not args.no_report)
+                        poll_s=args.poll, settle_s=args.settle,
+                        finish=None if args.no_report else report)
     print(f"{res.n_bound} of {res.n_rows} planned images bound; {res.n_warnings} with warnings; "
           f"live page {res.page}")
     return 1 if res.n_warnings else 0

@@ -3,7 +3,9 @@
 :class:`Watcher` is the testable core: each :meth:`Watcher.tick` looks at the
 camera folder once (no sleeping, the clock passed in), and returns what happened
 as :class:`WatchEvent` values. :func:`watch_session` calls it in a loop, prints the
-events, and ends on Ctrl-C (or when every planned image is in) with the report.
+events, and ends on Ctrl-C (or when every planned image is in) by calling its
+`finish` (the ``watch`` command passes one that writes the report: the report is
+a layer above the session, so the session layer does not call it itself).
 
 A tick:
 
@@ -447,9 +449,8 @@ class WatchResult:
         Photographs with a warning.
     page : pathlib.Path or None
         The live page.
-    report : SessionReport or None
-        The report written at the end (None with ``report=False`` or when nothing
-        could be reported).
+    report : object or None
+        What `finish` returned (the ``watch`` command: the SessionReport), or None.
     interrupted : bool
         Ended by Ctrl-C.
     """
@@ -463,9 +464,9 @@ class WatchResult:
 
 
 def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float = 0.5,
-                  settle_s: float = 1.0, give_up_s: float = 10.0, report: bool = True,
+                  settle_s: float = 1.0, give_up_s: float = 10.0, finish=None,
                   stop=None, echo=None) -> WatchResult:
-    """Follow a session while it is shot; end with the report.
+    """Follow a session while it is shot; end with `finish` (the report).
 
     Parameters
     ----------
@@ -479,8 +480,10 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
         Seconds between looks at the folder.
     settle_s, give_up_s : float
         See :class:`Watcher`.
-    report : bool
-        Write the report (:func:`~vision_torsion.report.session_report.report_session`) at the end.
+    finish : callable, optional
+        Called at the end, when a photograph was bound, with the session folder and
+        `out_dir` (e.g. ``lambda s, o: report_session(s, out_dir=o)``); its result is
+        :attr:`WatchResult.report`.
     stop : threading.Event, optional
         Set it to end the watch (besides Ctrl-C, and every row having its image).
     echo : callable, optional
@@ -517,11 +520,8 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
             interrupted = True
             echo(WatchEvent("stopped", "", "stopped; run the same command again to resume"))
     rep = None
-    if report and watcher.bound:
-        from ..report.session_report import report_session
-
-        rep = report_session(watcher.session.folder, out_dir=out_dir, jobs=1)
-        echo(WatchEvent("report", "", f"report: {rep.files.report_html}"))
+    if finish is not None and watcher.bound:
+        rep = finish(watcher.session.folder, out_dir)
     return WatchResult(n_bound=len(watcher.bound), n_rows=len(watcher.rows),
                        n_warnings=sum(1 for b in watcher.bound.values() if b.warnings),
                        page=watcher.out / LIVE_PAGE_NAME, report=rep, interrupted=interrupted)
