@@ -221,3 +221,25 @@ def test_watch_command_ends_when_every_image_is_in(rig, capsys):
     assert status == (1 if warned else 0)
     assert "  10/10  IMG_0010.png → line 11: orientation 0, cycle 1, positive_loading, step 2" in out
     assert (folder / "results" / "report.html").is_file()  # it ends with the report
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_everything(rig):
+    from vision_torsion.session.watch import watch_session
+
+    folder, cam, plan, photos = rig
+    for k, row in enumerate(plan.rows[:3]):
+        put(cam, f"IMG_{k + 1:04d}.png", photos[row["image"]])
+    seen = []
+
+    def echo(event):  # Ctrl-C right after the second photograph is shown
+        seen.append(event)
+        if event.kind == "shot" and event.file == "IMG_0002.png":
+            raise KeyboardInterrupt
+
+    res = watch_session(folder, camera_dir=cam, poll_s=0.01, settle_s=0.0, echo=echo)
+    assert res.interrupted and seen[-1].message == "stopped; run the same command again to resume"
+    # what was measured is kept: the binding is written and the cache holds the results
+    from vision_torsion.session.binding import load_binding
+
+    assert len(load_binding(folder).images) >= 2
+    assert "finished" in (folder / "results" / "live.html").read_text()
