@@ -669,3 +669,12 @@ def test_the_pandas_free_csv_writer_writes_what_pandas_writes(tmp_path):
     fast = fileio.write_records_csv(tmp_path / "fast.csv", columns, records).read_bytes()
     slow = fileio.write_csv(tmp_path / "pandas.csv", pd.DataFrame.from_records(records, columns=columns)).read_bytes()
     assert fast == slow
+
+
+def test_plan_and_synth_refuse_an_unwritable_folder_before_writing(capsys, tmp_path):
+    (tmp_path / "file").write_text("x")
+    code, _, err = run(capsys, "plan", tmp_path / "file" / "session", "--max-torque", "0.36",
+                       "--step-mass", "0.02", "--arm-radius", "0.05")
+    assert code == 2 and "file" in err and "cannot create the output folder" in err
+    code, _, err = run(capsys, "synth", "session", tmp_path / "file", "--scene", "paper_session")
+    assert code == 2 and "it is a file, not a folder" in err

@@ -76,7 +76,10 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Plan the session; returns 0."""
+    from ..fileio import check_output_dir
     from ..session.plan import plan_session
+
+    check_output_dir(args.out_dir)  # writable, with space, before anything is written
 
     plan = plan_session(
         args.out_dir, max_torque_nm=args.max_torque, step_mass_kg=args.step_mass,

@@ -47,6 +47,9 @@ def run_accuracy(args) -> int:
     from ..synthetic.folders import write_accuracy_folder
 
     check_new_folder(args.out_dir, force=args.force)
+    from ..fileio import check_output_dir
+
+    check_output_dir(args.out_dir)  # writable, with space, before rendering
 
     out = write_accuracy_folder(load_scene(args.scene), args.out_dir, angles_deg=args.angles, seed=args.seed, progress=progress_enabled(args))
     print(f"wrote accuracy folder {out}")
@@ -57,6 +60,9 @@ def run_session(args) -> int:
     from ..synthetic.session import load_session_scene, write_session_folder
 
     check_new_folder(args.out_dir, force=args.force)
+    from ..fileio import check_output_dir
+
+    check_output_dir(args.out_dir)  # writable, with space, before rendering
     scene, spec = load_session_scene(args.scene)
     out = write_session_folder(scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args),
                                overwrite=args.force)
