@@ -55,11 +55,21 @@ def test_no_orientation_effect_when_there_is_none(session):
 
 
 def test_orientation_effect_detected():
-    df = simulate_measurements(**TRUTH, orientations_deg=(0, 60, 120), orientation_k_u={60: 4.6},
+    # two cycles per orientation: the effect (4.6 vs 4.4) is tested against the cycle-to-cycle scatter
+    df = simulate_measurements(**TRUTH, orientations_deg=(0, 60, 120), orientation_k_u={60: 4.6}, n_cycles=2,
                                rng=np.random.default_rng(2))
     a = analyze_session(df, **FAST)
     assert a.summary["bilinear_k_u"]["orientation_test"]["significant"] is True
     assert a.summary["k_positive_unloading"]["orientation_test"]["p_value"] < 1e-6
+
+
+def test_orientation_effect_with_one_cycle_is_not_tested():
+    df = simulate_measurements(**TRUTH, orientations_deg=(0, 60, 120), orientation_k_u={60: 4.6},
+                               rng=np.random.default_rng(2))
+    t = analyze_session(df, **FAST).summary["k_positive_unloading"]["orientation_test"]
+    assert t["significant"] is None and t["reason"].startswith("one cycle per orientation")
+    # sd of (4.4, 4.6, 4.4) over their mean: 2.6 %
+    assert t["effect_size"] == pytest.approx(np.std([4.4, 4.6, 4.4], ddof=1) / np.mean([4.4, 4.6, 4.4]), rel=0.05)
 
 
 def test_orientation_test_reasons():
@@ -70,7 +80,7 @@ def test_orientation_test_reasons():
 def test_tables_and_to_dict(session):
     df, a = session
     d = a.to_dict()
-    assert d["schema"] == "vision-torsion/analysis-summary/1"
+    assert d["schema"] == "vision-torsion/analysis-summary/2"
     assert set(d) >= {"settings", "counts", "uncertainty", "summary", "per_orientation", "loops", "phases",
                       "issues", "failed_images"}
     assert d["counts"] == {"images": len(df), "images_failed": 0, "loops": 4, "orientations": 2,
@@ -125,7 +135,10 @@ def test_too_few_steps_and_failed_images():
     assert set(a.failed_images["message"]) == {"marker not found"}
     assert any("excluded: marker not found" in m for m in msgs)
     # the loop still exists but lacks +Tmax: energy is not computed from a wrong polygon
-    assert a.summary["k_negative_loading"]["n"] == 1
+    assert a.summary["loop_energy"]["n"] == 0
+    # negative loading switches stiffness: given as its two stiffnesses, not one line
+    assert a.summary["k_negative_loading"]["n"] == 0
+    assert a.summary["k_negative_loading_below"]["mean"] == pytest.approx(TRUTH["k_l"], rel=0.01)
 
 
 def test_torque_never_reverses():

@@ -31,9 +31,11 @@ __all__ = ["PHASES", "LOOP_PHASES", "REQUIRED_COLUMNS", "validate_measurements",
 LOOP_PHASES = CYCLE_PHASES
 #: Columns ``measurements.csv`` must have (:data:`vision_torsion.measurements.MEASUREMENT_COLUMNS`).
 REQUIRED_COLUMNS = MEASUREMENT_COLUMNS
+#: Optional column: the common (g, r scale) part of ``torque_std_nm``.
+OPTIONAL_COLUMNS = ("torque_common_std_nm",)
 
 
-def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+def validate_measurements(measurements: pd.DataFrame, *, with_closing: bool = False):
     """Check a measurements table and split it into usable rows and failed images.
 
     Parameters
@@ -51,6 +53,10 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
     failed : pandas.DataFrame
         ``image, orientation_deg, cycle, phase, step, message`` of every image that
         cannot be used, with the reason.
+    closing : pandas.DataFrame
+        Only with ``with_closing=True``: the usable ``closing`` rows.
+
+    Row numbers in messages are CSV lines (header = line 1, first data row = line 2).
 
     Raises
     ------
@@ -63,7 +69,9 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
     """
     if not isinstance(measurements, pd.DataFrame):
         raise AnalysisError(f"measurements must be a pandas DataFrame, got {type(measurements).__name__}")
-    df = read_measurements(measurements, name="measurements table").loc[:, list(REQUIRED_COLUMNS)]
+    raw = read_measurements(measurements, name="measurements table")
+    optional = [c for c in OPTIONAL_COLUMNS if c in raw.columns]
+    df = raw.loc[:, list(REQUIRED_COLUMNS) + optional]
 
     reason = pd.Series("", index=df.index)
     not_ok = df["status"] != "ok"
@@ -74,12 +82,16 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
     failed_mask = reason != ""
     failed = df.loc[failed_mask, ["image", "orientation_deg", "cycle", "phase", "step"]].copy()
     failed["message"] = reason[failed_mask]
+    closing = df.loc[~failed_mask & (df["phase"] == "closing")].copy().reset_index(drop=True)
     usable = df.loc[~failed_mask & df["phase"].isin(LOOP_PHASES)].copy()
     if usable.empty:
         raise AnalysisError("measurements table has no usable rows (status == 'ok' with finite torque and angle)")
     usable["_phase_order"] = usable["phase"].map({p: i for i, p in enumerate(PHASES)})
     usable = usable.sort_values(["orientation_deg", "cycle", "_phase_order", "step"], kind="stable")
-    return usable.drop(columns="_phase_order").reset_index(drop=True), failed.reset_index(drop=True)
+    usable = usable.drop(columns="_phase_order").reset_index(drop=True)
+    if with_closing:
+        return usable, failed.reset_index(drop=True), closing
+    return usable, failed.reset_index(drop=True)
 
 
 @dataclass(frozen=True)
@@ -102,6 +114,19 @@ class Loop:
     groups: np.ndarray
     images: np.ndarray
     torque_sources: np.ndarray | None = None
+    source_kinds: np.ndarray | None = None
+    torque_local_std_nm: np.ndarray | None = None
+
+    def local_sources(self) -> np.ndarray:
+        """:meth:`sources` without the common g, r scale (it leaves no residual in a fit)."""
+        src = self.sources()
+        if self.source_kinds is None:
+            return src
+        return src[:, np.asarray(self.source_kinds) != "g_r"]
+
+    def local_std(self) -> np.ndarray:
+        """Image-to-image part of the torque 1σ (N·m; the g, r scale part removed)."""
+        return self.torque_std_nm if self.torque_local_std_nm is None else self.torque_local_std_nm
 
     def sources(self) -> np.ndarray:
         """``torque_sources``, or the ``"level"`` matrix from ``groups`` and ``torque_std_nm``."""
@@ -152,7 +177,11 @@ def build_loops(usable: pd.DataFrame, *, torque_correlation="level", rig=None) -
     weight piece) shares its error across orientations and cycles (see
     :mod:`.uncertainty`, :func:`.uncertainty.torque_sources`).
     """
-    sources, groups = torque_sources(usable, correlation=torque_correlation, rig=rig)
+    from .fitcheck import local_torque_std
+
+    sources, groups, kinds = torque_sources(usable, correlation=torque_correlation, rig=rig, return_kinds=True)
+    common = usable["torque_common_std_nm"].to_numpy(float) if "torque_common_std_nm" in usable else None
+    local = local_torque_std(usable["torque_std_nm"].to_numpy(float), common)
     loops = []
     for (orient, cycle), idx in usable.groupby(["orientation_deg", "cycle"], sort=True).indices.items():
         sub = usable.iloc[idx]
@@ -165,6 +194,8 @@ def build_loops(usable: pd.DataFrame, *, torque_correlation="level", rig=None) -
             angle_std_rad=np.radians(sub["angle_std_deg"].to_numpy(float)),
             groups=groups[idx],
             images=sub["image"].astype(str).to_numpy(dtype=object),
-            torque_sources=compact_sources(sources[idx]),
+            torque_sources=compact_sources(sources[idx], kinds)[0],
+            source_kinds=compact_sources(sources[idx], kinds)[1],
+            torque_local_std_nm=local[idx],
         ))
     return loops

@@ -201,7 +201,8 @@ def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, torqu
     -------
     dict
         ``value`` (N·m/rad), ``std_angle``, ``std_torque`` (1σ, N·m/rad),
-        ``residual_rms_rad``, ``n_points``.
+        ``residual_rms_rad``, ``n_points``, ``residual_rad`` (per sample) and
+        ``compliance_rad_per_nm`` (the fitted slope, for the lack-of-fit gate).
 
     Raises
     ------
@@ -241,6 +242,8 @@ def phase_stiffness(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, torqu
         "std_torque": float(np.sqrt(cov_t[1, 1])) * k * k,
         "residual_rms_rad": float(np.sqrt(np.mean(resid**2))),
         "n_points": int(tau.size),
+        "residual_rad": resid,
+        "compliance_rad_per_nm": float(b),
     }
 
 

@@ -1,28 +1,46 @@
 """``analyze_session``: every figure of every loop of a session, with uncertainties,
-summaries, and a list of what could not be computed and why.
+summaries, checks on the data, and a list of what could not be computed and why.
 
-Figures (``figure`` name → unit; see :mod:`.metrics` and :mod:`.models` for the
-definitions):
+Figures (``figure`` name → unit; see :mod:`.metrics`, :mod:`.models`,
+:mod:`.preisach`, :mod:`.catalogue` for the definitions), and what happens when a
+check fails:
 
-==================================  ============  ====================================
-figure                              unit          method of the uncertainty
-==================================  ============  ====================================
-k_positive_unloading, ...           nm_per_rad    first order (slope), per phase
-hysteresis, hysteresis_loss         deg           Monte Carlo
-lost_motion_3pct, lost_motion_4pct  deg           Monte Carlo
-secant_stiffness                    nm_per_rad    Monte Carlo
-loop_energy                         j             Monte Carlo
-loss_factor                         1             Monte Carlo
-k1, k2, k3 / t1, t2                 nm_per_rad/nm first order (piecewise-linear fit)
-bilinear_k_u, bilinear_k_l          nm_per_rad    first order (fit)
-bilinear_tau_c                      nm            first order (fit)
-bilinear_residual_rms               deg           (none: a fit statistic)
-bouc_wen_k_e, bouc_wen_z_s, ...     various       first order (fit)
-==================================  ============  ====================================
+=====================================  ============  =============  ===============================
+figure                                 unit          uncertainty    when its check fails
+=====================================  ============  =============  ===============================
+k_<phase> (straight line)              nm_per_rad    first order    lack of fit: **withheld**
+k_<phase>_below / _above, switch_nm    nm_per_rad/nm first order    lack of fit: **withheld**
+k_<phase>_secant (phase ends)          nm_per_rad    first order    phase start/end missing: withheld
+hysteresis, hysteresis_loss            deg           Monte Carlo    gap in the levels: **withheld**
+lost_motion_<x>pct                     deg           Monte Carlo    ±x·T not bracketed: withheld
+secant_stiffness                       nm_per_rad    Monte Carlo    ends not bracketed: withheld
+loop_energy, loss_factor               j, 1          Monte Carlo    gap in the levels: withheld
+k1, k2, k3 (catalogue T1, T2 fixed)    nm_per_rad    first order    lack of fit: **flagged**, u×√χ²_red
+bilinear_k_u, _k_l, _tau_c             various       first order    lack of fit: **flagged**, u×√χ²_red
+preisach_residual_rms                  deg           (fit stat.)    lack of fit: **flagged**
+bouc_wen_* (optional)                  various       first order    lack of fit: flagged, u×√χ²_red;
+                                                                    a parameter on its bound: flagged
+=====================================  ============  =============  ===============================
+
+A straight-line slope is withheld rather than inflated because it has no meaning
+when the stiffness switches inside the phase; the phase is then described by its two
+stiffnesses (below/above the switch) and its secant, which sit beside it. Model
+parameters keep a meaning when a model is only approximately right, so they are
+shown, flagged, with the uncertainty multiplied by ``√χ²_red`` (the lack of fit
+becomes part of the uncertainty budget).
+
+Every phase range starts at the phase's **starting image** (the last image of the
+phase before: the paper's "0 to −0.36" for negative loading).
+
+Checks on the data (:mod:`.checks`): the angle sign (an inverted sign withholds
+every figure with the advice to set ``angle_sign = -1``), gaps (nothing is
+interpolated across a failed image), loop closure and creep (the ``closing`` image),
+points far off their loop's model (listed by image). Each is an :class:`Issue`.
 
 Torque errors follow the weight pieces when the rig is known (``rig=...``,
 ``torque_correlation="pieces"``), else one shared error per torque level
-(``"level"``); see :mod:`.uncertainty` for both models and the propagation formulas.
+(``"level"``); pulley friction is a torque opposing the motion; see
+:mod:`.uncertainty`.
 
 A figure that cannot be computed is NaN in the tables and None in JSON, and an
 :class:`Issue` says which orientation/cycle and why; it is never replaced by 0.
@@ -37,23 +55,41 @@ import numpy as np
 import pandas as pd
 
 from ..errors import AnalysisError
-from . import metrics
+from . import checks, metrics
+from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
+from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
+from .preisach import fit_preisach
 from .summary import summarise_figures
-from .uncertainty import COVERAGE_FACTOR, check_rig, compact_sources, monte_carlo_std, torque_sources
+from .uncertainty import (
+    COVERAGE_FACTOR,
+    check_rig,
+    compact_sources,
+    least_squares_weights,
+    monte_carlo_std,
+    numeric_jacobian,
+    std_by_kind,
+    torque_sources,
+)
 
-__all__ = ["Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA"]
+__all__ = ["Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA", "FIGURE_COLUMNS"]
 
 #: Identifies the layout of :meth:`SessionAnalysis.to_dict` (summary.json).
-SUMMARY_SCHEMA = "vision-torsion/analysis-summary/1"
+SUMMARY_SCHEMA = "vision-torsion/analysis-summary/2"
 
 _RAD_TO_ARCMIN = 180.0 * 60.0 / math.pi
-_MC_FIGURES = {
-    "hysteresis": "deg", "hysteresis_loss": "deg", "lost_motion_3pct": "deg", "lost_motion_4pct": "deg",
-    "secant_stiffness": "nm_per_rad", "loop_energy": "j", "loss_factor": "1",
-}
 _MIN_PHASE_POINTS_FOR_LOOP = 2
+_TOL = 1e-9  # N·m: torque levels closer than this are the same level
+#: Kinds of torque-error source (:func:`.uncertainty.torque_sources`) kept apart in the budget.
+SOURCE_KINDS = ("weights", "g_r", "friction", "level")
+#: Columns of :attr:`SessionAnalysis.figures`.
+FIGURE_COLUMNS = ["orientation_deg", "cycle", "figure", "unit", "value", "std", "std_angle", "std_torque", "u95",
+                  "method", "flag", *[f"std_{k}" for k in SOURCE_KINDS], "std_lack_of_fit", "reduced_chi2"]
+
+
+def _lm_name(fraction: float) -> str:
+    return f"lost_motion_{round(100 * fraction, 6):g}pct".replace(".", "p")
 
 
 @dataclass(frozen=True)
@@ -101,9 +137,14 @@ class SessionAnalysis:
     loop_data : list of Loop
         The samples of each loop (for plots).
     fits : dict
-        ``{(orientation_deg, cycle): {"bilinear": BilinearFit | None, "bouc_wen": BoucWenFit | None}}``.
+        ``{(orientation_deg, cycle): {"bilinear": BilinearFit | None, "bouc_wen": BoucWenFit | None,
+        "preisach": PreisachFit | None, "checks": {model: LackOfFit}}}``.
     n_images : int
         Rows of the input table (including reference and failed images).
+    checks : dict
+        ``angle_sign_inverted`` (bool), ``closure`` (list of closure/creep comparisons,
+        :func:`.checks.closure_checks`), ``outliers`` (images beyond 4σ of their
+        loop's model).
     """
 
     figures: pd.DataFrame
@@ -117,6 +158,7 @@ class SessionAnalysis:
     loop_data: list = field(repr=False)
     fits: dict = field(repr=False)
     n_images: int = 0
+    checks: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """JSON-ready dict (the content of summary.json); keys documented in the README.
@@ -151,7 +193,26 @@ class SessionAnalysis:
             "phases": _records(self.phases),
             "issues": [asdict(i) for i in self.issues],
             "failed_images": _records(self.failed_images),
+            "checks": _jsonable(self.checks),
+            "model_checks": [
+                {"orientation_deg": o, "cycle": c, "model": m, **chk.to_dict()}
+                for (o, c), f in self.fits.items() for m, chk in f.get("checks", {}).items()
+            ],
         }
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if np.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
 
 
 def _records(frame: pd.DataFrame) -> list:
@@ -165,55 +226,171 @@ class _Collector:
     def __init__(self, loop: Loop, issues: list):
         self.loop, self.issues, self.rows = loop, issues, []
 
-    def add(self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method=""):
-        std = float(np.hypot(std_angle, std_torque))
-        self.rows.append({
+    def add(self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method="", *, parts=None, check=None,
+            flag=""):
+        """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u."""
+        infl, red = 1.0, np.nan
+        if check is not None and check.testable:
+            red = check.reduced_chi2
+            if check.rejected:
+                infl = check.inflation
+                flag = "; ".join(x for x in (flag, f"flagged, uncertainty ×{infl:.3g} (√χ²_red): {check.describe()}") if x)
+        std0 = float(np.hypot(std_angle, std_torque))
+        std = std0 * infl
+        row = {
             "orientation_deg": self.loop.orientation_deg, "cycle": self.loop.cycle, "figure": figure, "unit": unit,
-            "value": float(value), "std": std, "std_angle": float(std_angle), "std_torque": float(std_torque),
-            "u95": COVERAGE_FACTOR * std, "method": method,
-        })
+            "value": float(value), "std": std, "std_angle": float(std_angle) * infl,
+            "std_torque": float(std_torque) * infl, "u95": COVERAGE_FACTOR * std, "method": method, "flag": flag,
+            "std_lack_of_fit": std0 * math.sqrt(max(infl**2 - 1.0, 0.0)) if np.isfinite(std0) else np.nan,
+            "reduced_chi2": red,
+        }
+        for k in SOURCE_KINDS:
+            row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
+        self.rows.append(row)
+        if flag:
+            self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, flag))
 
     def fail(self, figure, unit, reason):
         self.add(figure, unit, np.nan)
         self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, reason))
 
 
-def _tolerance(tau: np.ndarray) -> float:
-    levels = np.unique(tau)
-    gaps = np.diff(levels)
-    return 0.5 * float(gaps.min()) if gaps.size else 0.0
+def _expected_start_end(phase, tmax, tmin):
+    return {"positive_unloading": (tmax, 0.0), "negative_loading": (0.0, tmin),
+            "negative_unloading": (tmin, 0.0), "positive_loading": (0.0, tmax)}[phase]
 
 
-def _phase_figures(col: _Collector, phase_rows: list):
+_PREVIOUS = {"negative_loading": "positive_unloading", "negative_unloading": "negative_loading",
+             "positive_loading": "negative_unloading", "positive_unloading": "positive_loading"}
+
+
+def _phase_samples(seq: pd.DataFrame, loop: Loop, phase: str, tmax: float, tmin: float):
+    """Indices (into ``seq``) of a phase's samples, its starting image first when it was measured."""
+    pos = np.flatnonzero(((seq["cycle"] == loop.cycle) & (seq["phase"] == phase)).to_numpy())
+    if pos.size == 0:
+        return pos
+    start, _ = _expected_start_end(phase, tmax, tmin)
+    first = seq.iloc[pos[0]]
+    if abs(float(first["torque_nm"]) - start) > _TOL and pos[0] > 0:
+        prev = seq.iloc[pos[0] - 1]
+        if prev["phase"] == _PREVIOUS[phase] and abs(float(prev["torque_nm"]) - start) <= _TOL:
+            pos = np.concatenate([[pos[0] - 1], pos])
+    return pos
+
+
+def _parts_first_order(gt_row_kinds: dict, index: int, scale: float) -> dict:
+    return {k: float(v[index]) * scale for k, v in gt_row_kinds.items()}
+
+
+def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_local: np.ndarray,
+                   sources: np.ndarray, kinds: np.ndarray, levels: np.ndarray):
+    """Stiffness of each phase: straight line (gated), two stiffnesses if it switches, secant."""
     loop = col.loop
+    tau_all = seq["torque_nm"].to_numpy(float)
+    tmax, tmin = float(tau_all.max()), float(tau_all.min())
     for phase in LOOP_PHASES:
-        m = loop.phase == phase
         name = f"k_{phase}"
-        tau = loop.torque_nm[m]
+        pos = _phase_samples(seq, loop, phase, tmax, tmin)
+        tau = tau_all[pos]
+        th = np.radians(seq["angle_deg"].to_numpy(float)[pos])
+        sa = np.radians(seq["angle_std_deg"].to_numpy(float)[pos])
+        st = rows_local[pos]
+        src, knd = compact_sources(sources[pos], kinds)
+        src_local = src[:, np.asarray(knd) != "g_r"]
+        start, end = _expected_start_end(phase, tmax, tmin)
         row = {"orientation_deg": loop.orientation_deg, "cycle": loop.cycle, "phase": phase,
                "torque_from_nm": float(tau[0]) if tau.size else np.nan,
-               "torque_to_nm": float(tau[-1]) if tau.size else np.nan, "n_points": int(m.sum())}
-        if not m.any():
+               "torque_to_nm": float(tau[-1]) if tau.size else np.nan, "n_points": int(pos.size),
+               "stiffness_nm_per_rad": np.nan, "stiffness_std_nm_per_rad": np.nan, "residual_rms_deg": np.nan,
+               "reduced_chi2": np.nan, "stiffness_below_nm_per_rad": np.nan, "stiffness_above_nm_per_rad": np.nan,
+               "switch_torque_nm": np.nan, "secant_nm_per_rad": np.nan, "secant_std_nm_per_rad": np.nan,
+               "note": ""}
+        if pos.size == 0:
             col.fail(name, "nm_per_rad", f"phase {phase} is missing (no usable image)")
+            _finish_phase_row(row, phase_rows)
+            continue
+        lo, hi = sorted((start, end))
+        expected = levels[(levels >= lo - _TOL) & (levels <= hi + _TOL)]
+        missing = checks.missing_levels(tau, expected)
+        switched = False
+        try:
+            res = metrics.phase_stiffness(tau, th, angle_std_rad=sa, torque_std_nm=st, torque_sources=src)
+        except AnalysisError as exc:
+            col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
             res = None
-        else:
-            try:
-                res = metrics.phase_stiffness(tau, loop.angle_rad[m], angle_std_rad=loop.angle_std_rad[m],
-                                              torque_std_nm=loop.torque_std_nm[m],
-                                              torque_sources=loop.sources()[m])
-            except AnalysisError as exc:
-                col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
-                res = None
         if res is not None:
-            col.add(name, "nm_per_rad", res["value"], res["std_angle"], res["std_torque"], "first-order")
-            std = math.hypot(res["std_angle"], res["std_torque"])
-            row.update(stiffness_nm_per_rad=res["value"], stiffness_std_nm_per_rad=std,
-                       residual_rms_deg=math.degrees(res["residual_rms_rad"]))
-        else:
-            row.update(stiffness_nm_per_rad=np.nan, stiffness_std_nm_per_rad=np.nan, residual_rms_deg=np.nan)
-        row["stiffness_nm_per_arcmin"] = row["stiffness_nm_per_rad"] / _RAD_TO_ARCMIN
-        row["stiffness_std_nm_per_arcmin"] = row["stiffness_std_nm_per_rad"] / _RAD_TO_ARCMIN
-        phase_rows.append(row)
+            chk = lack_of_fit(res["residual_rad"], angle_std_rad=sa, torque_std_nm=st,
+                              compliance_rad_per_nm=res["compliance_rad_per_nm"], n_params=2, torque_sources=src_local)
+            row.update(residual_rms_deg=math.degrees(res["residual_rms_rad"]), reduced_chi2=chk.reduced_chi2)
+            if chk.rejected:
+                switched = True
+                col.fail(name, "nm_per_rad", f"phase {phase}: a straight line does not fit, withheld ({chk.describe()}); "
+                         "the phase is given as its stiffness below and above the switch, and its secant")
+                row["note"] = "straight line rejected (lack of fit)"
+            else:
+                col.add(name, "nm_per_rad", res["value"], res["std_angle"], res["std_torque"], "first-order",
+                        parts=_slope_parts(tau, th, sa, st, src, knd, res["value"]), check=chk)
+                row.update(stiffness_nm_per_rad=res["value"],
+                           stiffness_std_nm_per_rad=math.hypot(res["std_angle"], res["std_torque"]))
+        if switched:
+            _switch_figures(col, row, phase, tau, th, sa, st, src_local)
+        _phase_secant(col, row, phase, tau, th, sa, seq["torque_std_nm"].to_numpy(float)[pos], start, end, missing)
+        _finish_phase_row(row, phase_rows)
+
+
+def _slope_parts(tau, th, sa, st, src, knd, k):
+    """Torque part of a phase slope by kind of source (first order)."""
+    b = 1.0 / k
+    x = np.column_stack([np.ones_like(tau), tau])
+    w = 1.0 / np.maximum(sa**2 + (b * st) ** 2, 1e-300)
+    g = np.linalg.solve(x.T @ (x * w[:, None]), (x * w[:, None]).T)
+    gt = g @ (b * src)
+    parts = std_by_kind(gt, knd)
+    return {kk: float(v[1]) * k * k for kk, v in parts.items()}
+
+
+def _switch_figures(col, row, phase, tau, th, sa, st, src_local):
+    names = (f"k_{phase}_below", f"k_{phase}_above", f"switch_{phase}")
+    try:
+        sw = fit_switch(tau, th, angle_std_rad=sa, torque_std_nm=st)
+    except AnalysisError as exc:
+        for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
+            col.fail(n, u, f"phase {phase}: {exc}")
+        return
+    chk = lack_of_fit(th - sw["model"], angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=sw["compliance"],
+                      n_params=sw["n_params"], torque_sources=src_local)
+    if chk.rejected:
+        for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
+            col.fail(n, u, f"phase {phase}: two stiffnesses with one switch do not fit either, withheld "
+                           f"({chk.describe()}); see the secant and the model fits")
+        return
+    for n, key in zip(names[:2], ("k_below", "k_above")):
+        col.add(n, "nm_per_rad", sw[key], sw["std_angle"][key], sw["std_torque"][key], "first-order", check=chk)
+    col.add(names[2], "nm", sw["switch_nm"], method="fit (switch torque from the phase start)")
+    row.update(stiffness_below_nm_per_rad=sw["k_below"], stiffness_above_nm_per_rad=sw["k_above"],
+               switch_torque_nm=sw["switch_nm"])
+
+
+def _phase_secant(col, row, phase, tau, th, sa, st, start, end, missing):
+    name = f"k_{phase}_secant"
+    if abs(tau[0] - start) > _TOL or abs(tau[-1] - end) > _TOL:
+        which = "starting" if abs(tau[0] - start) > _TOL else "last"
+        col.fail(name, "nm_per_rad", f"phase {phase}: its {which} image ({start if which == 'starting' else end:+.4g} "
+                 "N·m) is missing, so the secant over the phase cannot be formed")
+        return
+    try:
+        k, s_a, s_t = secant(tau, th, angle_std_rad=sa, torque_std_nm=st)
+    except AnalysisError as exc:
+        col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
+        return
+    col.add(name, "nm_per_rad", k, s_a, s_t, "first-order (two ends)")
+    row.update(secant_nm_per_rad=k, secant_std_nm_per_rad=math.hypot(s_a, s_t))
+
+
+def _finish_phase_row(row, phase_rows):
+    row["stiffness_nm_per_arcmin"] = row["stiffness_nm_per_rad"] / _RAD_TO_ARCMIN
+    row["stiffness_std_nm_per_arcmin"] = row["stiffness_std_nm_per_rad"] / _RAD_TO_ARCMIN
+    phase_rows.append(row)
 
 
 def _loop_problem(loop: Loop) -> str | None:
@@ -231,73 +408,138 @@ def _loop_problem(loop: Loop) -> str | None:
     return None
 
 
-def _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol):
-    fr_lo, fr_hi = settings["secant_interval"]
-    lm = settings["lost_motion_fractions"]
+def _mc_evaluator(is_desc, top, bottom, settings):
+    sec_lo, sec_hi = settings["secant_interval_nm"]
+    lm_ref = settings["lost_motion_reference_nm"]
 
     def evaluate(tau, th):
         td, yd, ta, ya = tau[:, is_desc], th[:, is_desc], tau[:, ~is_desc], th[:, ~is_desc]
-        hyst, loss = metrics.loop_width(td, yd, ta, ya, tol=tol)
+        hyst, loss = metrics.loop_width(td, yd, ta, ya, tol=_TOL)
         energy = metrics.loop_energy(tau, th)
         out = {
             "hysteresis": np.degrees(hyst), "hysteresis_loss": np.degrees(loss),
-            "secant_stiffness": metrics.secant_stiffness(td, yd, ta, ya, lower_nm=fr_lo * max_torque,
-                                                         upper_nm=fr_hi * max_torque, tol=tol),
+            "secant_stiffness": metrics.secant_stiffness(td, yd, ta, ya, lower_nm=sec_lo, upper_nm=sec_hi, tol=_TOL),
             "loop_energy": energy,
             "loss_factor": metrics.loss_factor(energy, tau[:, top].mean(1), th[:, top].mean(1),
                                                tau[:, bottom].mean(1), th[:, bottom].mean(1)),
         }
-        for name, f in zip(("lost_motion_3pct", "lost_motion_4pct"), lm):
-            out[name] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * max_torque, tol=tol))
+        for f in settings["lost_motion_fractions"]:
+            out[_lm_name(f)] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * lm_ref, tol=_TOL))
         return out
 
     return evaluate
 
 
-def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed: int):
+def _mc_units(settings):
+    units = {"hysteresis": "deg", "hysteresis_loss": "deg", "secant_stiffness": "nm_per_rad", "loop_energy": "j",
+             "loss_factor": "1"}
+    units.update({_lm_name(f): "deg" for f in settings["lost_motion_fractions"]})
+    return units
+
+
+def _gap_reasons(settings, tau, is_desc, levels) -> dict:
+    """Why each model-free figure would interpolate across a gap (figure → reason), from the runs' levels."""
+    runs = {"descending": np.unique(tau[is_desc]), "ascending": np.unique(tau[~is_desc])}
+    out = {}
+    holes = {}
+    for rn, lv in runs.items():
+        exp = levels[(levels >= lv.min() - _TOL) & (levels <= lv.max() + _TOL)] if lv.size else levels[:0]
+        miss = checks.missing_levels(lv, exp)
+        if miss:
+            holes[rn] = miss
+    if holes:
+        txt = "; ".join(f"{rn} run lacks {', '.join(f'{v:+.4g}' for v in m)} N·m" for rn, m in holes.items())
+        for name in ("hysteresis", "loop_energy", "loss_factor"):
+            out[name] = f"a failed image leaves a gap ({txt}): the loop would be interpolated across it, withheld"
+
+    def point(name, where):
+        for rn, at in where:
+            g = checks.gap_between(runs[rn], levels, at)
+            if g:
+                out[name] = (f"{at:+.4g} N·m is not bracketed by adjacent measured levels in the {rn} run "
+                             f"(missing {', '.join(f'{v:+.4g}' for v in g)} N·m): not interpolated across the gap, withheld")
+                return
+
+    point("hysteresis_loss", [("descending", 0.0), ("ascending", 0.0)])
+    lo, hi = settings["secant_interval_nm"]
+    point("secant_stiffness", [("ascending", lo), ("ascending", hi), ("descending", -lo), ("descending", -hi)])
+    for f in settings["lost_motion_fractions"]:
+        x = f * settings["lost_motion_reference_nm"]
+        point(_lm_name(f), [("descending", x), ("descending", -x), ("ascending", x), ("ascending", -x)])
+    return out
+
+
+def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.ndarray):
     loop = col.loop
     tau, th, th_std, tau_std, groups, is_desc, sources = loop.runs()
     top = groups == groups[np.argmax(tau)]
     bottom = groups == groups[np.argmin(tau)]
-    tol = _tolerance(tau)
-    evaluate = _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol)
+    evaluate = _mc_evaluator(is_desc, top, bottom, settings)
     nominal = evaluate(tau[None, :], th[None, :])
-    std_a, std_t = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources,
-                                   n_draws=settings["n_draws"], seed=seed)
-    for name, unit in _MC_FIGURES.items():
+    kinds = loop.source_kinds if loop.source_kinds is not None else np.array(["level"] * sources.shape[1], object)
+    std_a, std_t, by_kind = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources,
+                                            n_draws=settings["n_draws"], seed=seed, kinds=kinds)
+    gaps = _gap_reasons(settings, tau, is_desc, levels)
+    for name, unit in _mc_units(settings).items():
         v = float(nominal[name][0])
-        if np.isfinite(v):
-            col.add(name, unit, v, std_a[name], std_t[name], "monte-carlo")
+        if name in gaps:
+            col.fail(name, unit, gaps[name])
+        elif np.isfinite(v):
+            col.add(name, unit, v, std_a[name], std_t[name], "monte-carlo", parts=by_kind[name])
         else:
-            col.fail(name, unit, _mc_reason(name, tau, settings, max_torque))
+            col.fail(name, unit, _mc_reason(name, tau, settings))
+    return tau, th, th_std, is_desc, sources, kinds
+
+
+def _catalogue_figures(col: _Collector, settings: dict, runs):
+    tau, th, th_std, is_desc, sources, kinds = runs
+    loop = col.loop
     seg_mask = (is_desc & (tau <= 0)) | (~is_desc & (tau >= 0))
+    t, y, sa = tau[seg_mask], th[seg_mask], th_std[seg_mask]
+    branch = np.where(is_desc[seg_mask], -1, 1)
+    src, knd = compact_sources(sources[seg_mask], kinds)
+    src_local = src[:, np.asarray(knd) != "g_r"]
+    st_local = np.sqrt(np.sum(src_local**2, axis=1))
+    names = (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"))
+    breaks = settings.get("catalogue_breaks_nm")
     try:
-        seg = metrics.fit_three_segment(tau[seg_mask], th[seg_mask], branch=np.where(is_desc[seg_mask], -1, 1),
-                                        angle_std_rad=th_std[seg_mask],
-                                        torque_sources=compact_sources(sources[seg_mask]))
+        if breaks is not None:
+            res = fit_fixed_breaks(t, y, branch=branch, breaks_nm=breaks, angle_std_rad=sa, torque_std_nm=st_local,
+                                   torque_sources=src, gate_sources=src_local)
+            method = "linear least squares, catalogue T1/T2 fixed"
+        elif settings["fit_breaks"]:
+            res = fit_catalogue_breaks(t, y, branch=branch, angle_std_rad=sa, torque_std_nm=st_local,
+                                       torque_sources=src, gate_sources=src_local)
+            method = "breaks fitted (uncertainty with the breaks held)"
+        else:
+            for n, u in names:
+                col.fail(n, u, "no catalogue T1/T2 given and fitting the breaks is off")
+            return
     except AnalysisError as exc:
-        for name, unit in (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"), ("t1", "nm"), ("t2", "nm")):
-            col.fail(name, unit, str(exc))
+        for n, u in names + (("t1", "nm"), ("t2", "nm")):
+            col.fail(n, u, str(exc))
         return
-    for name, unit in (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"), ("t1", "nm"), ("t2", "nm")):
-        col.add(name, unit, seg[name], seg["std_angle"][name], seg["std_torque"][name], "first-order")
-    for brk, (ka, kb) in (("t1", ("K1", "K2")), ("t2", ("K2", "K3"))):
-        b_std = math.hypot(seg["std_angle"][brk], seg["std_torque"][brk])
-        if not b_std < 0.1 * max_torque:
-            col.issues.append(Issue(loop.orientation_deg, loop.cycle, brk,
-                                    f"break torque {brk.upper()} is poorly identified (1σ = {b_std:.3g} N·m, more "
-                                    f"than 10 % of the max torque): {ka} and {kb} hardly differ, so the loading "
-                                    "branch is closer to two segments than three"))
+    chk = res["check"]
+    for j, (n, u) in enumerate(names):
+        if j < len(res["k"]):
+            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk)
+        else:
+            col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}")
+    if breaks is None and settings["fit_breaks"]:
+        for j, n in enumerate(("t1", "t2")):
+            if j < len(res["breaks_nm"]):
+                col.add(n, "nm", res["breaks_nm"][j], method="fitted break (no uncertainty: profiled)")
+            else:
+                col.fail(n, "nm", "one break describes the loading branches (two segments)")
 
 
-def _mc_reason(name, tau, settings, max_torque):
+def _mc_reason(name, tau, settings):
     lo, hi = float(tau.min()), float(tau.max())
     if name.startswith("lost_motion"):
-        f = settings["lost_motion_fractions"][0 if "3pct" in name else 1]
-        return f"±{f * max_torque:.4g} N·m is not covered by both runs (torque {lo:.4g} to {hi:.4g} N·m)"
+        return f"the lost-motion torques are not covered by both runs (torque {lo:.4g} to {hi:.4g} N·m)"
     if name == "secant_stiffness":
-        a, b = settings["secant_interval"]
-        return f"secant interval {a * max_torque:.4g} to {b * max_torque:.4g} N·m is not covered by both loading branches"
+        a, b = settings["secant_interval_nm"]
+        return f"secant interval {a:.4g} to {b:.4g} N·m is not covered by both loading branches"
     if name == "hysteresis_loss":
         return "zero torque is not covered by both runs"
     return f"the two runs do not overlap in torque or the loop is degenerate (torque {lo:.4g} to {hi:.4g} N·m)"
@@ -305,12 +547,27 @@ def _mc_reason(name, tau, settings, max_torque):
 
 _BW_UNITS = {"k_e": ("nm_per_rad", 1.0), "z_s": ("deg", 180 / math.pi), "a": ("per_nm", 1.0),
              "rho": ("1", 1.0), "n": ("1", 1.0)}
+_BW_BOUNDS = {"rho": (1e-12, 0.5), "n": (0.3, 40.0)}
+
+
+def _bilinear_jacobian(bil: BilinearFit, tau: np.ndarray) -> np.ndarray:
+    """d(model)/d(θ₀, c_u, c_l, τ_c) of a bilinear fit along the torque path (central differences)."""
+    from .models import bilinear_response
+
+    p = np.array([bil.theta0_rad, 1 / bil.k_u_nm_per_rad, 1 / bil.k_l_nm_per_rad, bil.tau_c_nm])
+
+    def f(q):
+        return bilinear_response(tau, k_u=1 / q[1], k_l=1 / q[2], tau_c=q[3], theta_start=q[0])
+
+    amp = float(np.max(np.abs(tau)))
+    return numeric_jacobian(f, p, np.array([1e-6, p[1] * 1e-6, p[2] * 1e-6, amp * 1e-7]))
 
 
 def _model_fits(col: _Collector, settings: dict) -> dict:
     loop = col.loop
+    st = loop.local_std()
     kw = dict(angle_std_rad=loop.angle_std_rad, torque_sources=loop.sources())
-    out = {"bilinear": None, "bouc_wen": None}
+    out = {"bilinear": None, "bouc_wen": None, "preisach": None, "checks": {}}
     try:
         bil: BilinearFit = fit_bilinear(loop.torque_nm, loop.angle_rad, **kw)
     except AnalysisError as exc:
@@ -319,10 +576,28 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
             col.fail(name, unit, str(exc))
     else:
         out["bilinear"] = bil
+        model = bil.predict(loop.torque_nm)
+        chk = lack_of_fit(loop.angle_rad - model, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
+                          compliance_rad_per_nm=path_compliance(loop.torque_nm, model), n_params=4,
+                          torque_sources=loop.local_sources(), jacobian=_bilinear_jacobian(bil, loop.torque_nm),
+                          weights=least_squares_weights(loop.angle_std_rad))
+        out["checks"]["bilinear"] = chk
         for name, attr, unit in (("k_u", "k_u_nm_per_rad", "nm_per_rad"), ("k_l", "k_l_nm_per_rad", "nm_per_rad"),
                                  ("tau_c", "tau_c_nm", "nm")):
-            col.add(f"bilinear_{name}", unit, getattr(bil, attr), bil.std_angle[name], bil.std_torque[name], "first-order")
+            col.add(f"bilinear_{name}", unit, getattr(bil, attr), bil.std_angle[name], bil.std_torque[name],
+                    "first-order", check=chk)
         col.add("bilinear_residual_rms", "deg", math.degrees(bil.residual_rms_rad), method="fit statistic")
+    if settings["fit_preisach"]:
+        try:
+            pre = fit_preisach(loop.torque_nm, loop.angle_rad, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
+                               torque_sources=loop.local_sources())
+        except AnalysisError as exc:
+            col.fail("preisach_residual_rms", "deg", str(exc))
+        else:
+            out["preisach"] = pre
+            out["checks"]["preisach"] = pre.check
+            col.add("preisach_residual_rms", "deg", math.degrees(pre.residual_rms_rad), method="fit statistic",
+                    flag=f"Preisach model rejected: {pre.check.describe()}" if pre.check.rejected else "")
     if not settings["fit_bouc_wen"]:
         return out
     try:
@@ -333,11 +608,39 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
         col.fail("bouc_wen_residual_rms", "deg", str(exc))
         return out
     out["bouc_wen"] = bw
+    model = bw.predict(loop.torque_nm)
+    chk = lack_of_fit(loop.angle_rad - model, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
+                      compliance_rad_per_nm=path_compliance(loop.torque_nm, model), n_params=6,
+                      torque_sources=loop.local_sources())
+    out["checks"]["bouc_wen"] = chk
     for name, (unit, scale) in _BW_UNITS.items():
-        col.add(f"bouc_wen_{name}", unit, bw.params[name] * scale, bw.std_angle[name] * scale,
-                bw.std_torque[name] * scale, "first-order")
+        v = bw.params[name]
+        lo_hi = _BW_BOUNDS.get(name)
+        on_bound = lo_hi is not None and (v <= lo_hi[0] * 1.001 or v >= lo_hi[1] * 0.999)
+        if on_bound:
+            col.add(f"bouc_wen_{name}", unit, v * scale, method="first-order",
+                    flag=f"parameter on its bound ({lo_hi[0]:g} to {lo_hi[1]:g}): not identified, no uncertainty given")
+        else:
+            col.add(f"bouc_wen_{name}", unit, v * scale, bw.std_angle[name] * scale, bw.std_torque[name] * scale,
+                    "first-order", check=chk)
     col.add("bouc_wen_residual_rms", "deg", math.degrees(bw.residual_rms_rad), method="fit statistic")
     return out
+
+
+def _outlier_issues(col: _Collector, pre):
+    loop = col.loop
+    if pre is None:
+        return []
+    model = loop.angle_rad - pre.residual_rad
+    comp = path_compliance(loop.torque_nm, model)
+    sig = np.sqrt(loop.angle_std_rad**2 + (comp * loop.local_std()) ** 2)
+    found = checks.outliers(loop.images, pre.residual_rad, sig)
+    for image, z in found:
+        col.issues.append(Issue(loop.orientation_deg, loop.cycle, "outlier",
+                                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit): a forgotten or "
+                                "extra weight, or a missed or extra shot?"))
+    return found
+
 
 
 def _wide(figures: pd.DataFrame) -> pd.DataFrame:
@@ -386,34 +689,48 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     return out
 
 
-def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None, rig=None,
-                    lost_motion_fractions=(0.03, 0.04), secant_interval=(0.5, 1.0),
-                    n_draws=400, seed=0, fit_bouc_wen=True) -> SessionAnalysis:
-    """Analyse the torque–angle table of a session: every figure of every loop.
+def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, catalogue_breaks_nm=None,
+                    fit_breaks=True, secant_interval_nm=None, gear_ratio=None, torque_correlation=None, rig=None,
+                    lost_motion_fractions=(0.03, 0.04), secant_interval=(0.5, 1.0), n_draws=400, seed=0,
+                    fit_bouc_wen=False, fit_preisach=True) -> SessionAnalysis:
+    """Analyse the torque–angle table of a session: every figure of every loop, checked.
 
     Parameters
     ----------
     measurements : pandas.DataFrame
-        The ``measurements.csv`` table (see :data:`.loops.REQUIRED_COLUMNS`). Only
+        The ``measurements.csv`` table (see :data:`.loops.REQUIRED_COLUMNS`; the
+        optional ``torque_common_std_nm`` is used when present). Only
         ``status == "ok"`` rows are used; the others are listed as failed images.
     max_torque_nm : float, optional
-        Rated/maximum torque for lost motion and the secant interval, N·m. Default:
-        the largest ``|torque_nm|`` of the usable loop images.
+        Maximum test torque, N·m (default: the largest ``|torque_nm|`` of the usable
+        loop images): the secant interval's fractions refer to it.
+    rated_torque_nm : float, optional
+        The gear's rated torque T_R, N·m: lost motion is evaluated at
+        ``±fraction·T_R``. Without it, at ``±fraction·max_torque_nm`` (and
+        ``settings["lost_motion_reference"]`` says so).
+    catalogue_breaks_nm : (float, float), optional
+        The catalogue's T1, T2 (N·m): K1, K2, K3 by linear least squares with these
+        breaks fixed.
+    fit_breaks : bool
+        Without catalogue breaks, fit them (one or two, :mod:`.catalogue`).
+    secant_interval_nm : (float, float), optional
+        Secant interval in N·m (overrides ``secant_interval``).
+    gear_ratio : float, optional
+        Transmission ratio i (input turns per output turn): stiffnesses are also given
+        on the output side, ``K_out = i²·K_in`` (see ``output_side`` in the summary for
+        the caveat).
     torque_correlation : {"pieces", "level", "independent"}, optional
         Error model of the torques (see :mod:`.uncertainty`). Default: ``"pieces"``
         when ``rig`` is given, else ``"level"``.
     rig : TorqueRig or mapping, optional
         Rig constants for the ``"pieces"`` model
         (:class:`vision_torsion.measurements.TorqueRig`, e.g. a session's
-        ``config.torque_rig``, or a mapping of its constants): ``step_mass_kg`` (one
-        weight piece, kg), ``mass_std_kg`` (1σ of one piece, kg), ``gravity_m_per_s2``,
-        ``arm_radius_m`` (m) and optionally ``friction_torque_std_nm`` (1σ per image,
-        N·m), ``arm_radius_std_m``, ``gravity_std_m_per_s2`` (see
+        ``config.torque_rig``, or a mapping of its constants; see
         :func:`.uncertainty.check_rig`). The pieces per pan of an image are
-        ``mass_kg / step_mass_kg`` (:func:`.uncertainty.pieces_per_pan`), the sign
-        that of its phase.
-    lost_motion_fractions : (float, float)
-        Fractions of ``max_torque_nm`` for the two lost-motion figures (3 % and 4 %).
+        ``mass_kg / step_mass_kg``, the sign that of its phase.
+    lost_motion_fractions : sequence of float
+        Fractions of T_R (or the max torque) for the lost-motion figures; 3 % and
+        4 % by default (GB/T 35089 and the catalogues).
     secant_interval : (float, float)
         Secant stiffness interval as fractions of ``max_torque_nm``.
     n_draws : int
@@ -421,7 +738,10 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     seed : int
         Base seed; loop ``i`` uses ``seed + i``.
     fit_bouc_wen : bool
-        Fit the Bouc–Wen model too (the slowest part, ≈0.1–0.5 s per loop).
+        Fit the Bouc–Wen model too (slow, ≈0.1–0.5 s per loop; it does not describe
+        the sharp bilinear loop, and its gate says so).
+    fit_preisach : bool
+        Fit the Preisach model (:mod:`.preisach`), also used to find outliers.
 
     Returns
     -------
@@ -430,17 +750,8 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     Raises
     ------
     AnalysisError
-        Invalid table (see :func:`.loops.validate_measurements`) or invalid options
-        (``"pieces"`` without a rig, an invalid rig, a non-numeric ``mass_kg``).
-        Problems of single loops are not raised but listed in ``issues``; so is a
-        table whose ``torque_std_nm`` or ``mass_kg`` disagrees with the rig.
-
-    Notes
-    -----
-    Torque errors are propagated with all their correlations: the loading matrix
-    ``L`` of :func:`.uncertainty.torque_sources` (``δτ = L·ξ``) goes into the Monte
-    Carlo draws and into the first-order covariance of every slope and fit
-    (``cov_τ = (G·J_τ·L)(G·J_τ·L)ᵀ``, :mod:`.uncertainty`).
+        Invalid table (see :func:`.loops.validate_measurements`) or invalid options.
+        Problems of single loops are not raised but listed in ``issues``.
 
     Examples
     --------
@@ -449,7 +760,7 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     >>> df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), torque_model="pieces",
     ...                            rng=np.random.default_rng(1))
     >>> rig = dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)
-    >>> a = analyze_session(df, rig=rig, n_draws=50, fit_bouc_wen=False)
+    >>> a = analyze_session(df, rig=rig, n_draws=50)
     >>> a.settings["torque_correlation"], abs(a.summary["bilinear_k_u"]["mean"] / 4.4 - 1) < 0.01
     ('pieces', True)
     """
@@ -457,24 +768,45 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
         raise AnalysisError(f"n_draws must be at least 10, got {n_draws}")
     if not (0 <= secant_interval[0] < secant_interval[1] <= 1):
         raise AnalysisError(f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}")
-    if len(lost_motion_fractions) != 2 or not all(0 < f < 1 for f in lost_motion_fractions):
-        raise AnalysisError(f"lost_motion_fractions must be two fractions in (0, 1), got {lost_motion_fractions}")
+    fr = list(lost_motion_fractions)
+    if not fr or not all(isinstance(f, (int, float)) and 0 < f < 1 for f in fr):
+        raise AnalysisError(f"lost_motion_fractions must be fractions in (0, 1), got {lost_motion_fractions}")
+    for name, v in (("rated_torque_nm", rated_torque_nm), ("gear_ratio", gear_ratio)):
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise AnalysisError(f"{name} must be a positive number, got {v!r}")
+    if catalogue_breaks_nm is not None:
+        cb = [float(v) for v in catalogue_breaks_nm]
+        if len(cb) != 2 or not (0 < cb[0] < cb[1]):
+            raise AnalysisError(f"catalogue_breaks_nm must be (T1, T2) with 0 < T1 < T2 (N·m), got {catalogue_breaks_nm}")
+        catalogue_breaks_nm = cb
     if torque_correlation is None:
         torque_correlation = "level" if rig is None else "pieces"
     if rig is not None:
         rig = check_rig(rig)
-    usable, failed = validate_measurements(measurements)
+    usable, failed, closing = validate_measurements(measurements, with_closing=True)
     loops = build_loops(usable, torque_correlation=torque_correlation, rig=rig)
     data_max = float(np.max(np.abs(usable["torque_nm"])))
     if max_torque_nm is None:
         max_torque_nm = data_max
     elif not (np.isfinite(max_torque_nm) and max_torque_nm > 0):
         raise AnalysisError(f"max_torque_nm must be a positive torque (N·m), got {max_torque_nm!r}")
+    if secant_interval_nm is None:
+        secant_interval_nm = (secant_interval[0] * max_torque_nm, secant_interval[1] * max_torque_nm)
+    elif not (len(secant_interval_nm) == 2 and 0 <= secant_interval_nm[0] < secant_interval_nm[1]):
+        raise AnalysisError(f"secant_interval_nm must be (a, b) with 0 <= a < b (N·m), got {secant_interval_nm}")
+    lm_ref = float(rated_torque_nm) if rated_torque_nm is not None else float(max_torque_nm)
     settings = {
         "max_torque_nm": float(max_torque_nm), "torque_correlation": torque_correlation,
-        "lost_motion_fractions": [float(f) for f in lost_motion_fractions],
-        "secant_interval": [float(f) for f in secant_interval], "n_draws": int(n_draws), "seed": int(seed),
-        "fit_bouc_wen": bool(fit_bouc_wen), "coverage_factor": COVERAGE_FACTOR,
+        "lost_motion_fractions": [float(f) for f in fr], "lost_motion_reference_nm": lm_ref,
+        "lost_motion_reference": "rated torque T_R" if rated_torque_nm is not None else
+        "maximum test torque (no rated torque given)",
+        "rated_torque_nm": None if rated_torque_nm is None else float(rated_torque_nm),
+        "secant_interval": [float(f) for f in secant_interval],
+        "secant_interval_nm": [float(v) for v in secant_interval_nm],
+        "catalogue_breaks_nm": catalogue_breaks_nm, "fit_breaks": bool(fit_breaks),
+        "gear_ratio": None if gear_ratio is None else float(gear_ratio),
+        "n_draws": int(n_draws), "seed": int(seed), "fit_bouc_wen": bool(fit_bouc_wen),
+        "fit_preisach": bool(fit_preisach), "coverage_factor": COVERAGE_FACTOR,
         "rig": None if rig is None else rig.to_dict(),
     }
     issues: list[Issue] = []
@@ -484,27 +816,87 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
         orient = float(r.orientation_deg) if np.isfinite(r.orientation_deg) else None
         cycle = int(r.cycle) if np.isfinite(r.cycle) else None
         issues.append(Issue(orient, cycle, "*", f"image {r.image} ({r.phase}, step {r.step}) excluded: {r.message}"))
-    rows, phase_rows, fits = [], [], {}
-    for i, loop in enumerate(loops):
-        col = _Collector(loop, issues)
-        _phase_figures(col, phase_rows)
-        problem = _loop_problem(loop)
-        if problem is None:
-            _model_free_figures(col, settings, float(max_torque_nm), seed + i)
-            fits[(loop.orientation_deg, loop.cycle)] = _model_fits(col, settings)
-        else:
-            for name, unit in {**_MC_FIGURES, "k1": "nm_per_rad", "k2": "nm_per_rad", "k3": "nm_per_rad",
-                               "t1": "nm", "t2": "nm", "bilinear_k_u": "nm_per_rad", "bilinear_k_l": "nm_per_rad",
-                               "bilinear_tau_c": "nm"}.items():
-                col.add(name, unit, np.nan)
-            issues.append(Issue(loop.orientation_deg, loop.cycle, "loop figures", problem))
-            fits[(loop.orientation_deg, loop.cycle)] = {"bilinear": None, "bouc_wen": None}
-        rows.extend(col.rows)
-    figures = pd.DataFrame(rows, columns=["orientation_deg", "cycle", "figure", "unit", "value", "std", "std_angle",
-                                          "std_torque", "u95", "method"])
+    inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"])
+    if inverted:
+        issues.append(Issue(None, None, "angle sign",
+                            "angle_sign looks inverted: the angle falls as the torque rises; set angle_sign = -1 in "
+                            "session.toml (or multiply angle_deg by -1). Every figure is withheld until then."))
+    closure = checks.closure_checks(usable, closing)
+    creep = {}
+    for c in closure:
+        if c["creep"]:
+            creep.setdefault(c["orientation_deg"], []).append(c)
+            issues.append(Issue(c["orientation_deg"], None, "creep",
+                                f"{c['check']}: the angle moved by {c['difference_deg']:+.4g}° ({c['z']:+.1f}σ; "
+                                f"{c['image_first']} → {c['image_last']}): creep or a disturbed rig"))
+    levels = np.unique(np.round(usable["torque_nm"].to_numpy(float) / _TOL) * _TOL)
+    all_sources, _, kinds = torque_sources(usable, correlation=torque_correlation, rig=rig, return_kinds=True)
+    rows, phase_rows, fits, outlier_rows = [], [], {}, []
+    for orient, seq in usable.groupby("orientation_deg", sort=True):
+        seq = seq.reset_index(drop=True)
+        idx = np.flatnonzero(usable["orientation_deg"].to_numpy(float) == orient)
+        src_all = [lp for lp in loops if lp.orientation_deg == float(orient)]
+        sources = all_sources[idx]
+        local = np.concatenate([lp.local_std() for lp in src_all]) if src_all else np.zeros(0)
+        for lp in src_all:
+            i = loops.index(lp)
+            col = _Collector(lp, issues)
+            if inverted:
+                col.fail("*", "", "angle_sign looks inverted (set angle_sign = -1): figures withheld")
+                fits[(lp.orientation_deg, lp.cycle)] = {"bilinear": None, "bouc_wen": None, "preisach": None,
+                                                        "checks": {}}
+                rows.extend(col.rows)
+                continue
+            _phase_figures(col, phase_rows, seq, local, sources, kinds, levels)
+            problem = _loop_problem(lp)
+            if problem is None:
+                runs = _model_free_figures(col, settings, seed + i, levels)
+                _catalogue_figures(col, settings, runs)
+                fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
+                for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
+                    outlier_rows.append({"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image,
+                                         "z": z})
+            else:
+                for name, unit in {**_mc_units(settings), "k1": "nm_per_rad", "k2": "nm_per_rad", "k3": "nm_per_rad",
+                                   "bilinear_k_u": "nm_per_rad", "bilinear_k_l": "nm_per_rad",
+                                   "bilinear_tau_c": "nm"}.items():
+                    col.add(name, unit, np.nan)
+                issues.append(Issue(lp.orientation_deg, lp.cycle, "loop figures", problem))
+                fits[(lp.orientation_deg, lp.cycle)] = {"bilinear": None, "bouc_wen": None, "preisach": None,
+                                                        "checks": {}}
+            if float(orient) in creep:
+                for r in col.rows:
+                    if np.isfinite(r["value"]) and not r["flag"]:
+                        r["flag"] = "flagged: creep or drift in this orientation (see checks)"
+            rows.extend(col.rows)
+    figures = pd.DataFrame(rows, columns=FIGURE_COLUMNS)
+    figures = figures[figures["figure"] != "*"].reset_index(drop=True)
     summary, per_orientation = summarise_figures(figures)
+    _output_side(summary, settings)
+    phases = pd.DataFrame(phase_rows)
     return SessionAnalysis(
-        figures=figures, loops=_wide(figures), phases=pd.DataFrame(phase_rows), summary=summary,
+        figures=figures, loops=_wide(figures), phases=phases, summary=summary,
         per_orientation=per_orientation, issues=issues, failed_images=failed, settings=settings,
         loop_data=loops, fits=fits, n_images=int(len(measurements)),
+        checks={"angle_sign_inverted": bool(inverted), "closure": closure,
+                "outliers": outlier_rows},
     )
+
+
+#: Caveat of the output-side conversion.
+OUTPUT_SIDE_CAVEAT = (
+    "K_out = i²·K_in refers the input-side stiffness to the output through an ideal transmission "
+    "(θ_in = i·θ_out, τ_out = i·τ_in, no loss). Friction and efficiency losses, and any compliance between the "
+    "measured shaft and the gear, make the real output-side stiffness differ; measure at the output to be sure."
+)
+
+
+def _output_side(summary: dict, settings: dict) -> None:
+    i = settings.get("gear_ratio")
+    if not i:
+        return
+    for name, s in summary.items():
+        if s.get("unit") == "nm_per_rad" and s.get("mean") is not None:
+            s["output_side"] = {"gear_ratio": i, "mean_nm_per_rad": s["mean"] * i * i,
+                                "mean_std_nm_per_rad": None if s.get("mean_std") is None else s["mean_std"] * i * i,
+                                "caveat": OUTPUT_SIDE_CAVEAT}

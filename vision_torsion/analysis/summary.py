@@ -1,29 +1,35 @@
-"""Summaries across loops: per orientation, across the session, and a test of whether
-the orientation effect is larger than the measurement uncertainty.
+"""Summaries across loops: per orientation, across the session, the uncertainty budget
+of each mean, and a test of the orientation effect against the cycle-to-cycle scatter.
 
 Input is the long *figures* table of :func:`.session.analyze_session` (one row per
-orientation, cycle and figure with ``value``, ``std_angle``, ``std_torque``).
+orientation, cycle and figure with ``value``, ``std_angle``, ``std_torque`` and the
+torque parts ``std_weights``, ``std_g_r``, ``std_friction``, ``std_torque`` (level
+model), ``std_lack_of_fit``).
 
 Notes
 -----
-- **Across all loops**: mean, sample standard deviation (ddof=1), min, max, range.
-  The standard uncertainty of the mean combines the angle part, independent between
-  loops (``sqrt(Σσ_a²)/n``), with the torque part, which the torque error models
-  (:mod:`.uncertainty`: the same weight pieces, or the same levels, in every loop)
-  make common to all loops and so does not average down (mean of ``σ_t``).
-- **Per orientation**: the same over that orientation's cycles.
-- **Orientation test** (a chi-square test of equal means): with orientation means
-  ``x_o`` and their uncertainties ``s_o``,
-  ``χ² = Σ (x_o − x̄_w)² / s_o²`` about the weighted mean ``x̄_w``, ``dof = n_o − 1``,
-  ``p = P(χ²_dof ≥ χ²)``. ``s_o`` is the *angle* part only (the torque part is the
-  same for every orientation and cancels in their differences), or, when an
-  orientation has several cycles, the larger of that and the observed cycle-to-cycle
-  scatter ``sd/sqrt(n_c)``, so that unmodelled repeatability does not pass for an
-  orientation effect. The orientation effect is called larger than the measurement
-  uncertainty when ``p < 0.05``.
+- **Mean across loops** and its standard uncertainty (GUM):
+  the part that differs from loop to loop is known twice, propagated
+  (``u_prop = sqrt(Σσ_a,i²)/n``: angle noise, independent between loops) and observed
+  (**Type A**, ``u_A = sd/√n``, which also holds the cycle-to-cycle repeatability of
+  the gear); it is the larger of the two (the observed scatter already contains the
+  propagated noise, adding both would count it twice). The torque parts (weights,
+  g and r, friction) and the lack of fit are common to all loops and do not average
+  down: the mean of each over loops. All in quadrature give ``u_c``.
+  The coverage factor is Student's ``t_0.975`` at the Welch–Satterthwaite degrees of
+  freedom ``ν = u_c⁴/(u_A⁴/(n−1))`` when Type A is the random part, never below 2.
+- **Orientation effect**: a one-way ANOVA of the loop values grouped by orientation
+  (:func:`orientation_anova`): the orientation effect is tested against the
+  cycle-to-cycle scatter, never against the measurement noise alone (which leaves
+  out the gear's own repeatability and so calls every difference "significant").
+  With one cycle per orientation there is no replicate scatter: the effect size
+  (sd of the orientation values over their mean) is reported and the test is not
+  made. Significant at ``p < ALPHA``.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pandas as pd
@@ -31,7 +37,7 @@ from scipy import stats
 
 from .uncertainty import COVERAGE_FACTOR
 
-__all__ = ["ALPHA", "summarise_figures", "orientation_test"]
+__all__ = ["ALPHA", "summarise_figures", "orientation_test", "orientation_anova", "mean_uncertainty", "BUDGET_LABELS"]
 
 #: Significance level of the orientation test.
 ALPHA = 0.05
@@ -51,6 +57,9 @@ def _describe(v: np.ndarray) -> dict:
 
 def orientation_test(means, stds) -> dict:
     """Chi-square test of equal orientation means given their standard uncertainties.
+
+    Kept for means whose uncertainties include the replicate scatter; the session
+    summary uses :func:`orientation_anova` (the noise alone is not the right yardstick).
 
     Parameters
     ----------
@@ -84,9 +93,110 @@ def orientation_test(means, stds) -> dict:
     return {"chi2": chi2, "dof": dof, "p_value": p, "significant": bool(p < ALPHA), "reason": None}
 
 
-def _mean_std(std_angle: np.ndarray, std_torque: np.ndarray) -> tuple[float, float]:
-    n = std_angle.size
-    return float(np.sqrt(np.sum(std_angle**2)) / n), float(np.mean(std_torque))
+def orientation_anova(groups) -> dict:
+    """One-way ANOVA of a figure's loop values grouped by orientation.
+
+    Parameters
+    ----------
+    groups : sequence of array_like
+        Values of each orientation (one per cycle).
+
+    Returns
+    -------
+    dict
+        ``test`` ("one-way ANOVA"), ``f``, ``dof`` ([between, within]), ``p_value``,
+        ``significant`` (p < :data:`ALPHA`), ``effect_size`` (sd of the orientation
+        means / |grand mean|), ``range`` (of the orientation means), ``reason``
+        (why not tested, else None).
+
+    Examples
+    --------
+    >>> r = orientation_anova([[1.0, 1.1], [1.0, 1.1], [1.0, 1.1]])
+    >>> r["significant"], r["dof"]
+    (False, [2, 3])
+    >>> orientation_anova([[1.0], [1.2]])["reason"]
+    'one cycle per orientation: no cycle-to-cycle scatter to test the orientation effect against (effect size reported, not tested)'
+    """
+    g = [np.asarray(v, float)[np.isfinite(np.asarray(v, float))] for v in groups]
+    g = [v for v in g if v.size]
+    means = np.array([v.mean() for v in g]) if g else np.zeros(0)
+    grand = float(np.mean(np.concatenate(g))) if g else float("nan")
+    out = {"test": "one-way ANOVA", "f": None, "dof": None, "p_value": None, "significant": None,
+           "effect_size": (float(np.std(means, ddof=1) / abs(grand)) if means.size >= 2 and grand != 0 else None),
+           "range": float(np.ptp(means)) if means.size >= 2 else None, "reason": None}
+    if len(g) < 2:
+        out["reason"] = "fewer than two orientations with a value"
+        return out
+    n = sum(v.size for v in g)
+    if n - len(g) < 1:
+        out["reason"] = ("one cycle per orientation: no cycle-to-cycle scatter to test the orientation effect "
+                         "against (effect size reported, not tested)")
+        return out
+    within = sum(float(np.sum((v - v.mean()) ** 2)) for v in g)
+    between = sum(v.size * (v.mean() - grand) ** 2 for v in g)
+    d1, d2 = len(g) - 1, n - len(g)
+    if within <= 0:
+        out["reason"] = "no scatter at all between cycles: the test is undefined"
+        return out
+    f = (between / d1) / (within / d2)
+    p = float(stats.f.sf(f, d1, d2))
+    out.update(f=float(f), dof=[d1, d2], p_value=p, significant=bool(p < ALPHA))
+    return out
+
+
+_KINDS = ("weights", "g_r", "friction", "level")
+BUDGET_LABELS = {"angle_noise": "angle noise (propagated)", "repeatability": "repeatability between loops (Type A)",
+                 "weights": "weights", "g_r": "g and r (scale)", "friction": "pulley friction",
+                 "level": "torque (per level)", "torque_total": "torque (all sources)", "lack_of_fit": "lack of fit"}
+
+
+def _finite_mean(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.mean(x)) if x.size else 0.0
+
+
+def mean_uncertainty(sub: pd.DataFrame) -> dict:
+    """Uncertainty budget of the mean of ``sub["value"]`` (module notes).
+
+    Returns ``{"mean", "n", "sd", "std", "coverage_factor", "u95", "dof", "budget": {...}}``.
+    """
+    v = sub["value"].to_numpy(float)
+    n = v.size
+    sa = sub["std_angle"].to_numpy(float)
+    if not (np.any(np.isfinite(sa)) or np.any(np.isfinite(sub["std_torque"].to_numpy(float)))):
+        # a fit statistic or a profiled value: no uncertainty to summarise
+        return {"mean": float(np.mean(v)) if n else None, "n": n, "sd": float(np.std(v, ddof=1)) if n >= 2 else None,
+                "std": float("nan"), "coverage_factor": None, "u95": float("nan"), "dof": None,
+                "budget": {"angle_noise": float("nan")}}
+    u_prop = float(np.sqrt(np.nansum(sa**2)) / n) if n else float("nan")
+    sd = float(np.std(v, ddof=1)) if n >= 2 else float("nan")
+    u_a = sd / math.sqrt(n) if n >= 2 else float("nan")
+    budget = {"angle_noise": u_prop, "repeatability": u_a if n >= 2 else None}
+    rand = max(u_prop, u_a) if n >= 2 else u_prop
+    total = rand**2 if np.isfinite(rand) else 0.0
+    have_parts = all(f"std_{k}" in sub for k in _KINDS)
+    if have_parts and np.all(np.isfinite(sub[[f"std_{k}" for k in _KINDS]].to_numpy(float))):
+        for k in _KINDS:
+            u = float(np.mean(sub[f"std_{k}"].to_numpy(float)))
+            budget[k] = u
+            total += u * u
+    else:
+        u = _finite_mean(sub["std_torque"].to_numpy(float))
+        budget["torque_total"] = u
+        total += u * u
+    if "std_lack_of_fit" in sub:
+        lof = sub["std_lack_of_fit"].to_numpy(float)
+        u = _finite_mean(lof)
+        budget["lack_of_fit"] = u
+        total += u * u
+    std = math.sqrt(total)
+    dof = math.inf
+    if n >= 2 and u_a >= u_prop and u_a > 0:
+        dof = std**4 / (u_a**4 / (n - 1))
+    k = max(COVERAGE_FACTOR, float(stats.t.ppf(0.975, dof))) if np.isfinite(dof) else COVERAGE_FACTOR
+    return {"mean": float(np.mean(v)) if n else None, "n": n, "sd": sd if n >= 2 else None, "std": std,
+            "coverage_factor": k, "u95": k * std, "dof": dof if np.isfinite(dof) else None, "budget": budget}
 
 
 def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
@@ -95,16 +205,17 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
     Parameters
     ----------
     figures : pandas.DataFrame
-        Columns ``orientation_deg, cycle, figure, unit, value, std_angle, std_torque``.
+        Columns ``orientation_deg, cycle, figure, unit, value, std_angle, std_torque``
+        (and the budget parts when present).
 
     Returns
     -------
     summary : dict
         ``{figure: {unit, n, mean, sd, min, max, range, mean_std, mean_u95,
-        orientation_test}}`` over finite values.
+        coverage_factor, dof, budget, flagged, orientation_test}}`` over finite values.
     per_orientation : pandas.DataFrame
         ``orientation_deg, figure, unit, n_cycles, mean, sd, std, std_angle,
-        std_torque`` (``std``: 1σ of the orientation mean).
+        std_torque, u95`` (``std``: 1σ of the orientation mean, same rules).
     """
     rows = []
     summary = {}
@@ -114,22 +225,24 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
         good = ok[ok["figure"] == fig]
         entry = {"unit": unit, **_describe(good["value"].to_numpy(float))}
         if entry["n"]:
-            sa, st = _mean_std(good["std_angle"].to_numpy(float), good["std_torque"].to_numpy(float))
-            entry["mean_std"] = float(np.hypot(sa, st))
-            entry["mean_u95"] = COVERAGE_FACTOR * entry["mean_std"]
+            mu = mean_uncertainty(good)
+            entry.update(mean_std=mu["std"] if np.isfinite(mu["std"]) else None,
+                         mean_u95=mu["u95"] if np.isfinite(mu["u95"]) else None, coverage_factor=mu["coverage_factor"],
+                         dof=mu["dof"], budget=mu["budget"])
         else:
-            entry["mean_std"] = entry["mean_u95"] = None
-        o_means, o_stds = [], []
+            entry.update(mean_std=None, mean_u95=None, coverage_factor=None, dof=None, budget=None)
+        entry["flagged"] = int(np.sum(good["flag"].astype(str) != "")) if "flag" in good else 0
+        entry["withheld"] = int(len(sub) - len(good))
+        groups = []
         for orient, og in good.groupby("orientation_deg", sort=True):
             v = og["value"].to_numpy(float)
-            sa, st = _mean_std(og["std_angle"].to_numpy(float), og["std_torque"].to_numpy(float))
-            sd = float(np.std(v, ddof=1)) if v.size >= 2 else np.nan
+            mu = mean_uncertainty(og)
             rows.append({"orientation_deg": float(orient), "figure": fig, "unit": unit, "n_cycles": int(v.size),
-                         "mean": float(np.mean(v)), "sd": sd, "std": float(np.hypot(sa, st)),
-                         "std_angle": sa, "std_torque": st})
-            o_means.append(float(np.mean(v)))
-            o_stds.append(max(sa, sd / np.sqrt(v.size)) if v.size >= 2 else sa)
-        entry["orientation_test"] = orientation_test(o_means, o_stds)
+                         "mean": float(np.mean(v)), "sd": mu["sd"] if mu["sd"] is not None else np.nan,
+                         "std": mu["std"], "std_angle": mu["budget"]["angle_noise"],
+                         "std_torque": _finite_mean(og["std_torque"].to_numpy(float)), "u95": mu["u95"]})
+            groups.append(v)
+        entry["orientation_test"] = orientation_anova(groups)
         summary[fig] = entry
-    cols = ["orientation_deg", "figure", "unit", "n_cycles", "mean", "sd", "std", "std_angle", "std_torque"]
+    cols = ["orientation_deg", "figure", "unit", "n_cycles", "mean", "sd", "std", "std_angle", "std_torque", "u95"]
     return summary, pd.DataFrame(rows, columns=cols)

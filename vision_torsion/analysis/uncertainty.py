@@ -81,6 +81,7 @@ from ..measurements import PHASE_SIGN, TorqueRig, pieces_per_pan
 __all__ = [
     "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
     "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
+    "std_by_kind", "PHASE_DIRECTION",
 ]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
@@ -134,7 +135,12 @@ def check_rig(rig) -> TorqueRig:
         raise AnalysisError(str(exc), reason=exc.reason) from None
 
 
-def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
+#: Direction of the torque change that led to an image of each phase (+1 rising).
+PHASE_DIRECTION = {"reference": 0, "positive_unloading": -1, "negative_loading": -1, "negative_unloading": 1,
+                   "positive_loading": 1, "closing": -1}
+
+
+def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9, return_kinds=False):
     """Loading matrix ``L`` of the torque errors: ``δτ = L·ξ``, ``ξ ~ N(0, I)``.
 
     Parameters
@@ -157,6 +163,10 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     groups : numpy.ndarray of int, shape (n_rows,)
         Same-nominal-torque index (:func:`torque_groups` with ``"level"``, or
         ``"independent"``), used to merge repeated torques inside a run.
+    kinds : numpy.ndarray of str, shape (n_sources,)
+        Only with ``return_kinds=True``: what each column is, for the uncertainty
+        budget: ``"weights"``, ``"g_r"`` (common scale), ``"friction"``, or
+        ``"level"`` (the ``"level"``/``"independent"`` models).
 
     Raises
     ------
@@ -168,7 +178,9 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     ``"pieces"``: with ``n_i`` = :func:`pieces_per_pan` and ``s_i`` the sign of
     the phase, ``L[i, (s, k)] = s·g·r·√2·mass_std_kg`` for ``k = 1..n_i`` and
     ``s = s_i``; ``L[i, scale] = τ_i·sqrt((u_g/g)² + (u_r/r)²)``;
-    ``L[i, friction_i] = friction_torque_std_nm``. ``"level"``: ``L[i, g_i] = σ_g``,
+    ``L[i, friction] = −d_i·friction_torque_std_nm`` with ``d_i`` the direction of the
+    last torque change (+1 for the loading phases of positive torque and the unloading
+    of negative torque, −1 otherwise; 0 for a reference image). ``"level"``: ``L[i, g_i] = σ_g``,
     the largest ``torque_std_nm`` of the group. ``"independent"``: ``diag(torque_std_nm)``.
 
     Examples
@@ -187,10 +199,14 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
         raise _error(f"torque_correlation must be one of {', '.join(TORQUE_MODELS)}, got {correlation!r}")
     groups = torque_groups(tau, correlation="independent" if correlation == "independent" else "level",
                            resolution_nm=resolution_nm)
+    def done(L, kinds):
+        return (L, groups, np.asarray(kinds, dtype=object)) if return_kinds else (L, groups)
+
     if correlation == "independent":
-        return np.diag(std), groups
+        return done(np.diag(std), ["level"] * tau.size)
     if correlation == "level":
-        return group_sources(groups, std), groups
+        L = group_sources(groups, std)
+        return done(L, ["level"] * L.shape[1])
     if rig is None:
         raise _error("torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, "
                      "arm_radius_m)")
@@ -211,15 +227,21 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     n_max = int(n.max()) if n.size else 0
     k = np.arange(1, n_max + 1)
     step = g_r * np.sqrt(2.0) * rig.mass_std_kg
-    cols = []
-    for s in (1.0, -1.0):
-        cols.append(np.where((sign[:, None] == s) & (n[:, None] >= k[None, :]), s * step, 0.0))
+    cols, kinds = [], []
+    for s_ in (1.0, -1.0):
+        cols.append(np.where((sign[:, None] == s_) & (n[:, None] >= k[None, :]), s_ * step, 0.0))
+        kinds += ["weights"] * n_max
     rel = float(np.hypot(rig.gravity_std_m_per_s2 / rig.gravity_m_per_s2, rig.arm_radius_std_m / rig.arm_radius_m))
     if rel > 0:
         cols.append((tau * rel)[:, None])
+        kinds.append("g_r")
     if rig.friction_torque_std_nm > 0:
-        cols.append(np.eye(tau.size) * rig.friction_torque_std_nm)
-    return np.concatenate(cols, axis=1) if cols else np.zeros((tau.size, 0)), groups
+        direction = np.asarray(frame["phase"].map(PHASE_DIRECTION), dtype=float)
+        direction = np.where(np.isfinite(direction), direction, 0.0)
+        cols.append((-direction * rig.friction_torque_std_nm)[:, None])
+        kinds.append("friction")
+    L = np.concatenate(cols, axis=1) if cols else np.zeros((tau.size, 0))
+    return done(L, kinds)
 
 
 def group_sources(groups, torque_std_nm) -> np.ndarray:
@@ -231,10 +253,26 @@ def group_sources(groups, torque_std_nm) -> np.ndarray:
     return out
 
 
-def compact_sources(sources) -> np.ndarray:
-    """Drop the all-zero columns of a loading matrix (sources that do not touch these rows)."""
+def compact_sources(sources, kinds=None):
+    """Drop the all-zero columns of a loading matrix (sources that do not touch these rows).
+
+    With ``kinds`` (one label per column) returns ``(L, kinds)`` of the kept columns.
+    """
     L = np.asarray(sources, dtype=float)
-    return L[:, np.any(L != 0.0, axis=0)]
+    keep = np.any(L != 0.0, axis=0)
+    if kinds is None:
+        return L[:, keep]
+    return L[:, keep], np.asarray(kinds, dtype=object)[keep]
+
+
+def std_by_kind(gt: np.ndarray, kinds) -> dict:
+    """1σ of each parameter from each kind of torque source.
+
+    ``gt`` is ``G·J_τ·L`` (parameters × sources, :func:`linearised_covariance`'s
+    torque sensitivity); returns ``{kind: ndarray (parameters,)}``.
+    """
+    kinds = np.asarray(kinds, dtype=object)
+    return {str(k): np.sqrt(np.sum(gt[:, kinds == k] ** 2, axis=1)) for k in dict.fromkeys(kinds.tolist())}
 
 
 def torque_groups(torque_nm, *, correlation="level", resolution_nm=1e-9) -> np.ndarray:
@@ -275,7 +313,7 @@ def _group_std(groups: np.ndarray, torque_std_nm: np.ndarray) -> np.ndarray:
 
 
 def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std_nm=None, groups=None,
-                    torque_sources=None, n_draws=400, seed=0):
+                    torque_sources=None, n_draws=400, seed=0, kinds=None):
     """Standard deviation of each figure of a loop from angle and from torque errors.
 
     Parameters
@@ -297,11 +335,16 @@ def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std
     seed : int
         Seed of ``numpy.random.default_rng``.
 
+    kinds : array_like of str (m,), optional
+        Kind of each torque source; then each kind is drawn on its own and a third
+        dict ``{name: {kind: std}}`` is returned, ``std_torque`` being their
+        quadrature sum (the kinds are independent).
+
     Returns
     -------
-    (dict, dict)
+    (dict, dict) or (dict, dict, dict)
         ``std_angle[name]`` and ``std_torque[name]`` (NaN where fewer than half the
-        draws gave a finite value).
+        draws gave a finite value), and with ``kinds`` the parts by kind.
 
     Notes
     -----
@@ -315,10 +358,21 @@ def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std
         torque_sources = group_sources(groups, torque_std_nm)
     L = np.asarray(torque_sources, float)
     d_theta = rng.standard_normal((n_draws, th.shape[1])) * np.asarray(angle_std_rad, float)[None, :]
-    d_tau = rng.standard_normal((n_draws, L.shape[1])) @ L.T
     by_angle = evaluate(np.repeat(tau, n_draws, axis=0), th + d_theta)
-    by_torque = evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
-    return _stds(by_angle), _stds(by_torque)
+    if kinds is None:
+        d_tau = rng.standard_normal((n_draws, L.shape[1])) @ L.T
+        by_torque = evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
+        return _stds(by_angle), _stds(by_torque)
+    kinds = np.asarray(kinds, dtype=object)
+    parts = {}
+    for kind in dict.fromkeys(kinds.tolist()):
+        Lk = L[:, kinds == kind]
+        d_tau = rng.standard_normal((n_draws, Lk.shape[1])) @ Lk.T
+        parts[str(kind)] = _stds(evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0)))
+    sa = _stds(by_angle)
+    by_kind = {name: {k: parts[k][name] for k in parts} for name in sa}
+    st = {name: float(np.sqrt(np.sum(np.square(list(v.values()))))) if v else 0.0 for name, v in by_kind.items()}
+    return sa, st, by_kind
 
 
 def _stds(values: dict) -> dict:

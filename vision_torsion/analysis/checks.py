@@ -1,0 +1,164 @@
+"""Checks on the data itself, before and beside the figures: the angle sign, gaps in
+the torque levels, loop closure and creep, and points far off their loop's model.
+
+Each check returns plain values (and :class:`.session.Issue` rows are made from
+them by :mod:`.session`); none of them changes the data.
+
+- **Angle sign** (:func:`angle_sign_inverted`): over every usable loop image the
+  angle must rise with the torque. The least-squares slope of angle on torque is
+  negative, beyond its own scatter, only when ``angle_sign`` is set the wrong way
+  round.
+- **Gaps** (:func:`gap_between`): a run of a loop is expected to hold every torque
+  level the session uses between its ends. A figure evaluated between two measured
+  neighbours with an expected level missing between them (a failed image) would be
+  interpolated across the kink a missing level can hide, so it is withheld.
+- **Closure and creep** (:func:`closure_checks`): the same load state photographed
+  twice must give the same angle within the noise. Two pairs are compared per
+  orientation: +Tmax at the start of the first cycle and +Tmax at the end of the
+  last (the same weights: the torque error cancels), and the ``closing`` zero-torque
+  image against the end of cycle 1's positive unloading (both reached by unloading
+  from +Tmax, no weights on the pans). ``|Δθ| > CLOSURE_K·σ_Δ`` is creep (or a
+  disturbed rig), with ``σ_Δ`` from the two images' angle uncertainties.
+- **Outliers** (:func:`outliers`): standardised residuals of a loop model
+  (``r/σ_eff``) beyond :data:`OUTLIER_K` list the image: a forgotten weight, an
+  extra or a missed shot.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["CLOSURE_K", "OUTLIER_K", "angle_sign_inverted", "gap_between", "closure_checks", "outliers"]
+
+#: Closure differences beyond this many σ are reported as creep.
+CLOSURE_K = 4.0
+#: Standardised residuals beyond this are listed as outliers.
+OUTLIER_K = 4.0
+
+
+def angle_sign_inverted(torque_nm, angle_deg) -> bool:
+    """True when the angle clearly falls as the torque rises (``angle_sign`` set the wrong way).
+
+    The least-squares slope of angle on torque over all given samples is compared with
+    the scatter about that line: inverted when the slope is negative and its t-value
+    below −5.
+
+    Examples
+    --------
+    >>> angle_sign_inverted([0.0, 0.1, 0.2, 0.3], [0.0, -1.0, -2.1, -2.9])
+    True
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_deg, float)
+    ok = np.isfinite(tau) & np.isfinite(th)
+    tau, th = tau[ok], th[ok]
+    if tau.size < 3 or np.ptp(tau) <= 0:
+        return False
+    x = tau - tau.mean()
+    b = float(np.sum(x * (th - th.mean())) / np.sum(x * x))
+    r = th - th.mean() - b * x
+    s = math.sqrt(max(float(np.sum(r * r)) / (tau.size - 2), 0.0))
+    se = s / math.sqrt(float(np.sum(x * x)))
+    return b < 0 and (se == 0 or b / se < -5.0)
+
+
+def gap_between(run_levels, expected_levels, at_nm, *, resolution_nm=1e-9):
+    """The expected torque levels missing between the measured neighbours of ``at_nm``.
+
+    Parameters
+    ----------
+    run_levels : array_like
+        Torque levels measured in a run (N·m).
+    expected_levels : array_like
+        Every level the session uses (N·m).
+    at_nm : float
+        Where a figure is evaluated (N·m).
+
+    Returns
+    -------
+    list of float
+        Missing levels strictly between the neighbours (empty: bracketed without a
+        gap); None when ``at_nm`` is outside the run.
+
+    Examples
+    --------
+    >>> gap_between([0.0, 0.2, 0.3], [0.0, 0.1, 0.2, 0.3], 0.05)
+    [0.1]
+    >>> gap_between([0.0, 0.1], [0.0, 0.1], 0.05)
+    []
+    """
+    lv = np.unique(np.asarray(run_levels, float))
+    ex = np.unique(np.asarray(expected_levels, float))
+    if lv.size == 0 or at_nm < lv[0] - resolution_nm or at_nm > lv[-1] + resolution_nm:
+        return None
+    lo = lv[lv <= at_nm + resolution_nm].max()
+    hi = lv[lv >= at_nm - resolution_nm].min()
+    miss = ex[(ex > lo + resolution_nm) & (ex < hi - resolution_nm)]
+    return [float(v) for v in miss]
+
+
+def missing_levels(run_levels, expected_levels, *, resolution_nm=1e-9):
+    """Expected levels inside a run's torque range that the run lacks (N·m)."""
+    lv = np.unique(np.asarray(run_levels, float))
+    ex = np.unique(np.asarray(expected_levels, float))
+    if lv.size == 0:
+        return []
+    inside = ex[(ex > lv[0] + resolution_nm) & (ex < lv[-1] - resolution_nm)]
+    have = np.min(np.abs(inside[:, None] - lv[None, :]), axis=1) <= resolution_nm if inside.size else np.zeros(0, bool)
+    return [float(v) for v in inside[~have]]
+
+
+def _pair(a, b, label):
+    d = float(b["angle_deg"] - a["angle_deg"])
+    s = math.hypot(float(a["angle_std_deg"]), float(b["angle_std_deg"]))
+    return {"check": label, "image_first": str(a["image"]), "image_last": str(b["image"]), "difference_deg": d,
+            "std_deg": s, "z": d / s if s > 0 else (math.inf if d else 0.0),
+            "creep": bool(abs(d) > CLOSURE_K * s) if s > 0 else bool(d != 0)}
+
+
+def closure_checks(usable: pd.DataFrame, closing: pd.DataFrame) -> list:
+    """Loop-closure and creep checks per orientation (see the module notes).
+
+    Parameters
+    ----------
+    usable : pandas.DataFrame
+        Usable loop rows in acquisition order (``image, orientation_deg, cycle, phase,
+        step, torque_nm, angle_deg, angle_std_deg``).
+    closing : pandas.DataFrame
+        Usable rows of phase ``closing`` (same columns).
+
+    Returns
+    -------
+    list of dict
+        ``orientation_deg, check, image_first, image_last, difference_deg, std_deg,
+        z, creep`` per comparison that could be made.
+    """
+    out = []
+    for orient, sub in usable.groupby("orientation_deg", sort=True):
+        tmax = sub["torque_nm"].max()
+        top = sub[np.isclose(sub["torque_nm"], tmax, rtol=0, atol=1e-9 * max(abs(tmax), 1.0))]
+        if len(top) >= 2:
+            out.append({"orientation_deg": float(orient),
+                        **_pair(top.iloc[0], top.iloc[-1], "+Tmax at the start and at the end of the run")})
+        c = closing[closing["orientation_deg"] == orient]
+        first = sub[(sub["phase"] == "positive_unloading") & (sub["cycle"] == sub["cycle"].min())]
+        if len(c) and len(first):
+            end = first.iloc[-1]
+            if abs(float(end["torque_nm"])) <= 1e-9:
+                out.append({"orientation_deg": float(orient),
+                            **_pair(end, c.iloc[-1], "zero torque after unloading: cycle 1 and the closing image")})
+    return out
+
+
+def outliers(images, residual_rad, sigma_rad, *, k=OUTLIER_K) -> list:
+    """``[(image, z), ...]`` of samples whose ``|r/σ|`` exceeds ``k``, largest first."""
+    r = np.asarray(residual_rad, float)
+    s = np.asarray(sigma_rad, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(s > 0, r / s, 0.0)
+    idx = np.flatnonzero(np.abs(z) > k)
+    idx = idx[np.argsort(-np.abs(z[idx]))]
+    return [(str(np.asarray(images)[i]), float(z[i])) for i in idx]

@@ -1,0 +1,320 @@
+"""Is a fit good enough to show? The lack-of-fit gate, and the stiffness of a phase
+whose stiffness switches.
+
+Every slope and model fit of :mod:`.session` goes through :func:`lack_of_fit`
+before it is reported: its residuals are compared with the noise the table implies,
+
+``σ_eff,i² = σθ,i² + (dθ/dτ)ᵢ²·στ,i²``
+
+(the angle noise, and the torque noise carried into angle through the local
+compliance of the fitted model, Orear's effective variance). ``χ² = Σ rᵢ²/σ_eff,i²``
+with ``dof = n − p`` (``p`` the fitted parameters; for a non-negative least-squares
+fit the parameters that are not at zero). The fit is **rejected** when
+``P(χ²_dof ≥ χ²) < LACK_OF_FIT_ALPHA`` (0.001: with some 40 fits per session, about
+one session in 25 has one false rejection, and a rejection is never silent).
+
+What happens to a rejected figure is decided per figure in :mod:`.session`
+(documented there): a straight-line phase stiffness is **withheld** (it has no
+meaning when the stiffness switches; the two stiffnesses below/above the switch and
+the secant take its place); model parameters are **flagged** and their uncertainty
+multiplied by ``√χ²_red``.
+
+``στ`` here is the part of the torque uncertainty that differs between images: the
+common scale error of g and r (``torque_common_std_nm``) moves every torque in
+proportion and leaves no residual, so it is removed first (:func:`local_torque_std`).
+The weight-piece errors are a random walk in the step number (:mod:`.uncertainty`);
+their marginal 1σ is used as if independent, which overstates the scatter a fit can
+leave, so the gate errs towards accepting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, stats
+
+from ..errors import AnalysisError
+from .uncertainty import least_squares_weights, linearised_covariance
+
+__all__ = [
+    "LACK_OF_FIT_ALPHA", "LackOfFit", "lack_of_fit", "path_compliance", "local_torque_std",
+    "fit_switch", "secant",
+]
+
+#: Significance level of the lack-of-fit test.
+LACK_OF_FIT_ALPHA = 1e-3
+
+
+@dataclass(frozen=True)
+class LackOfFit:
+    """Result of :func:`lack_of_fit`.
+
+    Attributes
+    ----------
+    chi2, dof, reduced_chi2, p_value : float, int, float, float
+        ``χ²``, its degrees of freedom, ``χ²/dof`` and ``P(χ²_dof ≥ χ²)``.
+    rejected : bool
+        ``p_value < alpha``.
+    residual_rms_rad, noise_rms_rad : float
+        RMS residual and RMS of ``σ_eff`` (what a fitting model would leave).
+    testable : bool
+        False when there is no degree of freedom or no uncertainty to test against;
+        then ``rejected`` is False and ``reason`` says why.
+    reason : str
+    """
+
+    chi2: float
+    dof: int
+    reduced_chi2: float
+    p_value: float
+    rejected: bool
+    residual_rms_rad: float
+    noise_rms_rad: float
+    testable: bool = True
+    reason: str = ""
+
+    @property
+    def inflation(self) -> float:
+        """``√max(χ²_red, 1)``: the factor applied to a flagged fit's uncertainty."""
+        return math.sqrt(max(self.reduced_chi2, 1.0)) if self.testable else 1.0
+
+    def describe(self) -> str:
+        """One sentence for a report: why the fit was rejected."""
+        return (f"lack of fit: χ²_red = {self.reduced_chi2:.3g} (dof {self.dof}, p = {self.p_value:.2g}); residual "
+                f"RMS {math.degrees(self.residual_rms_rad):.3g}° against {math.degrees(self.noise_rms_rad):.3g}° "
+                "of noise")
+
+    def to_dict(self) -> dict:
+        return {"chi2": self.chi2, "dof": self.dof, "reduced_chi2": self.reduced_chi2, "p_value": self.p_value,
+                "rejected": self.rejected, "residual_rms_deg": math.degrees(self.residual_rms_rad),
+                "noise_rms_deg": math.degrees(self.noise_rms_rad), "testable": self.testable, "reason": self.reason}
+
+
+def local_torque_std(torque_std_nm, torque_common_std_nm=None) -> np.ndarray:
+    """The image-to-image part of the torque 1σ: ``sqrt(στ² − στ,common²)`` (N·m)."""
+    st = np.asarray(torque_std_nm, float)
+    if torque_common_std_nm is None:
+        return st.copy()
+    sc = np.nan_to_num(np.asarray(torque_common_std_nm, float), nan=0.0)  # an absent column means no common part
+    return np.sqrt(np.clip(st**2 - sc**2, 0.0, None))
+
+
+def path_compliance(torque_nm, model_angle_rad) -> np.ndarray:
+    """Local compliance ``|dθ/dτ|`` (rad/(N·m)) of a model along the sampled torque path.
+
+    The mean of the model's ``|Δθ/Δτ|`` over the one or two path segments that touch
+    each sample (segments without a torque change are skipped), so it works for
+    path-dependent (hysteretic) models as well as for curves.
+
+    Examples
+    --------
+    >>> path_compliance([0.0, 1.0, 2.0, 1.0], [0.0, 2.0, 3.0, 1.0]).tolist()
+    [2.0, 1.5, 1.5, 2.0]
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(model_angle_rad, float)
+    dt, dth = np.diff(tau), np.diff(th)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seg = np.where(dt != 0, np.abs(dth / dt), np.nan)
+    left = np.concatenate([[np.nan], seg])
+    right = np.concatenate([seg, [np.nan]])
+    both = np.vstack([left, right])
+    cnt = np.sum(np.isfinite(both), axis=0)
+    out = np.where(cnt > 0, np.nansum(both, axis=0) / np.maximum(cnt, 1), 0.0)
+    return out
+
+
+def lack_of_fit(residual_rad, *, angle_std_rad, torque_std_nm, compliance_rad_per_nm, n_params,
+                alpha=LACK_OF_FIT_ALPHA, torque_sources=None, jacobian=None, weights=None) -> LackOfFit:
+    """Chi-square test of a fit's residuals against the noise the table implies.
+
+    Parameters
+    ----------
+    residual_rad : array_like (n,)
+        Data minus model, rad.
+    angle_std_rad, torque_std_nm : array_like (n,)
+        1σ per sample (rad; N·m, the image-to-image part, :func:`local_torque_std`).
+    compliance_rad_per_nm : array_like (n,) or float
+        Local ``dθ/dτ`` of the model at each sample (:func:`path_compliance`).
+    n_params : int
+        Fitted parameters.
+    alpha : float
+        Significance level.
+    torque_sources : array_like (n, m), optional
+        Loading matrix of correlated torque errors (N·m per unit source, without the
+        common g, r scale). Then ``χ² = rᵀC⁻¹r`` with the full covariance
+        ``C = diag(σθ²) + (c∘L)(c∘L)ᵀ``: the weight pieces' random walk makes the
+        residuals of neighbouring levels move together, and a diagonal ``χ²`` would
+        count that as lack of fit. ``torque_std_nm`` is then only used for the
+        noise RMS.
+    jacobian, weights : array_like (n, p) and (n,), optional
+        The fit's Jacobian and least-squares weights. With ``torque_sources`` the
+        residuals' own covariance ``S = R·C·Rᵀ``, ``R = I − J(JᵀWJ)⁻¹JᵀW``, is used:
+        ``χ² = rᵀS⁺r`` with ``dof = rank S`` (exact to first order for any weights;
+        a fit weighted by the angle noise alone lets the noisy points pull it, and
+        ``rᵀC⁻¹r`` would then count that as lack of fit).
+
+    Returns
+    -------
+    LackOfFit
+        Not testable (never rejected) when ``n ≤ n_params`` or a sample has no
+        positive uncertainty.
+
+    Examples
+    --------
+    >>> r = lack_of_fit([0.0, 0.01, -0.01, 0.0], angle_std_rad=0.01, torque_std_nm=0.0,
+    ...                 compliance_rad_per_nm=1.0, n_params=2)
+    >>> r.dof, round(r.reduced_chi2, 3), r.rejected
+    (2, 1.0, False)
+    """
+    r = np.asarray(residual_rad, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), r.shape)
+    st = np.broadcast_to(np.asarray(torque_std_nm, float), r.shape)
+    c = np.broadcast_to(np.asarray(compliance_rad_per_nm, float), r.shape)
+    var = sa**2 + (c * st) ** 2
+    dof = int(r.size - n_params)
+    rms = float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+    noise = float(np.sqrt(np.mean(var))) if r.size else float("nan")
+    if dof <= 0:
+        return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
+                         f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)")
+    if not np.all(np.isfinite(var)) or np.any(var <= 0) or (torque_sources is not None and np.any(sa <= 0)):
+        return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
+                         "a sample has no positive angle or torque uncertainty to test the fit against")
+    if torque_sources is None:
+        chi2 = float(np.sum(r**2 / var))
+    else:
+        cl = c[:, None] * np.asarray(torque_sources, float).reshape(r.size, -1)
+        cov = np.diag(sa**2) + cl @ cl.T
+        noise = float(np.sqrt(np.mean(np.diag(cov))))
+        if jacobian is not None:
+            jac = np.asarray(jacobian, float).reshape(r.size, -1)
+            w = np.ones(r.size) if weights is None else np.asarray(weights, float)
+            jw = jac * w[:, None]
+            try:
+                g = np.linalg.solve(jac.T @ jw, jw.T)
+            except np.linalg.LinAlgError:
+                g = np.linalg.pinv(jac.T @ jw) @ jw.T
+            proj = np.eye(r.size) - jac @ g
+            srr = proj @ cov @ proj.T
+            evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
+            keep = evals > evals.max() * 1e-10
+            z = (evecs[:, keep].T @ r) / np.sqrt(evals[keep])
+            chi2 = float(z @ z)
+            dof = int(keep.sum())
+        else:
+            try:
+                chol = np.linalg.cholesky(cov)
+                z = np.linalg.solve(chol, r)
+            except np.linalg.LinAlgError:
+                return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
+                                 "the noise covariance is singular; the fit cannot be tested")
+            chi2 = float(z @ z)
+    p = float(stats.chi2.sf(chi2, dof))
+    return LackOfFit(chi2, dof, chi2 / dof, p, bool(p < alpha), rms, noise)
+
+
+def secant(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm):
+    """Secant stiffness between the first and last sample, N·m/rad, with its 1σ parts.
+
+    Returns ``(k, std_angle, std_torque)``; the torque errors of the two ends are taken
+    independent (a conservative choice for the weight-piece random walk, whose common
+    part cancels in the difference).
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_rad, float)
+    dtau, dth = tau[-1] - tau[0], th[-1] - th[0]
+    if dtau == 0 or not dth * dtau > 0:
+        raise AnalysisError(f"secant: the angle does not change with the torque's sign between the ends "
+                            f"(Δτ = {dtau:.4g} N·m, Δθ = {math.degrees(dth):.4g}°)")
+    k = dtau / dth
+    sa = np.asarray(angle_std_rad, float)
+    st = np.asarray(torque_std_nm, float)
+    std_angle = abs(k / dth) * math.hypot(sa[0], sa[-1])
+    std_torque = abs(1.0 / dth) * math.hypot(st[0], st[-1])
+    return k, std_angle, std_torque
+
+
+def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_side=2):
+    """Two stiffnesses of a loading phase: below and above a switch torque.
+
+    ``θ = θ₀ + c₁·min(x, τ_s) + c₂·max(x − τ_s, 0)`` with ``x = |τ − τ_start|`` the
+    torque taken since the phase's start; the switch ``τ_s`` is profiled over the
+    mid-points between torque levels and refined by a bounded 1-D search, the
+    compliances are then a linear least-squares fit (weights ``1/σ_eff²``).
+
+    Returns
+    -------
+    dict
+        ``k_below``, ``k_above`` (N·m/rad), ``switch_nm`` (torque from the start, N·m),
+        ``std_angle``/``std_torque`` dicts of the stiffnesses (first order, the switch
+        held), ``model`` (rad, per sample), ``compliance`` (rad/(N·m), per sample),
+        ``n_params`` (4).
+
+    Raises
+    ------
+    AnalysisError
+        Fewer than ``2·min_per_side + 1`` samples, or a non-positive compliance.
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_rad, float)
+    sa = np.asarray(angle_std_rad, float)
+    st = np.asarray(torque_std_nm, float)
+    sgn = 1.0 if tau[-1] >= tau[0] else -1.0
+    x = sgn * (tau - tau[0])
+    levels = np.unique(x)
+    if levels.size < 2 * min_per_side + 1:
+        raise AnalysisError(f"a switch needs at least {2 * min_per_side + 1} torque levels in the phase, "
+                            f"got {levels.size}")
+    y = sgn * th
+
+    def design(ts):
+        return np.column_stack([np.ones_like(x), np.minimum(x, ts), np.maximum(x - ts, 0.0)])
+
+    def solve(ts, w):
+        a = design(ts)
+        sw = np.sqrt(w)
+        coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+        r = y - a @ coef
+        return coef, float(np.sum(w * r * r))
+
+    mids = 0.5 * (levels[1:] + levels[:-1])
+    cands = mids[min_per_side - 1: mids.size - (min_per_side - 1)]
+    w = least_squares_weights(sa)
+    best = None
+    for _ in range(2):  # effective variance: the weights depend on the local compliance
+        sse = [solve(ts, w)[1] for ts in cands]
+        i = int(np.argmin(sse))
+        lo_b = levels[max(i + min_per_side - 1, 0)]
+        hi_b = levels[min(i + min_per_side, levels.size - 1)]
+        res = optimize.minimize_scalar(lambda ts: solve(ts, w)[1], bounds=(lo_b, hi_b), method="bounded",
+                                       options={"xatol": max(levels[-1], 1e-12) * 1e-9})
+        ts = float(res.x) if res.fun <= sse[i] else float(cands[i])
+        coef, _ = solve(ts, w)
+        comp = np.where(x < ts, coef[1], coef[2])
+        best = (ts, coef)
+        var = sa**2 + (comp * st) ** 2
+        if not np.all(var > 0):
+            break
+        w = 1.0 / var
+    ts, coef = best
+    if not (coef[1] > 0 and coef[2] > 0):
+        raise AnalysisError(f"switch fit gives a non-positive compliance (below {coef[1]:.3g}, above {coef[2]:.3g} "
+                            "rad/(N·m))")
+    a = design(ts)
+    jac_tau = np.diag(sgn * np.where(x < ts, coef[1], coef[2]) * sgn)
+    try:
+        cov_a, cov_t = linearised_covariance(a, w, sa**2, jac_tau, st**2)
+    except np.linalg.LinAlgError:
+        raise AnalysisError("switch fit: the compliances are not identified (singular normal matrix)") from None
+    out = {"switch_nm": ts, "n_params": 4, "std_angle": {}, "std_torque": {}}
+    for j, name in ((1, "k_below"), (2, "k_above")):
+        k = 1.0 / coef[j]
+        out[name] = k
+        out["std_angle"][name] = math.sqrt(max(cov_a[j, j], 0.0)) * k * k
+        out["std_torque"][name] = math.sqrt(max(cov_t[j, j], 0.0)) * k * k
+    out["model"] = sgn * (a @ coef)
+    out["compliance"] = np.where(x < ts, coef[1], coef[2])
+    return out
