@@ -72,7 +72,9 @@ _LAZY = {
     "fit_bilinear": "analysis",
     "fit_bouc_wen": "analysis",
     "simulate_measurements": "analysis",
+    "fit_preisach": "analysis",
     "write_report": "report",
+    "analyze_table": "report.analyze",
     "report_session": "report.session_report",
     "run_demo": "report.session_report",
     # calibration

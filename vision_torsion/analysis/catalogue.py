@@ -125,6 +125,7 @@ def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, 
     comp = None
     w = 1.0 / np.where(sa > 0, sa**2, 1.0)
     for _ in range(2):  # effective variance: the local compliance enters the weights
+        w_used = w
         sw = np.sqrt(w)
         coef = np.linalg.lstsq(a * sw[:, None], th * sw, rcond=None)[0]
         comp_seg = coef[2:]
@@ -135,8 +136,9 @@ def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, 
         raise AnalysisError("catalogue stiffness: a segment has a non-positive compliance (the branches are not "
                             "monotone there)")
     resid = th - a @ coef
+    w_fit = w_used
     check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=a.shape[1],
-                        torque_sources=gate_sources if with_uncertainty else None)
+                        torque_sources=gate_sources if with_uncertainty else None, jacobian=a, weights=w_fit)
     k = [1.0 / c for c in coef[2:]]
     base = {"k": k, "check": check, "breaks_nm": brk, "points_per_segment": counts, "compliance": comp,
             "residual_rad": resid}

@@ -316,5 +316,7 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         out["std_angle"][name] = math.sqrt(max(cov_a[j, j], 0.0)) * k * k
         out["std_torque"][name] = math.sqrt(max(cov_t[j, j], 0.0)) * k * k
     out["model"] = sgn * (a @ coef)
+    out["design"] = a
+    out["weights"] = w
     out["compliance"] = np.where(x < ts, coef[1], coef[2])
     return out

@@ -183,11 +183,26 @@ def build_loops(usable: pd.DataFrame, *, torque_correlation="level", rig=None) -
     common = usable["torque_common_std_nm"].to_numpy(float) if "torque_common_std_nm" in usable else None
     local = local_torque_std(usable["torque_std_nm"].to_numpy(float), common)
     loops = []
+    tau_all = usable["torque_nm"].to_numpy(float)
+    orient_all = usable["orientation_deg"].to_numpy(float)
+    phase_all = usable["phase"].to_numpy(object)
     for (orient, cycle), idx in usable.groupby(["orientation_deg", "cycle"], sort=True).indices.items():
+        idx = np.asarray(idx)
+        # a later cycle starts where the one before ended (+Tmax, the last positive_loading image, which the
+        # protocol does not photograph twice): that image is also this loop's start
+        top = tau_all[orient_all == orient].max()
+        i0 = idx[0]
+        if (abs(tau_all[i0] - top) > 1e-9 and i0 > 0 and orient_all[i0 - 1] == orient
+                and phase_all[i0 - 1] == "positive_loading" and abs(tau_all[i0 - 1] - top) <= 1e-9
+                and phase_all[i0] == "positive_unloading"):
+            idx = np.concatenate([[i0 - 1], idx])
         sub = usable.iloc[idx]
+        phase = sub["phase"].to_numpy(dtype=object).copy()
+        if phase[0] == "positive_loading":
+            phase[0] = "positive_unloading"  # the borrowed start image begins this loop's unloading
         loops.append(Loop(
             orientation_deg=float(orient), cycle=int(cycle),
-            phase=sub["phase"].to_numpy(dtype=object),
+            phase=phase,
             torque_nm=sub["torque_nm"].to_numpy(float),
             torque_std_nm=sub["torque_std_nm"].to_numpy(float),
             angle_rad=np.radians(sub["angle_deg"].to_numpy(float)),

@@ -193,6 +193,8 @@ class SessionAnalysis:
             "phases": _records(self.phases),
             "issues": [asdict(i) for i in self.issues],
             "failed_images": _records(self.failed_images),
+            "gear": _jsonable(self.settings.get("test_metadata", {}).get("gear")),
+            "test": _jsonable(self.settings.get("test_metadata", {}).get("test")),
             "checks": _jsonable(self.checks),
             "model_checks": [
                 {"orientation_deg": o, "cycle": c, "model": m, **chk.to_dict()}
@@ -319,8 +321,10 @@ def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_lo
             col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
             res = None
         if res is not None:
-            chk = lack_of_fit(res["residual_rad"], angle_std_rad=sa, torque_std_nm=st,
-                              compliance_rad_per_nm=res["compliance_rad_per_nm"], n_params=2, torque_sources=src_local)
+            b = res["compliance_rad_per_nm"]
+            chk = lack_of_fit(res["residual_rad"], angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=b,
+                              n_params=2, torque_sources=src_local, jacobian=np.column_stack([np.ones_like(tau), tau]),
+                              weights=1.0 / np.maximum(sa**2 + (b * st) ** 2, 1e-300))
             row.update(residual_rms_deg=math.degrees(res["residual_rms_rad"]), reduced_chi2=chk.reduced_chi2)
             if chk.rejected:
                 switched = True
@@ -358,7 +362,7 @@ def _switch_figures(col, row, phase, tau, th, sa, st, src_local):
             col.fail(n, u, f"phase {phase}: {exc}")
         return
     chk = lack_of_fit(th - sw["model"], angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=sw["compliance"],
-                      n_params=sw["n_params"], torque_sources=src_local)
+                      n_params=sw["n_params"], torque_sources=src_local, jacobian=sw["design"], weights=sw["weights"])
     if chk.rejected:
         for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
             col.fail(n, u, f"phase {phase}: two stiffnesses with one switch do not fit either, withheld "
@@ -447,6 +451,11 @@ def _gap_reasons(settings, tau, is_desc, levels) -> dict:
         miss = checks.missing_levels(lv, exp)
         if miss:
             holes[rn] = miss
+    tips = (float(tau.min()), float(tau.max()))
+    for rn, lv in runs.items():
+        short = [t for t in tips if lv.size and np.min(np.abs(lv - t)) > _TOL]
+        if short:
+            holes.setdefault(rn, []).extend(short)
     if holes:
         txt = "; ".join(f"{rn} run lacks {', '.join(f'{v:+.4g}' for v in m)} N·m" for rn, m in holes.items())
         for name in ("hysteresis", "loop_energy", "loss_factor"):
@@ -819,8 +828,8 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
     inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"])
     if inverted:
         issues.append(Issue(None, None, "angle sign",
-                            "angle_sign looks inverted: the angle falls as the torque rises; set angle_sign = -1 in "
-                            "session.toml (or multiply angle_deg by -1). Every figure is withheld until then."))
+                            "angle_sign looks inverted; set angle_sign = -1 in session.toml (the angle falls as the "
+                            "torque rises; or multiply angle_deg by -1). Every figure is withheld until then."))
     closure = checks.closure_checks(usable, closing)
     creep = {}
     for c in closure:

@@ -52,6 +52,7 @@ _COMMAND_MODULES = [
     "bind",
     "watch",
     "report",
+    "analyze",
     "demo",
     "check_accuracy",
     "calibrate",

@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..fileio import write_csv
-from . import ReportFiles, write_report
+from . import ReportFiles
 
 __all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
 
@@ -76,25 +76,6 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
         "images": n_images,
         "images failed": n_failed,
     }
-
-
-def _test_metadata(session) -> dict:
-    """The test's metadata from session.toml's optional ``[test]``/``[gear]`` tables
-    (whatever the configuration carries under ``test`` and ``gear``: a dict or a
-    dataclass), only the entries present."""
-    import dataclasses
-
-    out = {}
-    for table in ("gear", "test"):
-        value = getattr(session.config, table, None)
-        if value is None:
-            continue
-        if dataclasses.is_dataclass(value):
-            value = dataclasses.asdict(value)
-        if isinstance(value, dict):
-            out.update({k: v for k, v in value.items()
-                        if v is not None and not isinstance(v, (dict, list, tuple)) or isinstance(v, (list, tuple)) and v})
-    return out
 
 
 _STIFFNESS_TITLE = "Stiffness per load step (Δτ/Δθ, each loop on its own)"
@@ -208,9 +189,9 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     SessionError, ManifestError
         The session folder is invalid (every problem listed).
     """
-    from ..analysis import analyze_session
     from ..measurements import read_measurements
     from ..session import load_session, process_session
+    from .analyze import analyze_table
 
     session = load_session(session_dir, missing="pending")
     out = Path(out_dir) if out_dir is not None else session.folder / "results"
@@ -219,11 +200,6 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     waiting = measurements[measurements["status"] == "pending"]
     measurements = measurements[measurements["status"] != "pending"]
     logger.info("analysing %d measurements", len(measurements))
-    analysis = analyze_session(
-        measurements,
-        max_torque_nm=session.config.protocol.max_torque_nm,
-        rig=session.config.torque_rig,
-    )
     title, section_html, *steps = _stiffness_section(measurements)
     extra = [(title, section_html), _overlay_section(session)]
     if len(waiting) or result.unlisted:
@@ -233,14 +209,10 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     with output_set():  # the report's files are replaced together or not at all
         if steps:
             write_csv(out / "stiffness_steps.csv", steps[0])
-        files = write_report(
-            measurements,
-            analysis,
-            conditions=_conditions(session, result.n_images, result.n_failed),
-            out_dir=out,
-            extra_sections=extra,
-            metadata=_test_metadata(session),
-        )
+        # the same path as `vision-torsion analyze`: the table, the session's settings, the report
+        res = analyze_table(measurements, session=session.config, out_dir=out,
+                            conditions=_conditions(session, result.n_images, result.n_failed), extra_sections=extra)
+    files, analysis = res.files, res.analysis
     return SessionReport(
         files=files,
         measurements_path=result.measurements_path,

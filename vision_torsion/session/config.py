@@ -30,6 +30,8 @@ from ..settings import MeasureSettings
 __all__ = [
     "RigConfig",
     "ProtocolConfig",
+    "GearConfig",
+    "TestConfig",
     "SessionConfig",
     "load_config",
     "write_config",
@@ -103,6 +105,57 @@ class ProtocolConfig:
 
 
 @dataclass(frozen=True)
+class GearConfig:
+    """The ``[gear]`` table: what is tested, from its catalogue (all optional).
+
+    Attributes
+    ----------
+    name, serial : str or None
+        Free text: the gear (type, size) and its serial number.
+    ratio : float or None
+        Transmission ratio i (input turns per output turn): stiffnesses are also given
+        on the output side, ``K_out = i²·K_in`` (with its caveat in the report).
+    rated_torque_nm : float or None
+        Rated torque T_R (N·m): lost motion at ±3 % and ±4 % of it.
+    t1_nm, t2_nm : float or None
+        Catalogue break torques T1 < T2 (N·m): K1, K2, K3 fitted with them fixed.
+    """
+
+    name: str | None = None
+    serial: str | None = None
+    ratio: float | None = None
+    rated_torque_nm: float | None = None
+    t1_nm: float | None = None
+    t2_nm: float | None = None
+
+
+@dataclass(frozen=True)
+class TestConfig:
+    """The ``[test]`` table: who, when, how the figures are taken (all optional).
+
+    Attributes
+    ----------
+    operator, notes : str or None
+        Free text shown in the report.
+    temperature_c : float or None
+        Ambient temperature (°C).
+    lost_motion_fractions : tuple of float or None
+        Fractions of T_R for lost motion (default 0.03 and 0.04).
+    secant_interval_nm : tuple of float or None
+        Secant stiffness interval (N·m), default 50–100 % of the maximum torque.
+    fit_breaks : bool
+        Without catalogue T1/T2, fit the break torques (default true).
+    """
+
+    operator: str | None = None
+    temperature_c: float | None = None
+    notes: str | None = None
+    lost_motion_fractions: tuple | None = None
+    secant_interval_nm: tuple | None = None
+    fit_breaks: bool = True
+
+
+@dataclass(frozen=True)
 class SessionConfig:
     """Everything ``session.toml`` says.
 
@@ -122,6 +175,8 @@ class SessionConfig:
     protocol: ProtocolConfig
     markers: MeasureSettings = field(default_factory=MeasureSettings)
     angle_sign: int = 1
+    gear: GearConfig = field(default_factory=GearConfig)
+    test: TestConfig = field(default_factory=TestConfig)
 
     @property
     def torque_rig(self) -> TorqueRig:
@@ -246,6 +301,62 @@ def _protocol_from(table, problems) -> ProtocolConfig | None:
                           max_torque_nm=max_torque, step_mass_kg=step, cycles=cycles)
 
 
+_GEAR_KEYS = ("name", "serial", "ratio", "rated_torque_nm", "t1_nm", "t2_nm")
+_TEST_KEYS = ("operator", "temperature_c", "notes", "lost_motion_fractions", "secant_interval_nm", "fit_breaks")
+
+
+def _text(table, key, problems, prefix):
+    if key not in table:
+        return None
+    v = table[key]
+    if not isinstance(v, str):
+        problems.add(f"{prefix}.{key}", f"expected text, got {v!r}")
+        return None
+    return v
+
+
+def _numbers(table, key, problems, prefix, *, length=None, check=None, what=""):
+    if key not in table:
+        return None
+    v = table[key]
+    if (not isinstance(v, list) or not v or (length is not None and len(v) != length)
+            or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in v)
+            or (check is not None and not check([float(x) for x in v]))):
+        problems.add(f"{prefix}.{key}", f"expected {what}, got {v!r}")
+        return None
+    return tuple(float(x) for x in v)
+
+
+def _gear_from(table, problems) -> GearConfig:
+    _unknown(table, _GEAR_KEYS, "gear", problems)
+    kw = {k: _text(table, k, problems, "gear") for k in ("name", "serial")}
+    for k in ("ratio", "rated_torque_nm", "t1_nm", "t2_nm"):
+        kw[k] = _number(table, k, problems, "gear", required=False, positive=True)
+    if ("t1_nm" in table) != ("t2_nm" in table):
+        problems.add("gear.t2_nm" if "t1_nm" in table else "gear.t1_nm",
+                     "give both catalogue break torques t1_nm and t2_nm, or neither")
+    elif kw["t1_nm"] is not None and kw["t2_nm"] is not None and not kw["t1_nm"] < kw["t2_nm"]:
+        problems.add("gear.t2_nm", f"expected t1_nm < t2_nm, got {kw['t1_nm']!r} and {kw['t2_nm']!r}")
+    return GearConfig(**kw)
+
+
+def _test_from(table, problems) -> TestConfig:
+    _unknown(table, _TEST_KEYS, "test", problems)
+    kw = {k: _text(table, k, problems, "test") for k in ("operator", "notes")}
+    kw["temperature_c"] = _number(table, "temperature_c", problems, "test", required=False)
+    kw["lost_motion_fractions"] = _numbers(table, "lost_motion_fractions", problems, "test",
+                                           check=lambda v: all(0 < x < 1 for x in v),
+                                           what="a list of fractions in (0, 1), e.g. [0.03, 0.04]")
+    kw["secant_interval_nm"] = _numbers(table, "secant_interval_nm", problems, "test", length=2,
+                                        check=lambda v: 0 <= v[0] < v[1], what="[lower, upper] in N·m, 0 <= lower < upper")
+    fb = table.get("fit_breaks", True)
+    if not isinstance(fb, bool):
+        problems.add("test.fit_breaks", f"expected true or false, got {fb!r}")
+        fb = True
+    kw["fit_breaks"] = fb
+    return TestConfig(**kw)
+
+
 def _markers_from(table, problems) -> MeasureSettings | None:
     try:
         return MeasureSettings.from_dict(table)
@@ -271,7 +382,7 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
         was expected.
     """
     problems = _Problems()
-    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol"), "",
+    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test"), "",
              problems)
     version = data.get("format_version", _FORMAT_VERSION)
     if version != _FORMAT_VERSION:
@@ -282,8 +393,10 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
     rig = _rig_from(_table(data, "rig", problems, required=True), problems)
     protocol = _protocol_from(_table(data, "protocol", problems, required=True), problems)
     markers = _markers_from(_table(data, "markers", problems, required=False), problems)
+    gear = _gear_from(_table(data, "gear", problems, required=False), problems)
+    test = _test_from(_table(data, "test", problems, required=False), problems)
     problems.raise_if_any(source)
-    return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign))
+    return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign), gear=gear, test=test)
 
 
 def load_config(path) -> SessionConfig:
@@ -311,7 +424,7 @@ def config_to_dict(config: SessionConfig) -> dict:
         rig_d[key] = getattr(rig, key)
     markers = {k: v for k, v in config.markers.to_dict().items() if v is not None}
     p = config.protocol
-    return {
+    out = {
         "format_version": _FORMAT_VERSION,
         "angle_sign": config.angle_sign,
         "rig": rig_d,
@@ -323,6 +436,20 @@ def config_to_dict(config: SessionConfig) -> dict:
             "cycles": p.cycles,
         },
     }
+    gear = {k: getattr(config.gear, k) for k in _GEAR_KEYS if getattr(config.gear, k) is not None}
+    if gear:
+        out["gear"] = gear
+    test = {}
+    for k in _TEST_KEYS:
+        v = getattr(config.test, k)
+        if k == "fit_breaks":
+            if v is False:
+                test[k] = False
+        elif v is not None:
+            test[k] = list(v) if isinstance(v, tuple) else v
+    if test:
+        out["test"] = test
+    return out
 
 
 def write_config(path, config: SessionConfig, *, header: str = "") -> Path:

@@ -1,0 +1,39 @@
+"""``vision-torsion analyze TABLE.csv [--session FILE.toml] [-o OUT_DIR]``."""
+
+from __future__ import annotations
+
+from . import add_common_options
+from .options import add_output_option
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "analyze",
+        help="analyse a torque-angle table (measurements.csv or another rig's) and write its report",
+        description=(
+            "Analyse TABLE.csv (columns image, orientation_deg, cycle, phase, step, mass_kg, torque_nm, "
+            "torque_std_nm, angle_deg, angle_std_deg, status, message; optional torque_common_std_nm) and write "
+            "summary.json, stiffness_table.csv, figures and report.html. With --session, the rig's weight pieces "
+            "carry the torque uncertainty and the optional [gear]/[test] tables (rated torque, catalogue T1/T2, "
+            "gear ratio, secant interval, operator, ...) are used. A figure that does not fit or would be "
+            "interpolated across a gap is withheld or flagged with its reason. Exit status 0, 1 if an image of "
+            "the table failed, 2 unusable input."
+        ),
+    )
+    p.add_argument("table", metavar="TABLE.csv")
+    p.add_argument("--session", metavar="FILE.toml", help="session.toml with the rig and the optional [gear]/[test]")
+    add_output_option(p, "TABLE's folder/<TABLE stem>_analysis")
+    add_common_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..report.analyze import analyze_table
+
+    res = analyze_table(args.table, session=args.session, out_dir=args.out_dir)
+    print(f"{res.n_rows} rows, {res.n_failed} image(s) not usable; {res.n_withheld} figure(s) withheld and "
+          f"{res.n_flagged} flagged, each with its reason in the report")
+    if res.analysis.checks.get("angle_sign_inverted"):
+        print("angle_sign looks inverted: set angle_sign = -1 in session.toml")
+    print(f"report: {res.files.report_html}")
+    return 1 if res.n_failed else 0

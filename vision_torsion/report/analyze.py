@@ -1,0 +1,187 @@
+"""``analyze_table``: any torque–angle table in, summary.json and report.html out.
+
+The one path from a table to a report: ``vision-torsion analyze TABLE.csv`` and
+``vision-torsion report SESSION_DIR`` (after processing) both come here.
+
+The table is a ``measurements.csv`` or one from another rig with the same columns
+(the README lists them: ``image, orientation_deg, cycle, phase, step, mass_kg,
+torque_nm, torque_std_nm, angle_deg, angle_std_deg, status, message``, optional
+``torque_common_std_nm``). A ``session.toml`` is optional: with it the torque
+uncertainty follows the weight pieces (its ``[rig]``), lost motion refers to the
+rated torque and K1–K3 to the catalogue breaks (its ``[gear]``), and the test's
+metadata (its ``[test]``) are shown in the report and written into summary.json.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from ..errors import AnalysisError
+
+__all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class AnalyzeResult:
+    """What :func:`analyze_table` wrote and found.
+
+    Attributes
+    ----------
+    files : vision_torsion.report.ReportFiles
+    analysis : vision_torsion.analysis.SessionAnalysis
+    n_rows, n_failed : int
+        Rows of the table and images that could not be used.
+    n_issues, n_withheld, n_flagged : int
+        Issues listed, figures withheld (null with a reason) and flagged.
+    """
+
+    files: object
+    analysis: object
+    n_rows: int
+    n_failed: int
+    n_issues: int
+    n_withheld: int
+    n_flagged: int
+
+
+def analysis_options(config) -> dict:
+    """Keyword arguments of :func:`~vision_torsion.analysis.analyze_session` from a session.toml.
+
+    ``[rig]`` and ``[protocol]`` give the weight-piece torque model and the maximum
+    torque; ``[gear]`` the rated torque, catalogue T1/T2 and gear ratio; ``[test]`` the
+    lost-motion fractions, the secant interval and whether to fit the breaks.
+    """
+    rig, proto, gear, test = config.rig, config.protocol, config.gear, config.test
+    kw = dict(
+        max_torque_nm=proto.max_torque_nm,
+        rig=dict(step_mass_kg=proto.step_mass_kg, mass_std_kg=rig.mass_std_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
+                 arm_radius_m=rig.arm_radius_m, friction_torque_std_nm=rig.friction_torque_std_nm,
+                 arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
+        rated_torque_nm=gear.rated_torque_nm, gear_ratio=gear.ratio, fit_breaks=test.fit_breaks,
+    )
+    if gear.t1_nm is not None and gear.t2_nm is not None:
+        kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
+    if test.lost_motion_fractions is not None:
+        kw["lost_motion_fractions"] = tuple(test.lost_motion_fractions)
+    if test.secant_interval_nm is not None:
+        kw["secant_interval_nm"] = tuple(test.secant_interval_nm)
+    return kw
+
+
+def test_metadata(config) -> dict:
+    """The ``[gear]`` and ``[test]`` entries that were given, for the report and summary.json."""
+    out = {}
+    for table, obj in (("gear", config.gear), ("test", config.test)):
+        d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(obj).items() if v is not None}
+        if table == "test" and d.get("fit_breaks") is True:
+            d.pop("fit_breaks")
+        if d:
+            out[table] = d
+    return out
+
+
+_LABELS = {
+    ("gear", "name"): "gear", ("gear", "serial"): "serial number", ("gear", "ratio"): "gear ratio i",
+    ("gear", "rated_torque_nm"): "rated torque T_R (N·m)", ("gear", "t1_nm"): "catalogue T1 (N·m)",
+    ("gear", "t2_nm"): "catalogue T2 (N·m)", ("test", "operator"): "operator",
+    ("test", "temperature_c"): "temperature (°C)", ("test", "notes"): "notes",
+    ("test", "lost_motion_fractions"): "lost motion at (fractions of T_R)",
+    ("test", "secant_interval_nm"): "secant interval (N·m)", ("test", "fit_breaks"): "fit break torques",
+}
+
+
+def _read_table(table) -> tuple[pd.DataFrame, str]:
+    from ..measurements import read_measurements
+
+    if isinstance(table, pd.DataFrame):
+        return table, "table"
+    path = Path(table)
+    # the one reader of the table: every bad row listed by its CSV line (MeasurementsError)
+    return read_measurements(path, name=str(path)), str(path)
+
+
+def analyze_table(table, *, session=None, out_dir=None, conditions=None, extra_sections=(), failures=None,
+                  title="Torsional stiffness and hysteresis report", n_draws=400, seed=0):
+    """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
+
+    Parameters
+    ----------
+    table : path-like or pandas.DataFrame
+        ``measurements.csv`` or a table with the same columns (rows with status
+        ``pending`` are skipped: not photographed yet).
+    session : path-like or SessionConfig, optional
+        A ``session.toml`` (or its parsed :class:`~vision_torsion.session.SessionConfig`)
+        for the rig, the protocol and the optional ``[gear]``/``[test]`` tables.
+    out_dir : path-like, optional
+        Output folder; default ``<table folder>/<table stem>_analysis``.
+    conditions : dict, optional
+        Test conditions to show first (default: the table, and the session's rig).
+    extra_sections : sequence of (title, html)
+        Further report sections.
+    failures : list of dict, optional
+        Further failed images (see :func:`~vision_torsion.report.write_report`).
+    title : str
+    n_draws, seed : int
+        Monte Carlo settings of the analysis.
+
+    Returns
+    -------
+    AnalyzeResult
+
+    Raises
+    ------
+    AnalysisError
+        The table is missing, unreadable, or lacks a column (named), or has no usable
+        row; the message starts with the file name.
+    SessionError
+        The session.toml is invalid (every problem listed).
+    """
+    from ..analysis import analyze_session
+    from ..fileio import output_set
+    from . import write_report
+
+    df, name = _read_table(table)
+    if "status" in df.columns:
+        df = df[df["status"].astype(str) != "pending"].reset_index(drop=True)
+    config = None
+    if session is not None:
+        if hasattr(session, "protocol"):
+            config = session
+        else:
+            from ..session.config import load_config
+
+            config = load_config(session)
+    kw = analysis_options(config) if config is not None else {}
+    try:
+        analysis = analyze_session(df, n_draws=n_draws, seed=seed, **kw)
+    except AnalysisError as exc:
+        if str(exc).startswith(name):
+            raise
+        raise type(exc)(f"{name}: {exc}", reason=getattr(exc, "reason", None)) from None
+    meta = test_metadata(config) if config is not None else {}
+    analysis.settings["test_metadata"] = meta
+    cond = dict(conditions) if conditions is not None else {"table": name}
+    if conditions is None and config is not None:
+        cond.update({"arm radius r (m)": config.rig.arm_radius_m, "gravity g (m/s²)": config.rig.gravity_m_per_s2,
+                     "mass per weight piece (kg)": config.protocol.step_mass_kg,
+                     "maximum torque (N·m)": config.protocol.max_torque_nm})
+    # the header of the report shows the test's metadata (gear, serial, operator, ...)
+    metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()}
+    if out_dir is None:
+        if isinstance(table, pd.DataFrame):
+            raise AnalysisError("out_dir is needed when the table is a DataFrame")
+        out_dir = Path(table).parent / f"{Path(table).stem}_analysis"
+    with output_set():  # the report's files are replaced together or not at all
+        files = write_report(df, analysis, conditions=cond, out_dir=out_dir, failures=failures,
+                             extra_sections=extra_sections, title=title, metadata=metadata)
+    f = analysis.figures
+    withheld = int((~f["value"].apply(lambda v: v == v)).sum())
+    flagged = int((f["flag"].astype(str) != "").sum())
+    return AnalyzeResult(files=files, analysis=analysis, n_rows=int(len(df)), n_failed=int(len(analysis.failed_images)),
+                         n_issues=len(analysis.issues), n_withheld=withheld, n_flagged=flagged)
