@@ -237,7 +237,7 @@ def secant(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm):
     return k, std_angle, std_torque
 
 
-def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_side=2):
+def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_side=2, torque_sources=None):
     """Two stiffnesses of a loading phase: below and above a switch torque.
 
     ``θ = θ₀ + c₁·min(x, τ_s) + c₂·max(x − τ_s, 0)`` with ``x = |τ − τ_start|`` the
@@ -245,12 +245,16 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     mid-points between torque levels and refined by a bounded 1-D search, the
     compliances are then a linear least-squares fit (weights ``1/σ_eff²``).
 
+    torque_sources : array_like (n, m), optional
+        Loading matrix of correlated torque errors for the uncertainty (the weight
+        pieces' random walk moves a slope far more than independent errors would).
+
     Returns
     -------
     dict
         ``k_below``, ``k_above`` (N·m/rad), ``switch_nm`` (torque from the start, N·m),
-        ``std_angle``/``std_torque`` dicts of the stiffnesses (first order, the switch
-        held), ``model`` (rad, per sample), ``compliance`` (rad/(N·m), per sample),
+        ``std_angle``/``std_torque`` dicts of these (first order, the switch fitted
+        with them), ``model`` (rad, per sample), ``compliance`` (rad/(N·m), per sample),
         ``n_params`` (4).
 
     Raises
@@ -304,12 +308,21 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         raise AnalysisError(f"switch fit gives a non-positive compliance (below {coef[1]:.3g}, above {coef[2]:.3g} "
                             "rad/(N·m))")
     a = design(ts)
-    jac_tau = np.diag(sgn * np.where(x < ts, coef[1], coef[2]) * sgn)
+    comp = np.where(x < ts, coef[1], coef[2])
+    if torque_sources is None:
+        jac_tau, g_var = np.diag(comp), st**2
+    else:
+        jac_tau = comp[:, None] * np.asarray(torque_sources, float).reshape(tau.size, -1)
+        g_var = np.ones(jac_tau.shape[1])
+    # the switch torque is fitted too: its column in the Jacobian (the torque errors move it, and with it the
+    # slopes: holding it fixed understates the torque part of k_below ~10x on the paper's loop)
+    a_full = np.column_stack([a, np.where(x > ts, coef[1] - coef[2], 0.0)])
     try:
-        cov_a, cov_t = linearised_covariance(a, w, sa**2, jac_tau, st**2)
+        cov_a, cov_t = linearised_covariance(a_full, w, sa**2, jac_tau, g_var)
     except np.linalg.LinAlgError:
         raise AnalysisError("switch fit: the compliances are not identified (singular normal matrix)") from None
-    out = {"switch_nm": ts, "n_params": 4, "std_angle": {}, "std_torque": {}}
+    out = {"switch_nm": ts, "n_params": 4, "std_angle": {"switch_nm": math.sqrt(max(cov_a[3, 3], 0.0))},
+           "std_torque": {"switch_nm": math.sqrt(max(cov_t[3, 3], 0.0))}}
     for j, name in ((1, "k_below"), (2, "k_above")):
         k = 1.0 / coef[j]
         out[name] = k

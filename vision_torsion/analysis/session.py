@@ -337,7 +337,7 @@ def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_lo
                 row.update(stiffness_nm_per_rad=res["value"],
                            stiffness_std_nm_per_rad=math.hypot(res["std_angle"], res["std_torque"]))
         if switched:
-            _switch_figures(col, row, phase, tau, th, sa, st, src_local)
+            _switch_figures(col, row, phase, tau, th, sa, st, src_local, src)
         _phase_secant(col, row, phase, tau, th, sa, seq["torque_std_nm"].to_numpy(float)[pos], start, end, missing)
         _finish_phase_row(row, phase_rows)
 
@@ -353,10 +353,10 @@ def _slope_parts(tau, th, sa, st, src, knd, k):
     return {kk: float(v[1]) * k * k for kk, v in parts.items()}
 
 
-def _switch_figures(col, row, phase, tau, th, sa, st, src_local):
+def _switch_figures(col, row, phase, tau, th, sa, st, src_local, src):
     names = (f"k_{phase}_below", f"k_{phase}_above", f"switch_{phase}")
     try:
-        sw = fit_switch(tau, th, angle_std_rad=sa, torque_std_nm=st)
+        sw = fit_switch(tau, th, angle_std_rad=sa, torque_std_nm=st, torque_sources=src)
     except AnalysisError as exc:
         for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
             col.fail(n, u, f"phase {phase}: {exc}")
@@ -370,7 +370,8 @@ def _switch_figures(col, row, phase, tau, th, sa, st, src_local):
         return
     for n, key in zip(names[:2], ("k_below", "k_above")):
         col.add(n, "nm_per_rad", sw[key], sw["std_angle"][key], sw["std_torque"][key], "first-order", check=chk)
-    col.add(names[2], "nm", sw["switch_nm"], method="fit (switch torque from the phase start)")
+    col.add(names[2], "nm", sw["switch_nm"], sw["std_angle"]["switch_nm"], sw["std_torque"]["switch_nm"],
+            "first-order (switch torque from the phase start)", check=chk)
     row.update(stiffness_below_nm_per_rad=sw["k_below"], stiffness_above_nm_per_rad=sw["k_above"],
                switch_torque_nm=sw["switch_nm"])
 

@@ -1,0 +1,188 @@
+"""Are the figures right, or do they say why not? (issue 14)
+
+    python benchmarks/bench_figures.py [--reps 50] [--jobs 2]
+
+Sessions from the benchmark's own generator (``truth_tables.py``: exact truth,
+no code shared with the analysis), analysed by ``analyze_session`` with the rig's
+weight-piece model, at 0.0005° and 0.005° of angle noise. For every loop figure
+that has a truth, a result is **ok** when it is within its u95 of the truth, or is
+withheld (null with a reason) or flagged with a reason; a **miss** is a shown,
+unflagged figure off by more than its u95. Prints a table and writes
+``benchmarks/results/figures.json``.
+
+Cases: bilinear; three-segment stiffening loop (catalogue T1/T2 given); smooth
+Masing loop; no orientation effect (1 and 3 cycles, 2 % cycle-to-cycle
+repeatability) and a 10 % one (3 cycles); a failed zero-torque image; half a phase
+failed; a 0.2° creep over the run (with the closing image). Plus: a straight line or
+a bilinear model shown unflagged where it does not describe the loop ("misfit
+shown"), K1–K3 within 1 % at the catalogue T1/T2, and the time of ``analyze`` on a
+450-row table (one core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import sys
+import time
+import zlib
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import truth_tables as T  # noqa: E402
+
+NOISES = (0.0005, 0.005)
+RIG = dict(step_mass_kg=T.STEP_MASS_KG, mass_std_kg=T.MASS_STD_KG, gravity_m_per_s2=T.G, arm_radius_m=T.R_M)
+SIX = (0, 60, 120, 180, 240, 300)
+CASES = {
+    # name: (kind, table options)
+    "bilinear": ("bilinear", dict(orientations=(0, 60))),
+    "three_segment": ("three_segment", dict(orientations=(0, 60))),
+    "masing": ("masing", dict(orientations=(0, 60))),
+    "no_effect_1_cycle": ("bilinear", dict(orientations=SIX, cycles=1)),
+    "no_effect_3_cycles": ("bilinear", dict(orientations=SIX, cycles=3)),
+    "effect_10pct_3_cycles": ("bilinear", dict(orientations=SIX, cycles=3, orientation_effect=0.10)),
+    "failed_zero_image": ("bilinear", dict(orientations=(0, 60), fail="zero")),
+    "half_phase_failed": ("bilinear", dict(orientations=(0, 60), fail="half_phase")),
+    "creep_0p2deg": ("bilinear", dict(orientations=(0, 60), creep_deg=0.2)),
+}
+ORIENT_FIGURES = ("k_positive_unloading", "hysteresis", "k_negative_loading_secant")
+# a straight line through these phases, or the bilinear model on these loops, is a misfit
+MISFIT = {"bilinear": ("k_negative_loading", "k_positive_loading"),
+          "masing": ("k_negative_loading", "k_positive_loading", "k_positive_unloading", "k_negative_unloading",
+                     "bilinear_k_u", "bilinear_k_l", "bilinear_tau_c"),
+          "three_segment": ("k_negative_loading", "k_positive_loading", "bilinear_k_u", "bilinear_k_l",
+                            "bilinear_tau_c")}
+
+
+def run_one(task):
+    case, noise, rep = task
+    from vision_torsion.analysis import analyze_session
+
+    kind, opts = CASES[case]
+    rng = np.random.default_rng([zlib.crc32(case.encode()), int(noise * 1e5), rep])
+    df, truth = T.session_table(kind, angle_std_deg=noise, rng=rng, **opts)
+    kw = dict(rig=RIG, max_torque_nm=T.T_MAX, n_draws=100, seed=rep)
+    if kind == "three_segment":
+        kw["catalogue_breaks_nm"] = (0.1, 0.25)
+    a = analyze_session(df, **kw)
+    f = a.figures
+    res = {"ok": 0, "miss": 0, "covered": 0, "shown": 0, "withheld": 0, "flagged": 0, "misfit_shown": 0,
+           "by_figure": {}, "k_within_1pct": [], "orientation": {}}
+    for r in f.itertuples(index=False):
+        key = (float(r.orientation_deg), int(r.cycle))
+        t = truth.get(key, {}).get(r.figure)
+        if r.figure in MISFIT.get(kind, ()) and math.isfinite(r.value) and not r.flag:
+            res["misfit_shown"] += 1
+        if t is None:
+            continue
+        fig = res["by_figure"].setdefault(r.figure, {"ok": 0, "n": 0, "miss": 0})
+        fig["n"] += 1
+        if not math.isfinite(r.value):
+            res["withheld"] += 1
+            ok = True
+        elif r.flag:
+            res["flagged"] += 1
+            ok = True
+        else:
+            res["shown"] += 1
+            ok = abs(r.value - t) <= r.u95
+            res["covered"] += ok
+        res["ok" if ok else "miss"] += 1
+        fig["ok"] += ok
+        fig["miss"] += not ok
+        if r.figure in ("k1", "k2", "k3") and math.isfinite(r.value):
+            res["k_within_1pct"].append(abs(r.value / t - 1) <= 0.01)
+    for name in ORIENT_FIGURES:
+        res["orientation"][name] = a.summary.get(name, {}).get("orientation_test", {}).get("significant")
+    return case, noise, rep, res
+
+
+def time_analyze(tmp: Path) -> float:
+    """CPU seconds of ``analyze_table`` (one core) on a 450-row table, best of 3."""
+    from vision_torsion.report.analyze import analyze_table
+
+    df, _ = T.session_table("bilinear", orientations=SIX, rng=np.random.default_rng(0))
+    path = tmp / "table.csv"
+    df.to_csv(path, index=False)
+    best = math.inf
+    for _ in range(3):
+        t0 = time.process_time()
+        analyze_table(path, out_dir=tmp / "out")
+        best = min(best, time.process_time() - t0)
+    return best, len(df)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--reps", type=int, default=50, help="sessions per case and noise level (default 50)")
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--cases", nargs="*", default=list(CASES))
+    args = p.parse_args(argv)
+    tasks = [(c, n, r) for c in args.cases for n in NOISES for r in range(args.reps)]
+    t0 = time.time()
+    if args.jobs > 1:
+        from multiprocessing import Pool
+
+        with Pool(args.jobs) as pool:
+            results = pool.map(run_one, tasks, chunksize=4)
+    else:
+        results = [run_one(t) for t in tasks]
+    wall = time.time() - t0
+    agg = {}
+    for case, noise, rep, res in results:
+        a = agg.setdefault((case, noise), {"sessions": 0, "ok": 0, "miss": 0, "shown": 0, "covered": 0,
+                                           "withheld": 0, "flagged": 0, "misfit_shown": 0, "sessions_ok": 0,
+                                           "k_ok": [], "orient": {k: 0 for k in ORIENT_FIGURES}, "by_figure": {}})
+        a["sessions"] += 1
+        for k in ("ok", "miss", "shown", "covered", "withheld", "flagged", "misfit_shown"):
+            a[k] += res[k]
+        a["sessions_ok"] += res["miss"] == 0
+        a["k_ok"] += res["k_within_1pct"]
+        for k, v in res["orientation"].items():
+            a["orient"][k] += bool(v)
+        for fig, v in res["by_figure"].items():
+            b = a["by_figure"].setdefault(fig, {"ok": 0, "n": 0})
+            b["ok"] += v["ok"]
+            b["n"] += v["n"]
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cpu, rows = time_analyze(Path(tmp))
+    when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    print(f"bench_figures: {args.reps} sessions per case and noise, {when}, wall {wall:.0f} s, "
+          f"load {os.getloadavg()[0]:.1f}")
+    print()
+    print("| case | noise (°) | sessions | figures ok (covered/withheld/flagged) | worst figure ok | shown: within u95 "
+          "| misfit shown unflagged | orientation 'significant' (k_pu / hyst / k_nl secant) | K1–K3 within 1 % |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    out = []
+    for (case, noise), a in agg.items():
+        n_fig = a["ok"] + a["miss"]
+        worst = min(((v["ok"] / v["n"]), fig) for fig, v in a["by_figure"].items()) if a["by_figure"] else (1.0, "-")
+        orient = " / ".join(f"{100 * a['orient'][k] / a['sessions']:.0f} %" for k in ORIENT_FIGURES)
+        k_ok = f"{100 * np.mean(a['k_ok']):.0f} % of {len(a['k_ok'])}" if a["k_ok"] else "–"
+        cov = f"{100 * a['covered'] / a['shown']:.1f} %" if a["shown"] else "–"
+        print(f"| {case} | {noise:g} | {a['sessions']} | {100 * a['ok'] / n_fig:.1f} % "
+              f"({a['covered']}/{a['withheld']}/{a['flagged']} of {n_fig}) | {100 * worst[0]:.0f} % {worst[1]} | "
+              f"{cov} | {a['misfit_shown']} | {orient} | {k_ok} |")
+        out.append({"case": case, "noise_deg": noise, **{k: v for k, v in a.items() if k != "k_ok"},
+                    "k_within_1pct": float(np.mean(a["k_ok"])) if a["k_ok"] else None})
+    print()
+    print(f"analyze_table of a {rows}-row table: {cpu:.2f} s CPU (one core, best of 3); target ≤ 3 s")
+    res_dir = Path(__file__).resolve().parent / "results"
+    res_dir.mkdir(exist_ok=True)
+    (res_dir / "figures.json").write_text(json.dumps({"date": when, "reps": args.reps, "wall_s": wall,
+                                                      "analyze_cpu_s": cpu, "rows": rows, "cases": out}, indent=1, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
+
+
+if __name__ == "__main__":
+    main()
