@@ -57,14 +57,9 @@ def analysis_options(config) -> dict:
     torque; ``[gear]`` the rated torque, catalogue T1/T2 and gear ratio; ``[test]`` the
     lost-motion fractions, the secant interval and whether to fit the breaks.
     """
-    rig, proto, gear, test = config.rig, config.protocol, config.gear, config.test
-    kw = dict(
-        max_torque_nm=proto.max_torque_nm,
-        rig=dict(step_mass_kg=proto.step_mass_kg, mass_std_kg=rig.mass_std_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
-                 arm_radius_m=rig.arm_radius_m, friction_torque_std_nm=rig.friction_torque_std_nm,
-                 arm_radius_std_m=rig.arm_radius_std_m, gravity_std_m_per_s2=rig.gravity_std_m_per_s2),
-        rated_torque_nm=gear.rated_torque_nm, gear_ratio=gear.ratio, fit_breaks=test.fit_breaks,
-    )
+    proto, gear, test = config.protocol, config.gear, config.test
+    kw = dict(max_torque_nm=proto.max_torque_nm, rig=config.torque_rig, rated_torque_nm=gear.rated_torque_nm,
+              gear_ratio=gear.ratio, fit_breaks=test.fit_breaks)
     if gear.t1_nm is not None and gear.t2_nm is not None:
         kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
     if test.lost_motion_fractions is not None:
