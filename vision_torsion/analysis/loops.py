@@ -140,6 +140,21 @@ class Loop:
         """Number of usable samples in each of the four phases."""
         return {p: int(np.sum(self.phase == p)) for p in LOOP_PHASES}
 
+    def run_matrix(self) -> np.ndarray:
+        """``A`` (merged run samples × loop samples): run values = ``A @`` loop values, in :meth:`runs` order."""
+        blocks = []
+        for phases, descending in ((LOOP_PHASES[:2], True), (LOOP_PHASES[2:], False)):
+            m = np.flatnonzero(np.isin(self.phase, phases))
+            g = self.groups[m]
+            uniq, inv = np.unique(g, return_inverse=True)
+            cnt = np.bincount(inv, minlength=uniq.size).astype(float)
+            tau = np.bincount(inv, self.torque_nm[m]) / cnt
+            avg = np.zeros((uniq.size, self.torque_nm.size))
+            avg[inv, m] = 1.0 / cnt[inv]
+            order = np.argsort(-tau if descending else tau, kind="stable")
+            blocks.append(avg[order])
+        return np.vstack(blocks)
+
     def runs(self):
         """Merged descending and ascending runs: ``(tau, theta, theta_std, tau_std, groups, is_desc, sources)``.
 

@@ -69,6 +69,7 @@ from .uncertainty import (
     least_squares_weights,
     monte_carlo_std,
     numeric_jacobian,
+    stds_of_draws,
     std_by_kind,
     torque_sources,
 )
@@ -479,7 +480,36 @@ def _gap_reasons(settings, tau, is_desc, levels) -> dict:
     return out
 
 
-def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.ndarray):
+def _torque_through_model(evaluate, loop: Loop, pre, th_run, kinds, n_draws: int, seed: int):
+    """Torque part of the model-free figures carried through the loop's fitted physics.
+
+    The angles of a loop responded to the **true** torques; the table gives nominal
+    ones. A torque error at a reversal changes the loop's amplitude and so every
+    angle after it (a Masing or Preisach loop's width at zero depends on how far it
+    was driven), which shifting the torque axis alone cannot show. Each draw
+    ``δτ = L·ξ`` (per kind of source) is run through the accepted Preisach fit ``P``:
+    the angles move by ``P(τ + δτ) − P(τ)`` and the figures are re-evaluated at the
+    nominal torques. Returns ``(std_torque, {figure: {kind: std}})``.
+    """
+    rng = np.random.default_rng(seed + 104729)
+    a = loop.run_matrix()
+    tau_l = loop.torque_nm
+    src = loop.sources()
+    base = pre.predict_many(tau_l[None, :])[0]
+    tau_run = np.repeat((a @ tau_l)[None, :], n_draws, axis=0)
+    parts = {}
+    for kind in dict.fromkeys(np.asarray(kinds).tolist()):
+        lk = src[:, np.asarray(kinds) == kind]
+        dtau = rng.standard_normal((n_draws, lk.shape[1])) @ lk.T
+        dth = pre.predict_many(tau_l[None, :] + dtau) - base[None, :]
+        parts[str(kind)] = stds_of_draws(evaluate(tau_run, th_run[None, :] + dth @ a.T))
+    names = next(iter(parts.values())).keys() if parts else []
+    by_kind = {n: {k: parts[k][n] for k in parts} for n in names}
+    std_t = {n: float(np.sqrt(np.sum(np.square(list(v.values()))))) for n, v in by_kind.items()}
+    return std_t, by_kind
+
+
+def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.ndarray, pre=None):
     loop = col.loop
     tau, th, th_std, tau_std, groups, is_desc, sources = loop.runs()
     top = groups == groups[np.argmax(tau)]
@@ -489,13 +519,17 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
     kinds = loop.source_kinds if loop.source_kinds is not None else np.array(["level"] * sources.shape[1], object)
     std_a, std_t, by_kind = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources,
                                             n_draws=settings["n_draws"], seed=seed, kinds=kinds)
+    method = "monte-carlo"
+    if pre is not None and not pre.check.rejected and sources.shape[1]:
+        std_t, by_kind = _torque_through_model(evaluate, loop, pre, th, kinds, settings["n_draws"], seed)
+        method = "monte-carlo (torque errors through the Preisach fit)"
     gaps = _gap_reasons(settings, tau, is_desc, levels)
     for name, unit in _mc_units(settings).items():
         v = float(nominal[name][0])
         if name in gaps:
             col.fail(name, unit, gaps[name])
         elif np.isfinite(v):
-            col.add(name, unit, v, std_a[name], std_t[name], "monte-carlo", parts=by_kind[name])
+            col.add(name, unit, v, std_a[name], std_t[name], method, parts=by_kind[name])
         else:
             col.fail(name, unit, _mc_reason(name, tau, settings))
     return tau, th, th_std, is_desc, sources, kinds
@@ -860,9 +894,10 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
             _phase_figures(col, phase_rows, seq, local, sources, kinds, levels)
             problem = _loop_problem(lp)
             if problem is None:
-                runs = _model_free_figures(col, settings, seed + i, levels)
-                _catalogue_figures(col, settings, runs)
                 fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
+                runs = _model_free_figures(col, settings, seed + i, levels,
+                                           pre=fits[(lp.orientation_deg, lp.cycle)]["preisach"])
+                _catalogue_figures(col, settings, runs)
                 for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
                     outlier_rows.append({"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image,
                                          "z": z})

@@ -81,7 +81,7 @@ from ..measurements import PHASE_SIGN, TorqueRig, pieces_per_pan
 __all__ = [
     "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
     "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
-    "std_by_kind", "PHASE_DIRECTION",
+    "std_by_kind", "PHASE_DIRECTION", "stds_of_draws",
 ]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
@@ -373,6 +373,11 @@ def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std
     by_kind = {name: {k: parts[k][name] for k in parts} for name in sa}
     st = {name: float(np.sqrt(np.sum(np.square(list(v.values()))))) if v else 0.0 for name, v in by_kind.items()}
     return sa, st, by_kind
+
+
+def stds_of_draws(values: dict) -> dict:
+    """Standard deviation of each figure over its draws (NaN when fewer than half are finite)."""
+    return _stds(values)
 
 
 def _stds(values: dict) -> dict:
