@@ -172,9 +172,12 @@ def analyze_table(table, *, session=None, out_dir=None, conditions=None, extra_s
         if isinstance(table, pd.DataFrame):
             raise AnalysisError("out_dir is needed when the table is a DataFrame")
         out_dir = Path(table).parent / f"{Path(table).stem}_analysis"
+    from .analysis_sections import analysis_sections
+
+    sections = [*analysis_sections(analysis), *extra_sections]
     with output_set():  # the report's files are replaced together or not at all
         files = write_report(df, analysis, conditions=cond, out_dir=out_dir, failures=failures,
-                             extra_sections=extra_sections, title=title, metadata=metadata)
+                             extra_sections=sections, title=title, metadata=metadata)
     f = analysis.figures
     withheld = int((~f["value"].apply(lambda v: v == v)).sum())
     flagged = int((f["flag"].astype(str) != "").sum())
