@@ -70,7 +70,7 @@ def run_one(task):
     kind, opts = CASES[case]
     rng = np.random.default_rng([zlib.crc32(case.encode()), int(noise * 1e5), rep])
     df, truth = T.session_table(kind, angle_std_deg=noise, rng=rng, **opts)
-    kw = dict(rig=RIG, max_torque_nm=T.T_MAX, n_draws=60, seed=rep)
+    kw = dict(rig=RIG, max_torque_nm=T.T_MAX, n_draws=40, seed=rep)
     if kind == "three_segment":
         kw["catalogue_breaks_nm"] = (0.1, 0.25)
     a = analyze_session(df, **kw)

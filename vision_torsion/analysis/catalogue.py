@@ -159,13 +159,27 @@ def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, 
 
 
 def _chi2(tau, th, sign, brk, sa, st):
-    try:
-        r = fit_fixed_breaks(tau, th, branch=sign, breaks_nm=brk, angle_std_rad=sa, torque_std_nm=st,
-                             with_uncertainty=False)
-    except AnalysisError:
+    """Effective-variance χ² of the fixed-break fit (the search's inner loop: no uncertainty, no test)."""
+    brk = list(brk)
+    if any(b <= 0 for b in brk) or any(b2 <= b1 for b1, b2 in zip(brk, brk[1:])):
         return np.inf, None
-    c = r["check"]
-    return (c.chi2 if c.testable else float(np.sum(r["residual_rad"] ** 2))), r
+    x = np.abs(tau)
+    edges = np.array([0.0, *brk, np.inf])
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        if np.unique(x[(x >= lo - 1e-12) & (x <= hi + 1e-12)]).size < 2:
+            return np.inf, None
+    a = _design(tau, sign, brk)
+    w = 1.0 / np.where(sa > 0, sa**2, 1.0)
+    seg = np.searchsorted(np.asarray(brk), x, side="right")
+    for _ in range(2):
+        sw = np.sqrt(w)
+        coef = np.linalg.lstsq(a * sw[:, None], th * sw, rcond=None)[0]
+        w_fit = w
+        w = 1.0 / np.maximum(sa**2 + (np.abs(coef[2:][seg]) * st) ** 2, 1e-300)
+    if not np.all(coef[2:] > 0):
+        return np.inf, None
+    r = th - a @ coef
+    return float(np.sum(w_fit * r * r)), True
 
 
 def fit_catalogue_breaks(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm, torque_sources=None,

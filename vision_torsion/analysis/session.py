@@ -453,9 +453,15 @@ def _gap_reasons(settings, tau, is_desc, levels) -> dict:
         miss = checks.missing_levels(lv, exp)
         if miss:
             holes[rn] = miss
-    tips = (float(tau.min()), float(tau.max()))
+    # the loop's tips: the descending run holds both (+Tmax, then down to −Tmax); the ascending run starts one
+    # level above −Tmax (the turning image is the descending run's last, photographed once) and ends at +Tmax
+    lo_tip, hi_tip = float(levels.min()), float(levels.max())
+    second = float(levels[1]) if levels.size > 1 else lo_tip
+    need = {"descending": (lo_tip, hi_tip), "ascending": (hi_tip,)}
     for rn, lv in runs.items():
-        short = [t for t in tips if lv.size and np.min(np.abs(lv - t)) > _TOL]
+        short = [t for t in need[rn] if not lv.size or np.min(np.abs(lv - t)) > _TOL]
+        if rn == "ascending" and lv.size and lv.min() > second + _TOL:
+            short.append(second)
         if short:
             holes.setdefault(rn, []).extend(short)
     if holes:
