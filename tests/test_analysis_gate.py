@@ -225,3 +225,16 @@ def test_analyze_command(tmp_path, capsys):
     assert main(["analyze", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "o2")]) == 2
     assert "bad.csv: missing column(s): torque_nm" in capsys.readouterr().err
     assert math.isfinite(d["summary"]["hysteresis"]["mean"])
+
+
+def test_a_planned_session_photographs_each_state_once(bilinear_table):
+    # plan's protocol: the only step 0 is +Tmax at the start; the turning images (0, −Tmax, 0) belong to the
+    # phase that ends there. Nothing may be withheld for a "missing" start of the next phase.
+    df = bilinear_table[(bilinear_table.step != 0) | (bilinear_table.phase.isin(["reference", "positive_unloading"]))]
+    a = analyze_session(df.reset_index(drop=True), **FAST)
+    row = a.loops.set_index("orientation_deg").loc[0.0]
+    width = math.degrees(0.15 * (1 / 0.3 - 1 / 4.4))
+    assert row["hysteresis_deg"] == pytest.approx(width, abs=0.02)  # 1e-3° noise; 0.02° is 20x that
+    assert np.isfinite(row["loop_energy_j"]) and np.isfinite(row["k_negative_loading_secant_nm_per_rad"])
+    nl = a.phases.set_index(["orientation_deg", "phase"]).loc[(0.0, "negative_loading")]
+    assert nl["torque_from_nm"] == 0.0  # its starting image is positive unloading's last
