@@ -131,7 +131,10 @@ def test_torque_rig_from_session_config_is_checked_once():
 
 def test_closing_rows_are_not_part_of_a_loop():
     table = _table()
-    closing = table[table["phase"] == "reference"].assign(phase="closing", image="closing.png", step=0)
+    # the closing image is the zero-torque state after unloading from +Tmax: the same state as the end of
+    # cycle 1's positive unloading (analysis compares the two for creep), so copy that row
+    ends = table[(table["phase"] == "positive_unloading") & (table["torque_nm"] == 0)]
+    closing = ends.groupby("orientation_deg").tail(1).assign(phase="closing", image="closing.png", step=0)
     with_closing = pd.concat([table, closing], ignore_index=True)
     a = analyze_session(table, n_draws=20, fit_bouc_wen=False)
     b = analyze_session(with_closing, n_draws=20, fit_bouc_wen=False)
