@@ -56,6 +56,7 @@ import pandas as pd
 
 from ..errors import AnalysisError
 from . import checks, metrics
+from ..numerics import numeric_jacobian
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
 from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
@@ -68,7 +69,6 @@ from .uncertainty import (
     compact_sources,
     least_squares_weights,
     monte_carlo_std,
-    numeric_jacobian,
     stds_of_draws,
     std_by_kind,
     torque_sources,
