@@ -94,21 +94,15 @@ def test_print_rules_unclip_scrolling_tables(analysed, tmp_path):
 
 
 def test_session_metadata_from_gear_and_test_tables():
-    # What session.toml's optional [gear]/[test] tables give (a dict or a dataclass
-    # on the configuration): flat entries present are shown, empty ones are not.
-    from dataclasses import dataclass
-    from types import SimpleNamespace
+    # What session.toml's optional [gear]/[test] tables give: the entries present, per table
+    # (the report's header shows them; summary.json keeps them under "gear" and "test").
+    from vision_torsion.report.analyze import test_metadata as metadata_of
+    from vision_torsion.session.config import config_from_dict
 
-    from vision_torsion.report.session_report import _test_metadata
-
-    @dataclass
-    class Gear:
-        gear: str = "CSF-17-100"
-        serial: str | None = None
-        rated_torque_nm: float = 24.0
-
-    config = SimpleNamespace(gear=Gear(), test={"operator": "M. Li", "temperature_c": 21.5, "notes": ""})
-    meta = _test_metadata(SimpleNamespace(config=config))
-    assert meta == {"gear": "CSF-17-100", "rated_torque_nm": 24.0, "operator": "M. Li", "temperature_c": 21.5,
-                    "notes": ""}
-    assert _test_metadata(SimpleNamespace(config=SimpleNamespace())) == {}
+    base = {"rig": {"arm_radius_m": 0.05, "mass_std_kg": 1e-4},
+            "protocol": {"orientations_deg": [0], "max_torque_nm": 0.36, "step_mass_kg": 0.02}}
+    cfg = config_from_dict({**base, "gear": {"name": "CSF-17-100", "rated_torque_nm": 24.0},
+                            "test": {"operator": "M. Li", "temperature_c": 21.5, "notes": ""}})
+    assert metadata_of(cfg) == {"gear": {"name": "CSF-17-100", "rated_torque_nm": 24.0},
+                                "test": {"operator": "M. Li", "temperature_c": 21.5, "notes": ""}}
+    assert metadata_of(config_from_dict(base)) == {}
