@@ -95,6 +95,8 @@ class ProcessResult:
         or whose orientation's reference image is not: a partly shot session.
     unlisted : tuple of str
         Image files in the session (or bound camera) folder that no row names.
+    suspect : tuple of str
+        The images among `failures` whose status is ``suspect`` (the others failed).
     """
 
     measurements_path: Path
@@ -106,6 +108,7 @@ class ProcessResult:
     failures: tuple[tuple[str, str], ...]
     pending: tuple[tuple[str, str], ...] = ()
     unlisted: tuple[str, ...] = ()
+    suspect: tuple[str, ...] = ()
 
     @property
     def n_pending(self) -> int:
@@ -434,4 +437,5 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
                          n_cached=sources.count("cached"),
                          failures=failures,
                          pending=tuple((r["image"], r["message"]) for r in waiting),
-                         unlisted=unlisted)
+                         unlisted=unlisted,
+                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT))
