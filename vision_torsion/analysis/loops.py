@@ -67,7 +67,9 @@ def validate_measurements(measurements: pd.DataFrame) -> tuple[pd.DataFrame, pd.
 
     reason = pd.Series("", index=df.index)
     not_ok = df["status"] != "ok"
-    reason[not_ok] = df.loc[not_ok, "message"].where(df.loc[not_ok, "message"] != "", "status " + df.loc[not_ok, "status"])
+    reason[not_ok] = df.loc[not_ok, "message"].where(
+        df.loc[not_ok, "message"] != "", "status " + df.loc[not_ok, "status"]
+    )
     for col in ("orientation_deg", "cycle", "step", "torque_nm", "angle_deg", "torque_std_nm", "angle_std_deg"):
         nan = (~not_ok) & (reason == "") & ~np.isfinite(df[col])
         reason[nan] = f"marked ok but {col} is not a finite number"
@@ -140,8 +142,17 @@ class Loop:
             avg[inv, np.arange(inv.size)] = 1.0 / cnt[inv]
             srcs = avg @ src[m]
             order = np.argsort(-tau if descending else tau, kind="stable")
-            out.append((tau[order], th[order], np.sqrt(var[order]), tstd[order], uniq[order],
-                        np.full(order.size, descending), srcs[order]))
+            out.append(
+                (
+                    tau[order],
+                    th[order],
+                    np.sqrt(var[order]),
+                    tstd[order],
+                    uniq[order],
+                    np.full(order.size, descending),
+                    srcs[order],
+                )
+            )
         return tuple(np.concatenate(parts) for parts in zip(*out))
 
 
@@ -156,15 +167,18 @@ def build_loops(usable: pd.DataFrame, *, torque_correlation="level", rig=None) -
     loops = []
     for (orient, cycle), idx in usable.groupby(["orientation_deg", "cycle"], sort=True).indices.items():
         sub = usable.iloc[idx]
-        loops.append(Loop(
-            orientation_deg=float(orient), cycle=int(cycle),
-            phase=sub["phase"].to_numpy(dtype=object),
-            torque_nm=sub["torque_nm"].to_numpy(float),
-            torque_std_nm=sub["torque_std_nm"].to_numpy(float),
-            angle_rad=np.radians(sub["angle_deg"].to_numpy(float)),
-            angle_std_rad=np.radians(sub["angle_std_deg"].to_numpy(float)),
-            groups=groups[idx],
-            images=sub["image"].astype(str).to_numpy(dtype=object),
-            torque_sources=compact_sources(sources[idx]),
-        ))
+        loops.append(
+            Loop(
+                orientation_deg=float(orient),
+                cycle=int(cycle),
+                phase=sub["phase"].to_numpy(dtype=object),
+                torque_nm=sub["torque_nm"].to_numpy(float),
+                torque_std_nm=sub["torque_std_nm"].to_numpy(float),
+                angle_rad=np.radians(sub["angle_deg"].to_numpy(float)),
+                angle_std_rad=np.radians(sub["angle_std_deg"].to_numpy(float)),
+                groups=groups[idx],
+                images=sub["image"].astype(str).to_numpy(dtype=object),
+                torque_sources=compact_sources(sources[idx]),
+            )
+        )
     return loops

@@ -70,7 +70,9 @@ class Issue:
     reason: str
 
     def __str__(self) -> str:
-        where = "session" if self.orientation_deg is None else f"orientation {self.orientation_deg:g}°, cycle {self.cycle}"
+        where = (
+            "session" if self.orientation_deg is None else f"orientation {self.orientation_deg:g}°, cycle {self.cycle}"
+        )
         return f"{where}: {self.figure}: {self.reason}"
 
 
@@ -155,8 +157,10 @@ class SessionAnalysis:
 
 
 def _records(frame: pd.DataFrame) -> list:
-    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
-            for r in frame.to_dict(orient="records")]
+    return [
+        {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
+        for r in frame.to_dict(orient="records")
+    ]
 
 
 class _Collector:
@@ -167,11 +171,20 @@ class _Collector:
 
     def add(self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method=""):
         std = float(np.hypot(std_angle, std_torque))
-        self.rows.append({
-            "orientation_deg": self.loop.orientation_deg, "cycle": self.loop.cycle, "figure": figure, "unit": unit,
-            "value": float(value), "std": std, "std_angle": float(std_angle), "std_torque": float(std_torque),
-            "u95": COVERAGE_FACTOR * std, "method": method,
-        })
+        self.rows.append(
+            {
+                "orientation_deg": self.loop.orientation_deg,
+                "cycle": self.loop.cycle,
+                "figure": figure,
+                "unit": unit,
+                "value": float(value),
+                "std": std,
+                "std_angle": float(std_angle),
+                "std_torque": float(std_torque),
+                "u95": COVERAGE_FACTOR * std,
+                "method": method,
+            }
+        )
 
     def fail(self, figure, unit, reason):
         self.add(figure, unit, np.nan)
@@ -190,25 +203,37 @@ def _phase_figures(col: _Collector, phase_rows: list):
         m = loop.phase == phase
         name = f"k_{phase}"
         tau = loop.torque_nm[m]
-        row = {"orientation_deg": loop.orientation_deg, "cycle": loop.cycle, "phase": phase,
-               "torque_from_nm": float(tau[0]) if tau.size else np.nan,
-               "torque_to_nm": float(tau[-1]) if tau.size else np.nan, "n_points": int(m.sum())}
+        row = {
+            "orientation_deg": loop.orientation_deg,
+            "cycle": loop.cycle,
+            "phase": phase,
+            "torque_from_nm": float(tau[0]) if tau.size else np.nan,
+            "torque_to_nm": float(tau[-1]) if tau.size else np.nan,
+            "n_points": int(m.sum()),
+        }
         if not m.any():
             col.fail(name, "nm_per_rad", f"phase {phase} is missing (no usable image)")
             res = None
         else:
             try:
-                res = metrics.phase_stiffness(tau, loop.angle_rad[m], angle_std_rad=loop.angle_std_rad[m],
-                                              torque_std_nm=loop.torque_std_nm[m],
-                                              torque_sources=loop.sources()[m])
+                res = metrics.phase_stiffness(
+                    tau,
+                    loop.angle_rad[m],
+                    angle_std_rad=loop.angle_std_rad[m],
+                    torque_std_nm=loop.torque_std_nm[m],
+                    torque_sources=loop.sources()[m],
+                )
             except AnalysisError as exc:
                 col.fail(name, "nm_per_rad", f"phase {phase}: {exc}")
                 res = None
         if res is not None:
             col.add(name, "nm_per_rad", res["value"], res["std_angle"], res["std_torque"], "first-order")
             std = math.hypot(res["std_angle"], res["std_torque"])
-            row.update(stiffness_nm_per_rad=res["value"], stiffness_std_nm_per_rad=std,
-                       residual_rms_deg=math.degrees(res["residual_rms_rad"]))
+            row.update(
+                stiffness_nm_per_rad=res["value"],
+                stiffness_std_nm_per_rad=std,
+                residual_rms_deg=math.degrees(res["residual_rms_rad"]),
+            )
         else:
             row.update(stiffness_nm_per_rad=np.nan, stiffness_std_nm_per_rad=np.nan, residual_rms_deg=np.nan)
         row["stiffness_nm_per_arcmin"] = row["stiffness_nm_per_rad"] / _RAD_TO_ARCMIN
@@ -224,7 +249,8 @@ def _loop_problem(loop: Loop) -> str | None:
         return f"phase(s) {', '.join(missing)} missing: the loop is not closed"
     few = [f"{p} ({n})" for p, n in counts.items() if n < _MIN_PHASE_POINTS_FOR_LOOP]
     if few:
-        return f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least {_MIN_PHASE_POINTS_FOR_LOOP} per phase"
+        return (f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least "
+                f"{_MIN_PHASE_POINTS_FOR_LOOP} per phase")
     lo, hi = float(loop.torque_nm.min()), float(loop.torque_nm.max())
     if not (lo < 0 < hi):
         return f"torque never reverses sign in this cycle (range {lo:.4g} to {hi:.4g} N·m): there is no loop"
@@ -240,12 +266,15 @@ def _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol):
         hyst, loss = metrics.loop_width(td, yd, ta, ya, tol=tol)
         energy = metrics.loop_energy(tau, th)
         out = {
-            "hysteresis": np.degrees(hyst), "hysteresis_loss": np.degrees(loss),
-            "secant_stiffness": metrics.secant_stiffness(td, yd, ta, ya, lower_nm=fr_lo * max_torque,
-                                                         upper_nm=fr_hi * max_torque, tol=tol),
+            "hysteresis": np.degrees(hyst),
+            "hysteresis_loss": np.degrees(loss),
+            "secant_stiffness": metrics.secant_stiffness(
+                td, yd, ta, ya, lower_nm=fr_lo * max_torque, upper_nm=fr_hi * max_torque, tol=tol
+            ),
             "loop_energy": energy,
-            "loss_factor": metrics.loss_factor(energy, tau[:, top].mean(1), th[:, top].mean(1),
-                                               tau[:, bottom].mean(1), th[:, bottom].mean(1)),
+            "loss_factor": metrics.loss_factor(
+                energy, tau[:, top].mean(1), th[:, top].mean(1), tau[:, bottom].mean(1), th[:, bottom].mean(1)
+            ),
         }
         for name, f in zip(("lost_motion_3pct", "lost_motion_4pct"), lm):
             out[name] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * max_torque, tol=tol))
@@ -262,8 +291,9 @@ def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed
     tol = _tolerance(tau)
     evaluate = _mc_evaluator(is_desc, top, bottom, max_torque, settings, tol)
     nominal = evaluate(tau[None, :], th[None, :])
-    std_a, std_t = monte_carlo_std(evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources,
-                                   n_draws=settings["n_draws"], seed=seed)
+    std_a, std_t = monte_carlo_std(
+        evaluate, tau, th, angle_std_rad=th_std, torque_sources=sources, n_draws=settings["n_draws"], seed=seed
+    )
     for name, unit in _MC_FIGURES.items():
         v = float(nominal[name][0])
         if np.isfinite(v):
@@ -272,11 +302,21 @@ def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed
             col.fail(name, unit, _mc_reason(name, tau, settings, max_torque))
     seg_mask = (is_desc & (tau <= 0)) | (~is_desc & (tau >= 0))
     try:
-        seg = metrics.fit_three_segment(tau[seg_mask], th[seg_mask], branch=np.where(is_desc[seg_mask], -1, 1),
-                                        angle_std_rad=th_std[seg_mask],
-                                        torque_sources=compact_sources(sources[seg_mask]))
+        seg = metrics.fit_three_segment(
+            tau[seg_mask],
+            th[seg_mask],
+            branch=np.where(is_desc[seg_mask], -1, 1),
+            angle_std_rad=th_std[seg_mask],
+            torque_sources=compact_sources(sources[seg_mask]),
+        )
     except AnalysisError as exc:
-        for name, unit in (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"), ("t1", "nm"), ("t2", "nm")):
+        for name, unit in (
+            ("k1", "nm_per_rad"),
+            ("k2", "nm_per_rad"),
+            ("k3", "nm_per_rad"),
+            ("t1", "nm"),
+            ("t2", "nm"),
+        ):
             col.fail(name, unit, str(exc))
         return
     for name, unit in (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"), ("t1", "nm"), ("t2", "nm")):
@@ -284,10 +324,16 @@ def _model_free_figures(col: _Collector, settings: dict, max_torque: float, seed
     for brk, (ka, kb) in (("t1", ("K1", "K2")), ("t2", ("K2", "K3"))):
         b_std = math.hypot(seg["std_angle"][brk], seg["std_torque"][brk])
         if not b_std < 0.1 * max_torque:
-            col.issues.append(Issue(loop.orientation_deg, loop.cycle, brk,
-                                    f"break torque {brk.upper()} is poorly identified (1σ = {b_std:.3g} N·m, more "
-                                    f"than 10 % of the max torque): {ka} and {kb} hardly differ, so the loading "
-                                    "branch is closer to two segments than three"))
+            col.issues.append(
+                Issue(
+                    loop.orientation_deg,
+                    loop.cycle,
+                    brk,
+                    f"break torque {brk.upper()} is poorly identified (1σ = {b_std:.3g} N·m, more "
+                    f"than 10 % of the max torque): {ka} and {kb} hardly differ, so the loading "
+                    "branch is closer to two segments than three",
+                )
+            )
 
 
 def _mc_reason(name, tau, settings, max_torque):
@@ -297,14 +343,21 @@ def _mc_reason(name, tau, settings, max_torque):
         return f"±{f * max_torque:.4g} N·m is not covered by both runs (torque {lo:.4g} to {hi:.4g} N·m)"
     if name == "secant_stiffness":
         a, b = settings["secant_interval"]
-        return f"secant interval {a * max_torque:.4g} to {b * max_torque:.4g} N·m is not covered by both loading branches"
+        return (
+            f"secant interval {a * max_torque:.4g} to {b * max_torque:.4g} N·m is not covered by both loading branches"
+        )
     if name == "hysteresis_loss":
         return "zero torque is not covered by both runs"
     return f"the two runs do not overlap in torque or the loop is degenerate (torque {lo:.4g} to {hi:.4g} N·m)"
 
 
-_BW_UNITS = {"k_e": ("nm_per_rad", 1.0), "z_s": ("deg", 180 / math.pi), "a": ("per_nm", 1.0),
-             "rho": ("1", 1.0), "n": ("1", 1.0)}
+_BW_UNITS = {
+    "k_e": ("nm_per_rad", 1.0),
+    "z_s": ("deg", 180 / math.pi),
+    "a": ("per_nm", 1.0),
+    "rho": ("1", 1.0),
+    "n": ("1", 1.0),
+}
 
 
 def _model_fits(col: _Collector, settings: dict) -> dict:
@@ -314,14 +367,23 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     try:
         bil: BilinearFit = fit_bilinear(loop.torque_nm, loop.angle_rad, **kw)
     except AnalysisError as exc:
-        for name, unit in (("bilinear_k_u", "nm_per_rad"), ("bilinear_k_l", "nm_per_rad"), ("bilinear_tau_c", "nm"),
-                           ("bilinear_residual_rms", "deg")):
+        for name, unit in (
+            ("bilinear_k_u", "nm_per_rad"),
+            ("bilinear_k_l", "nm_per_rad"),
+            ("bilinear_tau_c", "nm"),
+            ("bilinear_residual_rms", "deg"),
+        ):
             col.fail(name, unit, str(exc))
     else:
         out["bilinear"] = bil
-        for name, attr, unit in (("k_u", "k_u_nm_per_rad", "nm_per_rad"), ("k_l", "k_l_nm_per_rad", "nm_per_rad"),
-                                 ("tau_c", "tau_c_nm", "nm")):
-            col.add(f"bilinear_{name}", unit, getattr(bil, attr), bil.std_angle[name], bil.std_torque[name], "first-order")
+        for name, attr, unit in (
+            ("k_u", "k_u_nm_per_rad", "nm_per_rad"),
+            ("k_l", "k_l_nm_per_rad", "nm_per_rad"),
+            ("tau_c", "tau_c_nm", "nm"),
+        ):
+            col.add(
+                f"bilinear_{name}", unit, getattr(bil, attr), bil.std_angle[name], bil.std_torque[name], "first-order"
+            )
         col.add("bilinear_residual_rms", "deg", math.degrees(bil.residual_rms_rad), method="fit statistic")
     if not settings["fit_bouc_wen"]:
         return out
@@ -334,8 +396,14 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
         return out
     out["bouc_wen"] = bw
     for name, (unit, scale) in _BW_UNITS.items():
-        col.add(f"bouc_wen_{name}", unit, bw.params[name] * scale, bw.std_angle[name] * scale,
-                bw.std_torque[name] * scale, "first-order")
+        col.add(
+            f"bouc_wen_{name}",
+            unit,
+            bw.params[name] * scale,
+            bw.std_angle[name] * scale,
+            bw.std_torque[name] * scale,
+            "first-order",
+        )
     col.add("bouc_wen_residual_rms", "deg", math.degrees(bw.residual_rms_rad), method="fit statistic")
     return out
 
@@ -348,8 +416,12 @@ def _wide(figures: pd.DataFrame) -> pd.DataFrame:
     f["col"] = f["figure"] + np.where(suffix != "", "_" + suffix, "")
     f["col_std"] = f["figure"] + "_std" + np.where(suffix != "", "_" + suffix, "")
     order = list(dict.fromkeys(c for pair in zip(f["col"], f["col_std"]) for c in pair))
-    val = f.pivot_table(index=["orientation_deg", "cycle"], columns="col", values="value", aggfunc="first", dropna=False)
-    std = f.pivot_table(index=["orientation_deg", "cycle"], columns="col_std", values="std", aggfunc="first", dropna=False)
+    val = f.pivot_table(
+        index=["orientation_deg", "cycle"], columns="col", values="value", aggfunc="first", dropna=False
+    )
+    std = f.pivot_table(
+        index=["orientation_deg", "cycle"], columns="col_std", values="std", aggfunc="first", dropna=False
+    )
     wide = pd.concat([val, std], axis=1).reindex(columns=order)
     wide.columns.name = None
     return wide.reset_index()
@@ -368,10 +440,16 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     off = np.abs(frac - np.rint(frac)) > 0.01
     if off.any():
         i = int(np.flatnonzero(off)[0])
-        out.append(Issue(None, None, "torque uncertainty",
-                         f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
-                         f"{rig.step_mass_kg:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
-                         "the 'pieces' torque model counts a partial piece as a whole one"))
+        out.append(
+            Issue(
+                None,
+                None,
+                "torque uncertainty",
+                f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
+                f"{rig.step_mass_kg:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
+                "the 'pieces' torque model counts a partial piece as a whole one",
+            )
+        )
     sources, _ = torque_sources(usable, correlation="pieces", rig=rig)
     model_std = np.sqrt(np.sum(sources**2, axis=1))
     table_std = usable["torque_std_nm"].to_numpy(float)
@@ -379,16 +457,31 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     bad = np.abs(table_std - model_std) > 0.05 * np.maximum(model_std, table_std) + 1e-9 * scale
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        out.append(Issue(None, None, "torque uncertainty",
-                         f"torque_std_nm of {int(bad.sum())} image(s) differs from the rig's weight-piece model "
-                         f"(first: {usable['image'].iloc[i]}, table {table_std[i]:.3g} N·m, model "
-                         f"{model_std[i]:.3g} N·m); the uncertainties use the rig"))
+        out.append(
+            Issue(
+                None,
+                None,
+                "torque uncertainty",
+                f"torque_std_nm of {int(bad.sum())} image(s) differs from the rig's weight-piece model "
+                f"(first: {usable['image'].iloc[i]}, table {table_std[i]:.3g} N·m, model "
+                f"{model_std[i]:.3g} N·m); the uncertainties use the rig",
+            )
+        )
     return out
 
 
-def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None, rig=None,
-                    lost_motion_fractions=(0.03, 0.04), secant_interval=(0.5, 1.0),
-                    n_draws=400, seed=0, fit_bouc_wen=True) -> SessionAnalysis:
+def analyze_session(
+    measurements,
+    *,
+    max_torque_nm=None,
+    torque_correlation=None,
+    rig=None,
+    lost_motion_fractions=(0.03, 0.04),
+    secant_interval=(0.5, 1.0),
+    n_draws=400,
+    seed=0,
+    fit_bouc_wen=True,
+) -> SessionAnalysis:
     """Analyse the torque–angle table of a session: every figure of every loop.
 
     Parameters
@@ -456,7 +549,9 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     if n_draws < 10:
         raise AnalysisError(f"n_draws must be at least 10, got {n_draws}")
     if not (0 <= secant_interval[0] < secant_interval[1] <= 1):
-        raise AnalysisError(f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}")
+        raise AnalysisError(
+            f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}"
+        )
     if len(lost_motion_fractions) != 2 or not all(0 < f < 1 for f in lost_motion_fractions):
         raise AnalysisError(f"lost_motion_fractions must be two fractions in (0, 1), got {lost_motion_fractions}")
     if torque_correlation is None:
@@ -471,10 +566,14 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
     elif not (np.isfinite(max_torque_nm) and max_torque_nm > 0):
         raise AnalysisError(f"max_torque_nm must be a positive torque (N·m), got {max_torque_nm!r}")
     settings = {
-        "max_torque_nm": float(max_torque_nm), "torque_correlation": torque_correlation,
+        "max_torque_nm": float(max_torque_nm),
+        "torque_correlation": torque_correlation,
         "lost_motion_fractions": [float(f) for f in lost_motion_fractions],
-        "secant_interval": [float(f) for f in secant_interval], "n_draws": int(n_draws), "seed": int(seed),
-        "fit_bouc_wen": bool(fit_bouc_wen), "coverage_factor": COVERAGE_FACTOR,
+        "secant_interval": [float(f) for f in secant_interval],
+        "n_draws": int(n_draws),
+        "seed": int(seed),
+        "fit_bouc_wen": bool(fit_bouc_wen),
+        "coverage_factor": COVERAGE_FACTOR,
         "rig": None if rig is None else rig.to_dict(),
     }
     issues: list[Issue] = []
@@ -493,18 +592,47 @@ def analyze_session(measurements, *, max_torque_nm=None, torque_correlation=None
             _model_free_figures(col, settings, float(max_torque_nm), seed + i)
             fits[(loop.orientation_deg, loop.cycle)] = _model_fits(col, settings)
         else:
-            for name, unit in {**_MC_FIGURES, "k1": "nm_per_rad", "k2": "nm_per_rad", "k3": "nm_per_rad",
-                               "t1": "nm", "t2": "nm", "bilinear_k_u": "nm_per_rad", "bilinear_k_l": "nm_per_rad",
-                               "bilinear_tau_c": "nm"}.items():
+            for name, unit in {
+                **_MC_FIGURES,
+                "k1": "nm_per_rad",
+                "k2": "nm_per_rad",
+                "k3": "nm_per_rad",
+                "t1": "nm",
+                "t2": "nm",
+                "bilinear_k_u": "nm_per_rad",
+                "bilinear_k_l": "nm_per_rad",
+                "bilinear_tau_c": "nm",
+            }.items():
                 col.add(name, unit, np.nan)
             issues.append(Issue(loop.orientation_deg, loop.cycle, "loop figures", problem))
             fits[(loop.orientation_deg, loop.cycle)] = {"bilinear": None, "bouc_wen": None}
         rows.extend(col.rows)
-    figures = pd.DataFrame(rows, columns=["orientation_deg", "cycle", "figure", "unit", "value", "std", "std_angle",
-                                          "std_torque", "u95", "method"])
+    figures = pd.DataFrame(
+        rows,
+        columns=[
+            "orientation_deg",
+            "cycle",
+            "figure",
+            "unit",
+            "value",
+            "std",
+            "std_angle",
+            "std_torque",
+            "u95",
+            "method",
+        ],
+    )
     summary, per_orientation = summarise_figures(figures)
     return SessionAnalysis(
-        figures=figures, loops=_wide(figures), phases=pd.DataFrame(phase_rows), summary=summary,
-        per_orientation=per_orientation, issues=issues, failed_images=failed, settings=settings,
-        loop_data=loops, fits=fits, n_images=int(len(measurements)),
+        figures=figures,
+        loops=_wide(figures),
+        phases=pd.DataFrame(phase_rows),
+        summary=summary,
+        per_orientation=per_orientation,
+        issues=issues,
+        failed_images=failed,
+        settings=settings,
+        loop_data=loops,
+        fits=fits,
+        n_images=int(len(measurements)),
     )

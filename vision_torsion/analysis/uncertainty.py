@@ -79,8 +79,18 @@ from ..errors import AnalysisError, RigError
 from ..measurements import PHASE_SIGN, TorqueRig, pieces_per_pan
 
 __all__ = [
-    "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
-    "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
+    "COVERAGE_FACTOR",
+    "TORQUE_MODELS",
+    "RIG_KEYS",
+    "check_rig",
+    "torque_groups",
+    "torque_sources",
+    "pieces_per_pan",
+    "group_sources",
+    "compact_sources",
+    "monte_carlo_std",
+    "linearised_covariance",
+    "torque_source_jacobian",
 ]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
@@ -123,7 +133,8 @@ def check_rig(rig) -> TorqueRig:
 
     Examples
     --------
-    >>> check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)).friction_torque_std_nm
+    >>> rig = check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05))
+    >>> rig.friction_torque_std_nm
     0.0
     """
     if isinstance(rig, TorqueRig):
@@ -185,15 +196,17 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     std = np.asarray(frame["torque_std_nm"], dtype=float).reshape(-1)
     if correlation not in TORQUE_MODELS:
         raise _error(f"torque_correlation must be one of {', '.join(TORQUE_MODELS)}, got {correlation!r}")
-    groups = torque_groups(tau, correlation="independent" if correlation == "independent" else "level",
-                           resolution_nm=resolution_nm)
+    groups = torque_groups(
+        tau, correlation="independent" if correlation == "independent" else "level", resolution_nm=resolution_nm
+    )
     if correlation == "independent":
         return np.diag(std), groups
     if correlation == "level":
         return group_sources(groups, std), groups
     if rig is None:
-        raise _error("torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, "
-                     "arm_radius_m)")
+        raise _error(
+            "torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, arm_radius_m)"
+        )
     rig = check_rig(rig)
     import pandas as pd
 
@@ -202,8 +215,10 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9):
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         where = f"image {frame['image'].iloc[i]!r}" if "image" in frame else f"row {i}"
-        raise _error(f"measurements table, {where}: mass_kg is {str(frame['mass_kg'].iloc[i])!r}; the 'pieces' torque "
-                     "model needs the mass on each pan (kg, >= 0)")
+        raise _error(
+            f"measurements table, {where}: mass_kg is {str(frame['mass_kg'].iloc[i])!r}; the 'pieces' torque "
+            "model needs the mass on each pan (kg, >= 0)"
+        )
     n = pieces_per_pan(mass.reshape(-1), rig.step_mass_kg)
     sign = np.asarray(frame["phase"].map(PHASE_SIGN), dtype=float)
     sign = np.where(np.isfinite(sign), sign, np.sign(tau))
@@ -274,8 +289,18 @@ def _group_std(groups: np.ndarray, torque_std_nm: np.ndarray) -> np.ndarray:
     return out
 
 
-def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std_nm=None, groups=None,
-                    torque_sources=None, n_draws=400, seed=0):
+def monte_carlo_std(
+    evaluate,
+    torque_nm,
+    angle_rad,
+    *,
+    angle_std_rad,
+    torque_std_nm=None,
+    groups=None,
+    torque_sources=None,
+    n_draws=400,
+    seed=0,
+):
     """Standard deviation of each figure of a loop from angle and from torque errors.
 
     Parameters

@@ -39,8 +39,8 @@ import multiprocessing
 import os
 from collections import defaultdict, deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
-from itertools import islice
 from dataclasses import dataclass
+from itertools import islice
 from pathlib import Path
 
 from tqdm import tqdm
@@ -53,8 +53,8 @@ from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
-from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
+from .load import Session, load_session, unlisted_images
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
