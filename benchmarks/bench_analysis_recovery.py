@@ -190,12 +190,23 @@ def main(argv=None):
         print(_format(name, res), flush=True)
     if not args.quick:
         out = Path(__file__).resolve().parent / "results" / "analysis_recovery.json"
-        write_json(out, {"command": "python benchmarks/bench_analysis_recovery.py --reps %d --seed %d" % (reps, args.seed),
-                         "truth": truth, "truth_pieces": truth_pieces, "coverage_target": COVERAGE_TARGET,
-                         "scenarios": results})
+        write_json(
+            out,
+            {
+                "command": "python benchmarks/bench_analysis_recovery.py --reps %d --seed %d" % (reps, args.seed),
+                "truth": truth,
+                "truth_pieces": truth_pieces,
+                "coverage_target": COVERAGE_TARGET,
+                "scenarios": results,
+            },
+        )
         print(f"\nwritten {out}")
-    ok = all(r["within_target"] and r["coverage"] >= COVERAGE_TARGET
-             for res in results.values() if res["is_target"] for r in res["figures"].values())
+    ok = all(
+        r["within_target"] and r["coverage"] >= COVERAGE_TARGET
+        for res in results.values()
+        if res["is_target"]
+        for r in res["figures"].values()
+    )
     print("all targets met" if ok else "SOME TARGETS NOT MET")
     return 0 if ok else 1
 

@@ -52,7 +52,10 @@ def _rms(v) -> float:
 
 
 def _exact_pair(rendered) -> PairMeasurement:
-    ms = [Marker(x_px=float(x), y_px=float(y), radius_px=35.0, x_std_px=1e-6, y_std_px=1e-6, xy_cov_px2=0.0) for x, y in rendered.centres]
+    ms = [
+        Marker(x_px=float(x), y_px=float(y), radius_px=35.0, x_std_px=1e-6, y_std_px=1e-6, xy_cov_px2=0.0)
+        for x, y in rendered.centres
+    ]
     return PairMeasurement(*sorted(ms, key=lambda m: m.x_px))
 
 
@@ -74,8 +77,13 @@ def tilted(seeds: int) -> dict:
             except MarkerError as exc:  # a core failure: reported, never hidden
                 pairs.append(None)
                 failed.append(f"test image {i} ({angles[i]:g}°): {exc}")
-        run = {"seed": seed, "calibration_images_used": corr.info["n_images"], "test_failures": failed,
-               "reduced_chi2": corr.info["reduced_chi2"], "calibration_s": t_cal}
+        run = {
+            "seed": seed,
+            "calibration_images_used": corr.info["n_images"],
+            "test_failures": failed,
+            "reduced_chi2": corr.info["reduced_chi2"],
+            "calibration_s": t_cal,
+        }
         runs.append(run)
         if pairs[0] is None:
             run["skipped"] = "the test sequence's reference image could not be measured"
@@ -97,9 +105,18 @@ def tilted(seeds: int) -> dict:
             ),
         )
     done = [r for r in runs if "skipped" not in r]
-    agg = {k: _rms([r[k] for r in done]) for k in ("rms_uncorrected_deg", "rms_corrected_deg", "rms_correction_only_deg")}
-    return {"scene": "synthetic/tilted.toml", "images_per_sequence": len(angles), "runs": runs, "runs_used": len(done),
-            **agg, "target_deg": TARGET_DEG, "passed": agg["rms_corrected_deg"] <= TARGET_DEG}
+    agg = {
+        k: _rms([r[k] for r in done]) for k in ("rms_uncorrected_deg", "rms_corrected_deg", "rms_correction_only_deg")
+    }
+    return {
+        "scene": "synthetic/tilted.toml",
+        "images_per_sequence": len(angles),
+        "runs": runs,
+        "runs_used": len(done),
+        **agg,
+        "target_deg": TARGET_DEG,
+        "passed": agg["rms_corrected_deg"] <= TARGET_DEG,
+    }
 
 
 def standard() -> dict:
@@ -122,13 +139,20 @@ def standard() -> dict:
     core_rms = None
     if core.is_file():
         core_rms = json.loads(core.read_text()).get("accuracy", {}).get("rms_deg")
-    return {"scene": "synthetic/standard.toml", "n": res.n, "check_accuracy_rms_deg": res.rms_deg,
-            "direct_rms_deg": direct, "difference_deg": abs(res.rms_deg - direct),
-            "check_accuracy_u95_deg": res.u95_deg, "check_passed": res.passed,
-            # The direct measurement takes the in-memory 8-bit arrays, check-accuracy the
-            # decoded files (float32); the iterative fit stops at 1e-3 px centre moves,
-            # so the two starts may end 1e-5 px apart: "the same" is within 1 % of the RMS.
-            "bench_core_json_rms_deg": core_rms, "same": abs(res.rms_deg - direct) <= 0.01 * direct}
+    return {
+        "scene": "synthetic/standard.toml",
+        "n": res.n,
+        "check_accuracy_rms_deg": res.rms_deg,
+        "direct_rms_deg": direct,
+        "difference_deg": abs(res.rms_deg - direct),
+        "check_accuracy_u95_deg": res.u95_deg,
+        "check_passed": res.passed,
+        # The direct measurement takes the in-memory 8-bit arrays, check-accuracy the
+        # decoded files (float32); the iterative fit stops at 1e-3 px centre moves,
+        # so the two starts may end 1e-5 px apart: "the same" is within 1 % of the RMS.
+        "bench_core_json_rms_deg": core_rms,
+        "same": abs(res.rms_deg - direct) <= 0.01 * direct,
+    }
 
 
 def main(argv=None) -> int:
@@ -155,14 +179,19 @@ def main(argv=None) -> int:
         if "skipped" in r:
             print(f"  seed {r['seed']}: skipped: {r['skipped']}")
             continue
-        print(f"  seed {r['seed']}: uncorrected {r['rms_uncorrected_deg']:.5f}°, corrected {r['rms_corrected_deg']:.5f}° "
-              f"(reported σ {r['mean_reported_std_corrected_deg']:.5f}°), correction alone {r['rms_correction_only_deg']:.5f}°, "
-              f"χ²/dof {r['reduced_chi2']:.2f}")
+        print(
+            f"  seed {r['seed']}: uncorrected {r['rms_uncorrected_deg']:.5f}°, corrected {r['rms_corrected_deg']:.5f}° "
+            f"(reported σ {r['mean_reported_std_corrected_deg']:.5f}°), "
+            f"correction alone {r['rms_correction_only_deg']:.5f}°, "
+            f"χ²/dof {r['reduced_chi2']:.2f}"
+        )
     if st["bench_core_json_rms_deg"] is not None:
         print(f"  (benchmarks/results/core.json, all repeats: RMS {st['bench_core_json_rms_deg']:.6f}°)")
     ok = tl["passed"] and st["same"]
-    out = write_json(ROOT / "benchmarks" / "results" / "calibration.json",
-                     {"tilted": tl, "standard": st, "passed": ok, "seconds": time.perf_counter() - t0})
+    out = write_json(
+        ROOT / "benchmarks" / "results" / "calibration.json",
+        {"tilted": tl, "standard": st, "passed": ok, "seconds": time.perf_counter() - t0},
+    )
     print(f"{'PASSED' if ok else 'FAILED'}; wrote {out.relative_to(ROOT)}")
     return 0 if ok else 1
 

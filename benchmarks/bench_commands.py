@@ -131,7 +131,7 @@ def main() -> None:
     }
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"\n| command | time |\n|---|---|")
+    print("\n| command | time |\n|---|---|")
     for name, t in starts.items():
         print(f"| `vision-torsion {name}` | best {t['best_s']:.3f} s, median {t['median_s']:.3f} s |")
     print(f"\n{len(images)} images, --jobs 2, no cache; load average before each pair\n")

@@ -148,12 +148,23 @@ def main(argv=None) -> int:
         ("Cramér-Rao bound", f"{acc['crb_deg']:.5f}°", ""),
         ("RMS / bound", f"{acc['rms_over_crb']:.2f}", "≤ 1.5"),
         ("reported std / RMS", f"{acc['reported_std_over_rms']:.2f}", "0.7 – 1.3"),
-        ("processing, CPU ms/image (1 core, no decode)", f"{spd['cpu_ms_per_image_median']:.1f} (slowest {spd['cpu_ms_per_image_max']:.1f})", "≤ 10"),
+        (
+            "processing, CPU ms/image (1 core, no decode)",
+            f"{spd['cpu_ms_per_image_median']:.1f} (slowest {spd['cpu_ms_per_image_max']:.1f})",
+            "≤ 10",
+        ),
         ("render, ms/image 1400x1000", f"{rt:.0f}", "< 300"),
-        ("distractors: right / error / wrong pair", f"{dis['right_pair']} / {dis['clear_error']} / {dis['wrong_pair']}", "wrong = 0"),
+        (
+            "distractors: right / error / wrong pair",
+            f"{dis['right_pair']} / {dis['clear_error']} / {dis['wrong_pair']}",
+            "wrong = 0",
+        ),
     ]
     w = max(len(r[0]) for r in rows)
-    print(f"\nMeasurement core, standard scene ({datetime.now(timezone.utc):%Y-%m-%d}, {_cpu()}, load {os.getloadavg()[0]:.2f})\n")
+    print(
+        f"\nMeasurement core, standard scene ({datetime.now(timezone.utc):%Y-%m-%d}, {_cpu()}, "
+        f"load {os.getloadavg()[0]:.2f})\n"
+    )
     print(f"| {'quantity'.ljust(w)} | value | target |")
     print(f"|{'-' * (w + 2)}|-------|--------|")
     for name, value, target in rows:
@@ -162,7 +173,13 @@ def main(argv=None) -> int:
         ROOT / "benchmarks" / "results" / "core.json",
         {
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            "machine": {"cpu": _cpu(), "cores": os.cpu_count(), "python": platform.python_version(), "numpy": np.__version__, "opencv": cv2.__version__},
+            "machine": {
+                "cpu": _cpu(),
+                "cores": os.cpu_count(),
+                "python": platform.python_version(),
+                "numpy": np.__version__,
+                "opencv": cv2.__version__,
+            },
             "standard": acc,
             "speed": spd,
             "render_ms": rt,

@@ -61,7 +61,6 @@ from common import machine_info, one_core  # noqa: E402
 one_core()  # before NumPy loads its BLAS; workers inherit the environment
 
 import numpy as np  # noqa: E402
-
 from peers import PEERS, PeerFailure  # noqa: E402
 
 ROOT = HERE.parent

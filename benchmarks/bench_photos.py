@@ -31,7 +31,8 @@ so two properties that need none are measured:
   Every method is scored on the same triples: those whose three dots every method
   measured.
 - **time**: CPU time per photo on one core (OpenCV and BLAS single-threaded; CPU, not
-  wall, time because the machine is shared) of the whole job: ours is ``find_markers`` on the image (detection and every fit); a peer
+  wall, time because the machine is shared) of the whole job: ours is ``find_markers``
+  on the image (detection and every fit); a peer
   is the reference detection plus its fit of every reference dot, started from the
   reference blob (so the peers are handed the dots; we find them ourselves).
 
@@ -60,15 +61,17 @@ from common import machine_info, one_core  # noqa: E402
 one_core()
 
 import numpy as np  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
-
 import peers  # noqa: E402
 from photo_grid import grid_triples, off_line, reference_dots  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
 from vision_torsion.images import load_image  # noqa: E402
 from vision_torsion.markers import find_markers  # noqa: E402
 
 PHOTO_DIR = HERE.parent / "tests" / "data" / "photos"
 RESULTS = HERE / "results"
+
+
 def _ours(img, dots):
     t = time.process_time()
     table = find_markers(img)
@@ -144,16 +147,28 @@ def measure_photo(path: Path) -> dict:
 
 def markdown(rows, command, info) -> str:
     labels = {"ours": "vision-torsion (default)", **{m[0]: m[1] for m in METHODS}}
-    lines = [f"Photos benchmark, `{command}`, {info['date']}, {info['cpu_model']} "
-             f"(load {info['load_average_1_5_15min']}; CPU seconds on one core).", "",
-             "| photo | px, bits | ref. dots (r px) | triples | method | found ok | recall | row straightness RMS (px) | CPU s/photo |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Photos benchmark, `{command}`, {info['date']}, {info['cpu_model']} "
+        f"(load {info['load_average_1_5_15min']}; CPU seconds on one core).",
+        "",
+        "| photo | px, bits | ref. dots (r px) | triples | method | found ok | recall "
+        "| row straightness RMS (px) | CPU s/photo |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         for k, (name, m) in enumerate(r["methods"].items()):
-            head = (f"{r['photo']} | {r['size']}, {r['bits']}{' colour' if r['colour'] else ''} | "
-                    f"{r['reference_dots']} ({r['median_radius_px']:.1f}) | {r['triples']}") if k == 0 else " | | |"
-            lines.append(f"| {head} | {labels[name]} | {m['found']} | {m['recall']:.1%} | "
-                         f"{m['row_straightness_rms_px']:.4f} | {m['time_s']:.3f} |")
+            head = (
+                (
+                    f"{r['photo']} | {r['size']}, {r['bits']}{' colour' if r['colour'] else ''} | "
+                    f"{r['reference_dots']} ({r['median_radius_px']:.1f}) | {r['triples']}"
+                )
+                if k == 0
+                else " | | |"
+            )
+            lines.append(
+                f"| {head} | {labels[name]} | {m['found']} | {m['recall']:.1%} | "
+                f"{m['row_straightness_rms_px']:.4f} | {m['time_s']:.3f} |"
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -180,7 +195,9 @@ def main(argv=None) -> int:
     print(md)
     if not args.no_write:
         RESULTS.mkdir(exist_ok=True)
-        (RESULTS / "photos.json").write_text(json.dumps({"machine": info, "command": command, "photos": rows}, indent=1))
+        (RESULTS / "photos.json").write_text(
+            json.dumps({"machine": info, "command": command, "photos": rows}, indent=1)
+        )
         (RESULTS / "photos.md").write_text(md)
     return 0
 

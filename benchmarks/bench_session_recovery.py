@@ -37,7 +37,6 @@ from bench_analysis_recovery import COVERAGE_TARGET, _format, bilinear_truth, ev
 
 from vision_torsion.fileio import write_json  # noqa: E402
 
-
 #: The demo session's rig, for the weight-piece torque error model of the analysis:
 #: 0.02 kg pieces within ±0.1 g (uniform, so 1σ = 1e-4/√3 kg), r = 0.05 m, g = 9.81.
 RIG = dict(step_mass_kg=0.02, mass_std_kg=1e-4 / math.sqrt(3), gravity_m_per_s2=9.81, arm_radius_m=0.05,
@@ -51,7 +50,9 @@ def _one_session(args) -> pd.DataFrame:
     from vision_torsion.synthetic.session import write_session_folder
 
     scene, spec = demo_scene()
-    spec = dataclasses.replace(spec, orientations_deg=tuple(60.0 * k for k in range(orientations)), orientation_variation=0.0)
+    spec = dataclasses.replace(
+        spec, orientations_deg=tuple(60.0 * k for k in range(orientations)), orientation_variation=0.0
+    )
     with tempfile.TemporaryDirectory() as tmp:
         folder = write_session_folder(scene, spec, Path(tmp) / "s", seed=seed)
         res = process_session(folder, jobs=1)
@@ -70,12 +71,18 @@ def main(argv=None) -> int:
     render_s = time.perf_counter() - t0
     truth = bilinear_truth(k_u=4.4, k_l=0.3, tau_c=0.15, max_torque_nm=0.36, step_nm=2 * 0.02 * 9.81 * 0.05)
     res = evaluate_recovery(tables, truth, rig=RIG)
-    name = f"rendered sessions ({args.orientations} orientations, {len(tables[0])} images each), render+process {render_s / args.reps:.1f} s per session"
+    name = (f"rendered sessions ({args.orientations} orientations, {len(tables[0])} images each), "
+            f"render+process {render_s / args.reps:.1f} s per session")
     print(_format(name, res))
     write_json(
         HERE / "results" / "session_recovery.json",
-        {"command": f"python benchmarks/bench_session_recovery.py --reps {args.reps} --orientations {args.orientations}",
-         "truth": truth, "rig": RIG, "result": res},
+        {
+            "command": f"python benchmarks/bench_session_recovery.py --reps {args.reps} "
+            f"--orientations {args.orientations}",
+            "truth": truth,
+            "rig": RIG,
+            "result": res,
+        },
     )
     ok = all(r["within_target"] and r["coverage"] >= COVERAGE_TARGET for r in res["figures"].values())
     print("all targets met" if ok else "SOME TARGETS NOT MET")

@@ -154,8 +154,8 @@ def child(session: str, out: str, jobs: int, mode: str) -> None:
     "processes" sends even 2 jobs to worker processes."""
     import resource
 
-    from vision_torsion.session import process_session
     from vision_torsion.session import process as process_module
+    from vision_torsion.session import process_session
 
     if mode == "processes":
         process_module._MAX_THREAD_JOBS = 0

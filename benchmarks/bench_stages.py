@@ -259,38 +259,50 @@ def main(argv=None) -> int:
                      ("fit", "marker fit (pixel model)"), ("rest", "rest (judging, pair selection)"),
                      ("angle", "angle (pair_angle)")):
         print(f"| {label} | {stages[k]:.2f} |")
-    print(f"| **processing excluding decoding** (uninstrumented, wall) | **{stages['processing_excl_decode_median']:.2f}** "
-          f"(mean {stages['processing_excl_decode_mean']:.2f}, p90 {stages['processing_excl_decode_p90']:.2f}) |")
+    print(
+        "| **processing excluding decoding** (uninstrumented, wall) | "
+        f"**{stages['processing_excl_decode_median']:.2f}** "
+        f"(mean {stages['processing_excl_decode_mean']:.2f}, p90 {stages['processing_excl_decode_p90']:.2f}) |"
+    )
     print(f"| processing excluding decoding, CPU time | {stages['processing_excl_decode_cpu_median']:.2f} |")
     for key, what in (("processing_excl_decode_median", "wall"), ("processing_excl_decode_cpu_median", "CPU")):
         verdict = "met" if stages[key] <= 10 else "MISSED"
-        print(f"[{verdict}] processing excluding decoding <= 10 ms per image on one core ({what} time, median): "
-              f"{stages[key]:.2f} ms")
+        print(
+            f"[{verdict}] processing excluding decoding <= 10 ms per image on one core ({what} time, median): "
+            f"{stages[key]:.2f} ms"
+        )
     print("\nFolder throughput (ProcessPoolExecutor):")
     print("| workers | decode only (ms/img) | decode + measure + angle (ms/img) | images/s | measure ÷ decode |")
     print("|---:|---:|---:|---:|---:|")
     for r in runs:
-        print(f"| {r['jobs']} | {r['decode_only_ms_per_image']:.2f} | {r['measure_ms_per_image']:.2f} | "
-              f"{r['measure_images_per_s']:.0f} | {r['measure_over_decode']:.1f} |")
-    print(f"\nCPU scaling check: 2 processes do pure CPU work {scaling:.2f}x as fast as 1 "
-          f"(2.0 = two free cores; lower = the machine is shared)")
+        print(
+            f"| {r['jobs']} | {r['decode_only_ms_per_image']:.2f} | {r['measure_ms_per_image']:.2f} | "
+            f"{r['measure_images_per_s']:.0f} | {r['measure_over_decode']:.1f} |"
+        )
+    print(
+        f"\nCPU scaling check: 2 processes do pure CPU work {scaling:.2f}x as fast as 1 "
+        f"(2.0 = two free cores; lower = the machine is shared)"
+    )
     load_end = [round(x, 2) for x in os.getloadavg()]
     print(f"load average at the end {load_end}")
     if write:
         RESULTS.mkdir(parents=True, exist_ok=True)
-        write_json(RESULTS / "stages.json", {
-            "benchmark": "stages",
-            "command": "python benchmarks/bench_stages.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-            "machine": info,
-            "load_average_end": load_end,
-            "scene": "synthetic/standard.toml",
-            "stages_ms_median": stages,
-            "target_processing_ms": 10.0,
-            "target_met_wall": stages["processing_excl_decode_median"] <= 10,
-            "target_met_cpu": stages["processing_excl_decode_cpu_median"] <= 10,
-            "throughput": runs,
-            "cpu_scaling_2_over_1": scaling,
-        })
+        write_json(
+            RESULTS / "stages.json",
+            {
+                "benchmark": "stages",
+                "command": "python benchmarks/bench_stages.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+                "machine": info,
+                "load_average_end": load_end,
+                "scene": "synthetic/standard.toml",
+                "stages_ms_median": stages,
+                "target_processing_ms": 10.0,
+                "target_met_wall": stages["processing_excl_decode_median"] <= 10,
+                "target_met_cpu": stages["processing_excl_decode_cpu_median"] <= 10,
+                "throughput": runs,
+                "cpu_scaling_2_over_1": scaling,
+            },
+        )
         print(f"wrote {RESULTS / 'stages.json'}")
     return 0
 

@@ -41,7 +41,8 @@ Peers
 ``ml_disc``
     Maximum-likelihood (least-squares, i.e. ML under Gaussian pixel noise) fit of a
     blurred-disc model to every pixel of a square window of half-size r + 11 px
-    around each blob (started from the Otsu blob, as the moments peer): ``L(p)·(B + (F − B)·P(p))`` with ``P`` the exact convolution of a disc
+    around each blob (started from the Otsu blob, as the moments peer):
+    ``L(p)·(B + (F − B)·P(p))`` with ``P`` the exact convolution of a disc
     (centre, radius r) with an isotropic Gaussian of width σ — the non-central χ²
     distribution function, ``scipy.special.chndtr`` — and ``L = 1 + gx·x + gy·y`` a
     lighting plane. Eight parameters (cx, cy, r, σ, B, F, gx, gy), analytic
@@ -137,8 +138,14 @@ def hough_alt(image: np.ndarray) -> Detection:
     r_min, r_max = _radius_range(image)
     g8 = cv2.GaussianBlur(_to_uint8(image), (0, 0), 1.5)
     found = cv2.HoughCircles(
-        g8, cv2.HOUGH_GRADIENT_ALT, dp=1.5, minDist=2 * r_min, param1=80, param2=0.8,
-        minRadius=int(r_min), maxRadius=int(np.ceil(r_max)),
+        g8,
+        cv2.HOUGH_GRADIENT_ALT,
+        dp=1.5,
+        minDist=2 * r_min,
+        param1=80,
+        param2=0.8,
+        minRadius=int(r_min),
+        maxRadius=int(np.ceil(r_max)),
     )
     if found is None:
         raise PeerFailure("HoughCircles found no circle")

@@ -71,7 +71,9 @@ def test_identity_from_distinct_radii(small_scene):
     for img, ang in ((img_a, 0.0), (img_b, 170.0)):
         # grow the marker that started on the +x axis to 21 px (20 px is the other) (exact coverage, blurred)
         c = rotate_about(np.array([[300.3, 150.8]]), (200.3, 150.8), ang)[0]
-        cov = shape_coverage(_circle_distance_fn(CameraMapping(small_scene), c[0], c[1], 21.0), 0, 0, img.shape[1], img.shape[0])
+        cov = shape_coverage(
+            _circle_distance_fn(CameraMapping(small_scene), c[0], c[1], 21.0), 0, 0, img.shape[1], img.shape[0]
+        )
         cov = cv2.GaussianBlur(cov, (0, 0), 1.0)
         img[:] = img * (1 - cov) + 40 * cov
     ref = select_pair(find_markers(img_a, radius_range=(12, 30)))

@@ -53,12 +53,17 @@ needs_skimage = pytest.mark.skipif(not _has_new_skimage(), reason="scikit-image 
 
 @pytest.fixture(scope="module")
 def standard_image():
-    scene = load_scene(Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "standard.toml")
+    scene = load_scene(
+        Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "standard.toml"
+    )
     return render(scene, 27.5, seed=np.random.default_rng(8))
 
 
-@pytest.mark.parametrize("peer", [pytest.param(p, marks=needs_skimage) if p.name == "canny_circle" else p
-                                  for p in peers.PEERS], ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "peer",
+    [pytest.param(p, marks=needs_skimage) if p.name == "canny_circle" else p for p in peers.PEERS],
+    ids=lambda p: p.name,
+)
 def test_peer_finds_both_markers(peer, standard_image):
     det = peer.func(standard_image.image)
     truth = standard_image.centres[np.argsort(standard_image.centres[:, 0])]

@@ -27,12 +27,16 @@ ANGLES = [0.0, -40.0, 15.0, 65.0]
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     out = tmp_path_factory.mktemp("acc") / "check"
-    write_accuracy_folder(load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml"), out, angles_deg=ANGLES, seed=5)
+    write_accuracy_folder(
+        load_scene(ROOT / "vision_torsion" / "synthetic" / "scenes" / "standard.toml"), out, angles_deg=ANGLES, seed=5
+    )
     return out
 
 
 def _snapshot(d: Path) -> dict:
-    return {p.relative_to(d).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in d.rglob("*") if p.is_file()}
+    return {
+        p.relative_to(d).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in d.rglob("*") if p.is_file()
+    }
 
 
 def _copy(folder, tmp_path):
@@ -49,11 +53,30 @@ def test_check_passes_and_writes_outputs_only_in_results(folder):
     out = folder / "results"
     assert sorted(p.name for p in out.iterdir()) == ["accuracy.csv", "accuracy.json", "accuracy.png"]
     table = pd.read_csv(out / "accuracy.csv")
-    assert list(table.columns) == ["image", "reference_angle_deg", "measured_angle_deg", "error_deg", "angle_std_deg", "status"]
+    assert list(table.columns) == [
+        "image",
+        "reference_angle_deg",
+        "measured_angle_deg",
+        "error_deg",
+        "angle_std_deg",
+        "status",
+    ]
     assert list(table["status"]) == ["reference", "ok", "ok", "ok"]
     summary = json.loads((out / "accuracy.json").read_text())
-    for key in ("n", "bias_deg", "rms_deg", "max_abs_error_deg", "scale_error", "offset_deg", "fit_residual_rms_deg",
-                "u95_deg", "coverage_factor", "u95_method", "tolerance_deg", "passed"):
+    for key in (
+        "n",
+        "bias_deg",
+        "rms_deg",
+        "max_abs_error_deg",
+        "scale_error",
+        "offset_deg",
+        "fit_residual_rms_deg",
+        "u95_deg",
+        "coverage_factor",
+        "u95_method",
+        "tolerance_deg",
+        "passed",
+    ):
         assert key in summary
     assert summary["n"] == 3 and summary["passed"] is True and summary["tolerance_deg"] == 0.02
     assert res.passed and res.n_failed == 0
@@ -61,8 +84,10 @@ def test_check_passes_and_writes_outputs_only_in_results(folder):
     assert res.rms_deg < 0.005
     # the same RMS as measuring each image directly against the reference (same images)
     truth = pd.read_csv(folder / "truth.csv")
-    direct = [rotation_angle(folder / "reference.png", folder / n).angle_deg - a
-              for n, a in zip(truth["image"][1:], truth["true_angle_deg"][1:])]
+    direct = [
+        rotation_angle(folder / "reference.png", folder / n).angle_deg - a
+        for n, a in zip(truth["image"][1:], truth["true_angle_deg"][1:])
+    ]
     assert res.rms_deg == pytest.approx(float(np.sqrt(np.mean(np.square(direct)))), rel=1e-12)
     # U95 = t(0.975, n-1) * RMS with no reference uncertainty: t(0.975, 2) = 4.303
     assert res.coverage_factor == pytest.approx(4.3027, abs=1e-4)
@@ -89,7 +114,12 @@ def test_spec_sets_tolerance_and_cli_overrides(folder, tmp_path):
     assert load_spec(ROOT / "vision_torsion" / "calibration" / "specs" / "rotary_stage.toml").tolerance_deg == 0.02
     res = check_accuracy(folder, out_dir=tmp_path / "s", spec=spec)
     assert res.tolerance_deg == 0.005
-    assert main(["check-accuracy", str(folder), "-o", str(tmp_path / "t"), "--spec", str(spec), "--tolerance", "1e-7", "-q"]) == 1
+    assert (
+        main(
+            ["check-accuracy", str(folder), "-o", str(tmp_path / "t"), "--spec", str(spec), "--tolerance", "1e-7", "-q"]
+        )
+        == 1
+    )
 
 
 def test_one_bad_image_gets_a_status_and_the_run_goes_on(folder, tmp_path):
@@ -113,10 +143,22 @@ def _table_folder(tmp_path, text, images=("a.png", "b.png", "c.png")):
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("image,reference_angle_deg\na.png,0\nb.png,10\nd.png,20\n", r"reference\.csv, line 4: image 'd\.png' not found"),
-        ("image,reference_angle_deg\na.png,0\nb.png,10\nb.png,20\n", r"line 4: duplicate image 'b\.png' \(first on line 3\)"),
-        ("image,reference_angle_deg\na.png,0\nb.png,ten\nc.png,20\n", r"line 3: reference_angle_deg 'ten' is not a number"),
-        ("image,reference_angle_deg\na.png,0\nb.png,nan\nc.png,20\n", r"line 3: reference_angle_deg 'nan' is not finite"),
+        (
+            "image,reference_angle_deg\na.png,0\nb.png,10\nd.png,20\n",
+            r"reference\.csv, line 4: image 'd\.png' not found",
+        ),
+        (
+            "image,reference_angle_deg\na.png,0\nb.png,10\nb.png,20\n",
+            r"line 4: duplicate image 'b\.png' \(first on line 3\)",
+        ),
+        (
+            "image,reference_angle_deg\na.png,0\nb.png,ten\nc.png,20\n",
+            r"line 3: reference_angle_deg 'ten' is not a number",
+        ),
+        (
+            "image,reference_angle_deg\na.png,0\nb.png,nan\nc.png,20\n",
+            r"line 3: reference_angle_deg 'nan' is not finite",
+        ),
         ("image,reference_angle_deg\na.png,0\nb.png,10\n", r"2 row\(s\); need at least 3"),
         ("image,angle\na.png,0\nb.png,10\nc.png,20\n", r"missing column\(s\) reference_angle_deg"),
         ("image,reference_angle_deg\na.png,0\nb.png,10,5\nc.png,20\n", r"line 3: expected 2 fields, got 3"),
@@ -159,7 +201,9 @@ def test_correction_is_applied_by_check_and_measure(folder, tmp_path):
     # a similarity (turn + scale + shift) changes no angle: results must agree exactly,
     # while a shear must change them (so the correction is really applied)
     c, s = np.cos(0.3), np.sin(0.3)
-    PlaneCorrection(np.array([[1.2 * c, -1.2 * s, 40.0], [1.2 * s, 1.2 * c, -7.0], [0, 0, 1.0]])).save(tmp_path / "sim.toml")
+    PlaneCorrection(np.array([[1.2 * c, -1.2 * s, 40.0], [1.2 * s, 1.2 * c, -7.0], [0, 0, 1.0]])).save(
+        tmp_path / "sim.toml"
+    )
     shear = PlaneCorrection(np.array([[1.0, 0.01, 0.0], [0.0, 1.0, 0.0], [0, 0, 1.0]])).save(tmp_path / "shear.json")
     spec = tmp_path / "spec.toml"
     spec.write_text('tolerance_deg = 0.02\ncorrection = "sim.toml"\n')
@@ -170,9 +214,28 @@ def test_correction_is_applied_by_check_and_measure(folder, tmp_path):
     assert np.abs(with_shear.table["measured_angle_deg"] - plain.table["measured_angle_deg"]).max() > 0.05
     # independent rotations (a check folder): each the smallest turn from the reference
     m0 = measure_folder(folder, reference=folder / "reference.png", out_dir=tmp_path / "m0", order="independent")
-    m1 = measure_folder(folder, reference=folder / "reference.png", out_dir=tmp_path / "m1",
-                        settings=MeasureSettings(correction=str(shear)), order="independent")
+    m1 = measure_folder(
+        folder,
+        reference=folder / "reference.png",
+        out_dir=tmp_path / "m1",
+        settings=MeasureSettings(correction=str(shear)),
+        order="independent",
+    )
     ok = m0.table["image"] != "reference.png"
     assert np.abs(m1.table["angle_deg"][ok] - m0.table["angle_deg"][ok]).max() > 0.05
-    assert main(["measure", str(folder), "--reference", str(folder / "reference.png"), "-o", str(tmp_path / "m2"),
-                 "--correction", str(tmp_path / "missing.toml"), "-q"]) == 2
+    assert (
+        main(
+            [
+                "measure",
+                str(folder),
+                "--reference",
+                str(folder / "reference.png"),
+                "-o",
+                str(tmp_path / "m2"),
+                "--correction",
+                str(tmp_path / "missing.toml"),
+                "-q",
+            ]
+        )
+        == 2
+    )

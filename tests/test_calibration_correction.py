@@ -80,7 +80,10 @@ def test_correction_turns_tilted_angles_into_disk_angles():
         t = np.radians(angle)
         D = np.array([[700 - 300 * np.cos(t), 500 + 300 * np.sin(t)], [700 + 300 * np.cos(t), 500 - 300 * np.sin(t)]])
         xi, yi = cam.to_image(D[:, 0], D[:, 1])
-        m = [Marker(x_px=float(u), y_px=float(v), radius_px=35.0, x_std_px=0.01, y_std_px=0.01, xy_cov_px2=0.0) for u, v in zip(xi, yi)]
+        m = [
+            Marker(x_px=float(u), y_px=float(v), radius_px=35.0, x_std_px=0.01, y_std_px=0.01, xy_cov_px2=0.0)
+            for u, v in zip(xi, yi)
+        ]
         return PairMeasurement(*m)
 
     ref, cur = pair(0.0), pair(70.0)
@@ -119,7 +122,10 @@ def _good():
         (lambda d: d.update(format="other"), r"c\.json: field 'format' must be"),
         (lambda d: d.pop("homography"), r"c\.json: field 'homography' is missing"),
         (lambda d: d.update(homography=[[1, 0], [0, 1]]), r"c\.json: field 'homography' must be a 3x3"),
-        (lambda d: d["homography"][1].__setitem__(2, "x"), r"c\.json: field 'homography\[1\]\[2\]' must be a finite number"),
+        (
+            lambda d: d["homography"][1].__setitem__(2, "x"),
+            r"c\.json: field 'homography\[1\]\[2\]' must be a finite number",
+        ),
         (lambda d: d["distortion"].pop("centre_y_px"), r"c\.json: field 'distortion\.centre_y_px' is missing"),
         (lambda d: d["distortion"].update(k2=0.1), r"c\.json: unknown field\(s\) distortion\.k2"),
         (lambda d: d.update(extra=1), r"c\.json: unknown field\(s\) extra"),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,8 +14,6 @@ from vision_torsion.markers import Marker
 from vision_torsion.pair import PairMeasurement
 from vision_torsion.synthetic import load_scene, render, scene_from_dict, scene_to_dict
 from vision_torsion.synthetic.geometry import CameraMapping, marker_centres_disk
-
-from pathlib import Path
 
 TILTED = load_scene(Path(__file__).resolve().parents[1] / "vision_torsion" / "synthetic" / "scenes" / "tilted.toml")
 CAM = CameraMapping(TILTED)

@@ -26,7 +26,9 @@ def board_image(H, *, size=(640, 480), cols=9, rows=6, pitch=40.0, origin=(130.0
     j = np.floor(((yy - (up - 1) / 2) / up - origin[1]) / pitch).astype(int)
     inside = (i >= -1) & (i <= cols - 1) & (j >= -1) & (j <= rows - 1)
     board = np.where(inside & ((i + j) % 2 == 0), 30.0, 220.0).astype(np.float32)
-    hi = cv2.warpPerspective(board, S @ H @ np.linalg.inv(S), (w * up, h * up), flags=cv2.INTER_LINEAR, borderValue=220.0)
+    hi = cv2.warpPerspective(
+        board, S @ H @ np.linalg.inv(S), (w * up, h * up), flags=cv2.INTER_LINEAR, borderValue=220.0
+    )
     img = cv2.resize(hi, (w, h), interpolation=cv2.INTER_AREA)
     if k1:
         # distorted pixel x_d shows the undistorted image at u = undistort(x_d)
@@ -39,7 +41,9 @@ def board_image(H, *, size=(640, 480), cols=9, rows=6, pitch=40.0, origin=(130.0
 
 def _turned_pair(angle, centre=(320.0, 240.0), r=150.0):
     t = np.radians(angle)
-    return np.array([[centre[0] - r * np.cos(t), centre[1] + r * np.sin(t)], [centre[0] + r * np.cos(t), centre[1] - r * np.sin(t)]])
+    return np.array(
+        [[centre[0] - r * np.cos(t), centre[1] + r * np.sin(t)], [centre[0] + r * np.cos(t), centre[1] - r * np.sin(t)]]
+    )
 
 
 def _image_of(D, H, k1=0.0, size=(640, 480), f=640.0):

@@ -40,7 +40,9 @@ def accuracy_dir(tmp_path_factory, small_scene):
     """A small accuracy folder rendered by the API the synth command uses."""
     from vision_torsion.synthetic.folders import write_accuracy_folder
 
-    return write_accuracy_folder(small_scene, tmp_path_factory.mktemp("acc") / "acc", angles_deg=[-30.0, 12.5, 45.0], seed=3)
+    return write_accuracy_folder(
+        small_scene, tmp_path_factory.mktemp("acc") / "acc", angles_deg=[-30.0, 12.5, 45.0], seed=3
+    )
 
 
 def test_synth_accuracy_command(tmp_path, scene_file, capsys):
@@ -61,8 +63,19 @@ def test_measure_writes_angles_and_continues_past_a_bad_image(accuracy_dir, tmp_
     before = _tree_digest(images)
     out = tmp_path / "out"
     # an accuracy folder holds independent rotations (-30°, 12.5°, 45°): not a sequence of small steps
-    code = main(["measure", str(images), "--reference", str(images / "reference.png"), "-o", str(out), "-q",
-                 "--order", "independent"])
+    code = main(
+        [
+            "measure",
+            str(images),
+            "--reference",
+            str(images / "reference.png"),
+            "-o",
+            str(out),
+            "-q",
+            "--order",
+            "independent",
+        ]
+    )
     assert code == 1  # one image failed
     table = pd.read_csv(out / "angles.csv")
     truth = pd.read_csv(accuracy_dir / "reference.csv").set_index("image")["reference_angle_deg"]
@@ -74,7 +87,11 @@ def test_measure_writes_angles_and_continues_past_a_bad_image(accuracy_dir, tmp_
     assert err.max() < 0.01  # small scene: std ~0.001°
     assert (good["angle_std_deg"] > 0).all()
     assert _tree_digest(images) == before  # the input folder is never modified
-    assert "failed: " in (out := capsys.readouterr().err) and "img_002.png: truncated PNG" in out and out.count("img_002.png") == 1
+    assert (
+        "failed: " in (out := capsys.readouterr().err)
+        and "img_002.png: truncated PNG" in out
+        and out.count("img_002.png") == 1
+    )
 
 
 def test_measure_unusable_reference_exits_2(tmp_path, capsys):

@@ -51,3 +51,13 @@ def test_not_monotonic_branch_fit_has_its_code():
     with pytest.raises(AnalysisError, match="not monotonic") as info:
         fit_loading_branch(theta, torque, order=5)
     assert info.value.reason == "not_monotonic"
+
+
+def test_cli_failure_line_follows_the_status_not_the_wording():
+    from vision_torsion.cli import failure_line
+
+    assert failure_line("a.png", "residual 3x the others", status="suspect") == "a.png: residual 3x the others"
+    assert (
+        failure_line("a.png", "suspect: worded like one", status="failed") == "failed: a.png: suspect: worded like one"
+    )
+    assert failure_line("a.png", "a.png: no markers") == "failed: a.png: no markers"

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import re
-import shutil
 import stat
 import struct
 import subprocess
@@ -25,13 +24,12 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-
 from helpers import draw_target, make_session, tree_digest
+
 from vision_torsion import fileio
 from vision_torsion.cli import main
 from vision_torsion.errors import ImageReadError, OutputError
 from vision_torsion.images import MAX_IMAGE_PIXELS, decode_image, load_image
-
 
 # -- helpers ------------------------------------------------------------------------
 

@@ -15,9 +15,9 @@ from vision_torsion.angle import MAX_STEP_DEG, sequence_angles
 from vision_torsion.calibration.accuracy import check_accuracy
 from vision_torsion.cli import main
 from vision_torsion.errors import MarkerError, VisionTorsionError
+from vision_torsion.markers import Marker
 from vision_torsion.measure import measure_folder
 from vision_torsion.pair import measure_pair, select_pair
-from vision_torsion.markers import Marker
 from vision_torsion.session.plan import plan_session
 from vision_torsion.settings import MeasureSettings
 from vision_torsion.synthetic import Scene, render

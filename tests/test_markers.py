@@ -60,7 +60,9 @@ def test_every_fit_method_is_accurate(small_scene, fit):
 def test_bright_markers_on_dark_disk(small_scene):
     scene = small_scene.replace(disk={"background_level": 50.0}, markers={"polarity": "bright", "level": 210.0})
     r = render(scene, 5.0, seed=1)
-    assert (find_markers(r.image, polarity="dark")["status"] != "ok").all() or len(find_markers(r.image, polarity="dark")) == 0
+    assert (find_markers(r.image, polarity="dark")["status"] != "ok").all() or len(
+        find_markers(r.image, polarity="dark")
+    ) == 0
     table = find_markers(r.image, polarity="bright")
     assert np.abs(_match(table, r.centres)).max() < 0.03
 
@@ -136,7 +138,11 @@ def test_low_contrast_marker_is_reported():
     yy, xx = np.mgrid[0:200, 0:200]
     img[(xx - 100) ** 2 + (yy - 100) ** 2 < 25**2] -= 12  # 12 DN against 8 DN noise
     table = find_markers(img, radius_range=(15, 40))
-    assert (table["status"] != "ok").all() or table.empty or (table["status"].isin(["low_contrast", "not_round", "fit_failed"])).any()
+    assert (
+        (table["status"] != "ok").all()
+        or table.empty
+        or (table["status"].isin(["low_contrast", "not_round", "fit_failed"])).any()
+    )
 
 
 def test_settings_validation():

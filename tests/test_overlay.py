@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-
 from helpers import draw_target, make_session
+
 from vision_torsion.cli import main
 from vision_torsion.errors import OutputError
 from vision_torsion.images import write_image

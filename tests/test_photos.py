@@ -8,7 +8,6 @@ which any camera homography keeps. Kept fast: four small crops.
 from __future__ import annotations
 
 import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np

@@ -6,9 +6,9 @@ import os
 
 import numpy as np
 import pytest
+from helpers import draw_target, make_session
 from PIL import Image
 
-from helpers import draw_target, make_session
 from vision_torsion.analysis.models import bilinear_response
 from vision_torsion.errors import ManifestError, SessionError
 from vision_torsion.images import write_image

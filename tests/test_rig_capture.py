@@ -13,10 +13,8 @@ import shutil
 import pytest
 
 from vision_torsion.cli import main
-from vision_torsion.images import write_image
 from vision_torsion.session import process_session
 from vision_torsion.session.bind import bind_session
-from vision_torsion.session.steps import StepPoint, check_steps
 from vision_torsion.synthetic import Scene
 from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec

@@ -9,8 +9,8 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-
 from helpers import draw_target, make_session, tree_digest
+
 from vision_torsion.errors import SessionError
 from vision_torsion.images import write_image
 from vision_torsion.session.watch import Watcher

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import json
 
-from vision_torsion.session.cache import (CacheLog, cache_line, count_entries, merge_cache,
-                                         read_cache, read_logs)
+from vision_torsion.session.cache import CacheLog, cache_line, count_entries, merge_cache, read_cache, read_logs
 
 KEY_A, KEY_B, KEY_C = "a" * 64, "b" * 64, "c" * 64
 

@@ -5,8 +5,7 @@ import math
 import pytest
 
 from vision_torsion.errors import SessionError
-from vision_torsion.session.config import (config_from_dict, config_to_dict, load_config,
-                                           write_config)
+from vision_torsion.session.config import config_from_dict, config_to_dict, load_config, write_config
 
 
 def doc(**changes):

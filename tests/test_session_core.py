@@ -12,8 +12,8 @@ import time
 
 import pandas as pd
 import pytest
-
 from helpers import make_session
+
 from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
 from vision_torsion.session.cache import count_entries

@@ -5,14 +5,12 @@ Real measurement core on the small rendered targets of tests/helpers.py.
 
 import pandas as pd
 import pytest
+from helpers import draw_target, make_session
 
-from helpers import make_session
 from vision_torsion.cli import main
 from vision_torsion.errors import ManifestError
 from vision_torsion.images import write_image
 from vision_torsion.session import load_session, process_session
-
-from helpers import draw_target
 
 # OpenCV's anti-aliased discs measured by the real core: ~0.01° (see test_session_core)
 ANGLE_TOL_DEG = 0.05

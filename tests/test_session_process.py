@@ -7,18 +7,15 @@ session folder. The real measurement core is exercised in test_session_core.py.
 """
 
 import argparse
-import os
 
 import numpy as np
 import pandas as pd
 import pytest
-
-from vision_torsion.errors import OutputError
-
 from helpers import FakeCore, draw_target, make_session, tree_digest
+
 from vision_torsion import fileio
 from vision_torsion.cli import process as process_cli
-from vision_torsion.errors import ManifestError, SessionError
+from vision_torsion.errors import ManifestError, OutputError, SessionError
 from vision_torsion.images import write_image
 from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session

@@ -9,7 +9,9 @@ from vision_torsion.synthetic.coverage import band_coverage, shape_coverage, squ
 from vision_torsion.synthetic.geometry import CameraMapping, marker_centres_disk, rotate_about
 from vision_torsion.synthetic.render import _circle_distance_fn
 
-SCENES = sorted((__import__("pathlib").Path(__file__).parents[1] / "vision_torsion" / "synthetic" / "scenes").glob("*.toml"))
+SCENES = sorted(
+    (__import__("pathlib").Path(__file__).parents[1] / "vision_torsion" / "synthetic" / "scenes").glob("*.toml")
+)
 
 
 def _disc(cx, cy, r, size=(90, 100)):
@@ -72,7 +74,12 @@ def test_render_is_deterministic_for_a_seed(small_scene):
 
 
 def test_read_noise_has_the_configured_variance(small_scene):
-    scene = small_scene.replace(noise={"read_noise_dn": 3.0}, image={"bit_depth": 16}, disk={"background_level": 30000.0}, markers={"level": 10000.0})
+    scene = small_scene.replace(
+        noise={"read_noise_dn": 3.0},
+        image={"bit_depth": 16},
+        disk={"background_level": 30000.0},
+        markers={"level": 10000.0},
+    )
     ideal = render_ideal(scene, 0.0)
     noisy = render(scene, 0.0, seed=5).image.astype(float)
     resid = noisy - ideal
@@ -81,7 +88,12 @@ def test_read_noise_has_the_configured_variance(small_scene):
 
 
 def test_shot_noise_variance_follows_the_signal(small_scene):
-    scene = small_scene.replace(noise={"read_noise_dn": 0.0, "shot_noise": True, "electrons_per_dn": 4.0}, image={"bit_depth": 16}, disk={"background_level": 1000.0}, markers={"level": 400.0})
+    scene = small_scene.replace(
+        noise={"read_noise_dn": 0.0, "shot_noise": True, "electrons_per_dn": 4.0},
+        image={"bit_depth": 16},
+        disk={"background_level": 1000.0},
+        markers={"level": 400.0},
+    )
     ideal = render_ideal(scene, 0.0)
     resid = render(scene, 0.0, seed=9).image.astype(float) - ideal
     flat = ideal > 999.9
@@ -92,7 +104,9 @@ def test_shot_noise_variance_follows_the_signal(small_scene):
 @pytest.mark.parametrize("bits,dtype,top", [(8, np.uint8, 255), (12, np.uint16, 4095), (16, np.uint16, 65535)])
 def test_bit_depths(small_scene, bits, dtype, top):
     scale = (2**bits - 1) / 255
-    scene = small_scene.replace(image={"bit_depth": bits}, disk={"background_level": 200 * scale}, markers={"level": 40 * scale})
+    scene = small_scene.replace(
+        image={"bit_depth": bits}, disk={"background_level": 200 * scale}, markers={"level": 40 * scale}
+    )
     img = render(scene, 0.0, seed=1).image
     assert img.dtype == dtype and img.max() <= top and img.max() > 0.7 * top
 
@@ -136,8 +150,10 @@ def test_ready_scenes_load_and_round_trip(path):
 
 
 def _base():
-    return {"disk": {"center_x": 700.0, "center_y": 500.0, "background_level": 200.0},
-            "markers": {"polarity": "dark", "level": 40.0, "radius_px": 35.0, "distance_px": 300.0}}
+    return {
+        "disk": {"center_x": 700.0, "center_y": 500.0, "background_level": 200.0},
+        "markers": {"polarity": "dark", "level": 40.0, "radius_px": 35.0, "distance_px": 300.0},
+    }
 
 
 def test_scene_missing_field_is_named():
@@ -233,9 +249,19 @@ def test_session_truth_follows_the_bilinear_model():
     from vision_torsion.synthetic.session import SessionSpec, session_truth
 
     spec = SessionSpec(mass_tolerance_kg=0.0, orientations_deg=(0.0,))
-    rows = [{"image": f"i{k}.png", "orientation_deg": "0", "cycle": "1", "phase": ph, "step": "0", "mass_kg": m}
-            for k, (ph, m) in enumerate([("reference", "0"), ("positive_unloading", "0.36"), ("positive_unloading", "0"),
-                                         ("negative_loading", "0.36"), ("negative_unloading", "0"), ("positive_loading", "0.36")])]
+    rows = [
+        {"image": f"i{k}.png", "orientation_deg": "0", "cycle": "1", "phase": ph, "step": "0", "mass_kg": m}
+        for k, (ph, m) in enumerate(
+            [
+                ("reference", "0"),
+                ("positive_unloading", "0.36"),
+                ("positive_unloading", "0"),
+                ("negative_loading", "0.36"),
+                ("negative_unloading", "0"),
+                ("positive_loading", "0.36"),
+            ]
+        )
+    ]
     truth, _ = session_truth(spec, rows, seed=0)
     tau = 2 * truth["true_torque_nm"].to_numpy() / 2
     expect = np.degrees(bilinear_response(tau, k_u=4.4, k_l=0.3, tau_c=0.15))

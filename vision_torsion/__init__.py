@@ -15,7 +15,6 @@ True
 """
 
 from ._lazy import attach
-
 from .errors import *  # noqa: F401,F403
 from .errors import __all__ as _errors_all
 

@@ -301,8 +301,10 @@ def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:
 def check_contrast(contrast, sigma2) -> None:
     """Raise FitError unless the marker's contrast (DN) exceeds 3x the noise σ (σ² in DN²)."""
     if not abs(contrast) > 3.0 * np.sqrt(sigma2):
-        raise FitError(f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)",
-                       reason="low_contrast")
+        raise FitError(
+            f"marker edge has too little contrast ({contrast:.1f} DN against noise {np.sqrt(sigma2):.1f} DN)",
+            reason="low_contrast",
+        )
 
 
 def bounded_edge_width(new, old) -> float:

@@ -121,7 +121,9 @@ def _solve_levels(Phi, nx, ny, vals, weight, kappa=None):
     return coef, resid
 
 
-def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, patch: MarkerPatch | None = None) -> EdgePoints:
+def edge_points(
+    image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, patch: MarkerPatch | None = None
+) -> EdgePoints:
     """Sub-pixel edge points around a circle estimate.
 
     Parameters
@@ -178,7 +180,11 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     u = (R - d) / s
     coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, np.ones_like(vals))
     keep = cut_occluders(
-        resid, np.abs(u) < 3.0, lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1], ring_idx, patch.shape
+        resid,
+        np.abs(u) < 3.0,
+        lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1],
+        ring_idx,
+        patch.shape,
     )
     if keep is None:
         keep = np.ones(vals.size, bool)
@@ -209,8 +215,9 @@ def edge_points(image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, pat
     # neighbours on each side rather than let it pull the circle.
     lost = lost_sectors(sector[~keep & (np.abs(u) < 3.0)], n_sec)
     gb, pb = g[band], psi[band]
-    delta, ang, info = sector_edge_offsets(sector[band], n_sec, gb, resid[band], gb * np.cos(pb), gb * np.sin(pb),
-                                           drop=lost)
+    delta, ang, info = sector_edge_offsets(
+        sector[band], n_sec, gb, resid[band], gb * np.cos(pb), gb * np.sin(pb), drop=lost
+    )
     Rk = radius if radial_shape is None else radial_shape(ang)
     rho = Rk + delta
     std = np.sqrt(sigma2 / info)

@@ -24,17 +24,16 @@ Failure modes (reported per marker in the ``status`` column, with a ``message``)
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, replace
-
 import sys
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
+from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
 from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
 from .edges import edge_points
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
@@ -44,7 +43,15 @@ from .settings import MeasureSettings
 if TYPE_CHECKING:
     import pandas as pd
 
-__all__ = ["Marker", "find_markers", "find_marker_list", "find_candidates", "fit_marker", "markers_to_frame", "MARKER_COLUMNS"]
+__all__ = [
+    "Marker",
+    "find_markers",
+    "find_marker_list",
+    "find_candidates",
+    "fit_marker",
+    "markers_to_frame",
+    "MARKER_COLUMNS",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -128,8 +135,9 @@ def markers_to_frame(markers) -> pd.DataFrame:
 
     # flat fields: plain tuples, not dataclasses.asdict's recursive copies (a photo of
     # a dot grid has hundreds of markers)
-    return pd.DataFrame.from_records([tuple(getattr(m, c) for c in MARKER_COLUMNS) for m in markers],
-                                     columns=MARKER_COLUMNS)
+    return pd.DataFrame.from_records(
+        [tuple(getattr(m, c) for c in MARKER_COLUMNS) for m in markers], columns=MARKER_COLUMNS
+    )
 
 
 def is_frame(obj) -> bool:
@@ -243,8 +251,14 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width) -> MarkerPat
     reach = 3.0 * max(float(edge_width), 1.0) + 1.0
     for x, y, r in neighbours:
         # filled circles drawn in 1/16 px (OpenCV's shift): one C call per neighbour
-        cv2.circle(mask, (int(round((x - patch.x0) * 16)), int(round((y - patch.y0) * 16))),
-                   int(round((1.15 * r + reach) * 16)), 1, thickness=-1, shift=4)
+        cv2.circle(
+            mask,
+            (int(round((x - patch.x0) * 16)), int(round((y - patch.y0) * 16))),
+            int(round((1.15 * r + reach) * 16)),
+            1,
+            thickness=-1,
+            shift=4,
+        )
     excluded = mask.ravel().astype(bool)
     return replace(patch, excluded=excluded) if excluded.any() else patch
 
@@ -290,8 +304,10 @@ def fit_marker(
             patch = _exclude_neighbours(patch, neighbours, edge_width)
         cx, cy, r, levels = _start(patch, blob)
         if fit == "pixels":
-            return _whole(_pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
-                          image.shape)
+            return _whole(
+                _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
+                image.shape,
+            )
         s = float(edge_width)
         shape = None
         for _ in range(max_iter):
@@ -299,7 +315,14 @@ def fit_marker(
             w = 1.0 / ep.std_px**2
             if fit == "algebraic":
                 cf = fit_circle_algebraic(ep.x_px, ep.y_px)
-                nx_, ny_, nr, cov, rms, n_in = cf.x_px, cf.y_px, cf.radius_px, cf.cov, cf.residual_rms_px, int(cf.inliers.sum())
+                nx_, ny_, nr, cov, rms, n_in = (
+                    cf.x_px,
+                    cf.y_px,
+                    cf.radius_px,
+                    cf.cov,
+                    cf.residual_rms_px,
+                    int(cf.inliers.sum()),
+                )
             elif fit == "ellipse":
                 ef = fit_ellipse(ep.x_px, ep.y_px, weights=w)
                 nx_, ny_ = ef.x_px, ef.y_px
@@ -311,7 +334,14 @@ def fit_marker(
                 shape = _ellipse_radial(ef)
             else:
                 cf = fit_circle_geometric(ep.x_px, ep.y_px, weights=w, initial=(cx, cy, r))
-                nx_, ny_, nr, cov, rms, n_in = cf.x_px, cf.y_px, cf.radius_px, cf.cov, cf.residual_rms_px, int(cf.inliers.sum())
+                nx_, ny_, nr, cov, rms, n_in = (
+                    cf.x_px,
+                    cf.y_px,
+                    cf.radius_px,
+                    cf.cov,
+                    cf.residual_rms_px,
+                    int(cf.inliers.sum()),
+                )
             # the centre converges faster than radius and edge width, and is what counts
             moved = max(abs(nx_ - cx), abs(ny_ - cy))
             cx, cy, r, s = nx_, ny_, nr, ep.edge_width_px
@@ -324,27 +354,35 @@ def fit_marker(
     circ = _harmonic_circularity(ep.x_px, ep.y_px, cx, cy, r)
     if fit != "ellipse" and circ < min_circularity(r):
         return _not_round(cx, cy, r, circ)
-    return _whole(Marker(
-        x_px=float(cx),
-        y_px=float(cy),
-        radius_px=float(r),
-        x_std_px=float(np.sqrt(cov[0, 0])),
-        y_std_px=float(np.sqrt(cov[1, 1])),
-        xy_cov_px2=float(cov[0, 1]),
-        radius_std_px=float(np.sqrt(cov[2, 2])) if np.isfinite(cov[2, 2]) else np.nan,
-        residual_rms_px=float(rms),
-        n_edge_points=n_in,
-        contrast_dn=float(ep.foreground_dn - ep.background_dn),
-        circularity=circ,
-        edge_width_px=float(s),
-    ), image.shape)
+    return _whole(
+        Marker(
+            x_px=float(cx),
+            y_px=float(cy),
+            radius_px=float(r),
+            x_std_px=float(np.sqrt(cov[0, 0])),
+            y_std_px=float(np.sqrt(cov[1, 1])),
+            xy_cov_px2=float(cov[0, 1]),
+            radius_std_px=float(np.sqrt(cov[2, 2])) if np.isfinite(cov[2, 2]) else np.nan,
+            residual_rms_px=float(rms),
+            n_edge_points=n_in,
+            contrast_dn=float(ep.foreground_dn - ep.background_dn),
+            circularity=circ,
+            edge_width_px=float(s),
+        ),
+        image.shape,
+    )
 
 
 def _whole(marker: Marker, shape) -> Marker:
     """`marker`, or status ``border`` when its fitted disc is not whole in the image."""
     if marker.ok and not _inside(shape, marker.x_px, marker.y_px, marker.radius_px):
-        return Marker(x_px=marker.x_px, y_px=marker.y_px, radius_px=marker.radius_px, status="border",
-                      message="cut by the image border")
+        return Marker(
+            x_px=marker.x_px,
+            y_px=marker.y_px,
+            radius_px=marker.radius_px,
+            status="border",
+            message="cut by the image border",
+        )
     return marker
 
 
@@ -354,8 +392,13 @@ def _failed(blob: Blob, exc: FitError) -> Marker:
 
 
 def _not_round(cx, cy, r, circ) -> Marker:
-    return Marker(x_px=cx, y_px=cy, radius_px=r, status="not_round",
-                  message=f"edge is not circular (axis ratio {circ:.3f}, below {min_circularity(r):.3f})")
+    return Marker(
+        x_px=cx,
+        y_px=cy,
+        radius_px=r,
+        status="not_round",
+        message=f"edge is not circular (axis ratio {circ:.3f}, below {min_circularity(r):.3f})",
+    )
 
 
 def _pixels_marker(f: DiscFit) -> Marker:
@@ -446,8 +489,11 @@ def find_markers(
     if settings is None:
         settings = MeasureSettings(**given)  # validates; defaults for the rest
     elif given:
-        raise VisionTorsionError(f"find_markers: give either settings or {', '.join(given)}, not both "
-                                 "(settings already says how markers are found)", reason="conflicting_options")
+        raise VisionTorsionError(
+            f"find_markers: give either settings or {', '.join(given)}, not both "
+            "(settings already says how markers are found)",
+            reason="conflicting_options",
+        )
     return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
 
 
@@ -475,8 +521,9 @@ def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
     return detect_blobs(img, polarity=settings.polarity, radius_range=_radius_range(img, settings))
 
 
-def find_marker_list(img: np.ndarray, settings: MeasureSettings, *, enough=None,
-                     candidates: list[Blob] | None = None) -> list[Marker]:
+def find_marker_list(
+    img: np.ndarray, settings: MeasureSettings, *, enough=None, candidates: list[Blob] | None = None
+) -> list[Marker]:
     """The work of :func:`find_markers` on a validated image, as a list of :class:`Marker`.
 
     Parameters

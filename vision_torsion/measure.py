@@ -212,13 +212,15 @@ def measure_folder(
     flags = residual_flags([ref_pair, *pairs])[1:]  # the reference counts towards the typical residual
     rows = []
     for f, pair, ang, msg, flag in zip(files, pairs, angles, messages, flags):
-        row = {"image": printable_name(f.name), "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed", "message": msg}
+        row = {"image": printable_name(f.name), "angle_deg": np.nan, "angle_std_deg": np.nan, "status": "failed",
+               "message": msg}
         if ang is not None and ang.ambiguous:
             logger.warning("%s: %s", f.name, ang.ambiguous)
             row.update(status="ambiguous", message=ang.ambiguous)
         elif ang is not None:
-            row.update(angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg,
-                       status=SUSPECT if flag else "ok", message=flag)
+            row.update(
+                angle_deg=ang.angle_deg, angle_std_deg=ang.angle_std_deg, status=SUSPECT if flag else "ok", message=flag
+            )
             row.update(pair_columns(pair, ang.swapped))
         rows.append(row)
     table = pd.DataFrame(rows, columns=ANGLE_COLUMNS)

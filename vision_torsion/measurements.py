@@ -24,10 +24,14 @@ import math
 import os
 from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import MeasurementsError, RigError
+
+if TYPE_CHECKING:  # pandas is imported where a table is read (see _read_csv)
+    import pandas as pd
 
 __all__ = [
     "PHASES",
@@ -288,10 +292,11 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
     --------
     >>> import pandas as pd
     >>> t = pd.DataFrame({"phase": ["reference", "positive_loading"], "angle_deg": ["0", "x"]})
-    >>> read_measurements(t, columns=("phase", "angle_deg"))
-    Traceback (most recent call last):
-    ...
-    vision_torsion.errors.MeasurementsError: measurements table: 1 problem(s) (line numbers are CSV lines, the header is line 1)
+    >>> try:
+    ...     read_measurements(t, columns=("phase", "angle_deg"))
+    ... except MeasurementsError as exc:
+    ...     print(exc)
+    measurements table: 1 problem(s) (line numbers are CSV lines, the header is line 1)
       line 3: column angle_deg is not a number ('x')
     """
     import pandas as pd
@@ -304,8 +309,9 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
         name = name or "measurements table"
         frame = source
     else:
-        raise MeasurementsError(f"measurements must be a pandas DataFrame or a CSV file, "
-                                f"got {type(source).__name__}", reason="bad_type")
+        raise MeasurementsError(
+            f"measurements must be a pandas DataFrame or a CSV file, got {type(source).__name__}", reason="bad_type"
+        )
     missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise MeasurementsError(f"{name}: missing column(s): {', '.join(missing)}", reason="missing_column")
@@ -331,13 +337,18 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
             out[col] = out[col].astype(object).where(out[col].notna(), "").astype(str).str.strip()
     if "phase" in out.columns:
         unknown = ~out["phase"].isin(PHASES)
-        problems += [(line, f"unknown phase {out['phase'][line]!r}, expected one of {', '.join(PHASES)}")
-                     for line in out.index[unknown]]
+        problems += [
+            (line, f"unknown phase {out['phase'][line]!r}, expected one of {', '.join(PHASES)}")
+            for line in out.index[unknown]
+        ]
     if problems:
         problems.sort()
         listed = [f"line {line}: {what}" for line, what in problems[:_MAX_LISTED]]
         if len(problems) > _MAX_LISTED:
             listed.append(f"and {len(problems) - _MAX_LISTED} more")
-        raise MeasurementsError(f"{name}: {len(problems)} problem(s) (line numbers are CSV lines, the header "
-                                "is line 1)\n  " + "\n  ".join(listed), reason="bad_row")
+        raise MeasurementsError(
+            f"{name}: {len(problems)} problem(s) (line numbers are CSV lines, the header "
+            "is line 1)\n  " + "\n  ".join(listed),
+            reason="bad_row",
+        )
     return out

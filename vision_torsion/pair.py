@@ -23,9 +23,9 @@ from functools import lru_cache
 
 import numpy as np
 
+from .detect import default_radius_range
 from .errors import MarkerError
 from .images import as_grey_array
-from .detect import default_radius_range
 from .markers import Marker, find_marker_list, is_frame
 from .settings import MeasureSettings
 
@@ -224,9 +224,13 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     """
     settings = settings or MeasureSettings()
     if name is None:
-        name = str(image) if isinstance(image, (str, bytes)) or hasattr(image, "__fspath__") else getattr(image, "path", "image")
-    enough = {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair) if isinstance(
-        settings.pair, str) else None
+        is_path = isinstance(image, (str, bytes)) or hasattr(image, "__fspath__")
+        name = str(image) if is_path else getattr(image, "path", "image")
+    enough = (
+        {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair)
+        if isinstance(settings.pair, str)
+        else None
+    )
     img = as_grey_array(image, name=name, keep_integers=True)
     if candidates is None and enough is not None and settings.radius_range is None:
         quick = _coarse_pair(img, settings, enough, name)
@@ -256,8 +260,9 @@ def _coarse_pair(img, settings, enough, name):
         return None
     blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
     try:
-        pair = select_pair(find_marker_list(img, settings, enough=enough, candidates=blobs),
-                           pair=settings.pair, name=name)
+        pair = select_pair(
+            find_marker_list(img, settings, enough=enough, candidates=blobs), pair=settings.pair, name=name
+        )
     except MarkerError:
         return None
     small = min(pair.first.radius_px, pair.second.radius_px)

@@ -68,8 +68,8 @@ _SETTLED_PX = 0.05
 #: Ring beyond the edge zone ±3s (px). Inside, the marker's pixels only inform its
 #: level, which is not correlated with the centre: 2.5 px instead of 0.5 px gave the
 #: same RMS on 120 centres. Outside, they also pin the lighting gradient, which is
-#: correlated with the centre (a tilt of the levels mimics a shift). Paired against the maximum-likelihood reference of the
-#: benchmarks (square window, exact blurred-disc profile) on 200 centres of the
+#: correlated with the centre (a tilt of the levels mimics a shift). Paired against the
+#: maximum-likelihood reference of the benchmarks (square window, exact blurred-disc profile) on 200 centres of the
 #: standard scene: 5.5 px gave 1.054x its RMS, 7.5 px 1.033x, 9.5 px 1.025x, each
 #: 2 px costing ~15 % more pixels.
 _INNER_PX = 0.5
@@ -271,8 +271,12 @@ def _edge_diagnostics(p, resid, J, u):
     delta, ang, _ = sector_edge_offsets(k, n_sec, g, resid.take(band), g_cos, g_sin)
     c, s = np.cos(ang), np.sin(ang)
     r = R + delta
-    return (cx + r * c, cy + r * s, float(np.sqrt(np.dot(delta, delta) / delta.size)),
-            harmonic_circularity(delta, c, s, R))
+    return (
+        cx + r * c,
+        cy + r * s,
+        float(np.sqrt(np.dot(delta, delta) / delta.size)),
+        harmonic_circularity(delta, c, s, R),
+    )
 
 
 def fit_disc(
@@ -376,8 +380,10 @@ def fit_disc(
             full = (resid, J, u) if keep is None else _evaluate(p, ring)
             new_keep = _cut_outliers(p, ring, patch, *full)
             cuts += 1
-            if cuts == 3 or (keep is None and new_keep is None) or (
-                keep is not None and new_keep is not None and np.array_equal(keep, new_keep)
+            if (
+                cuts == 3
+                or (keep is None and new_keep is None)
+                or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
             ):
                 final = True
             if not (keep is None and new_keep is None):

@@ -75,7 +75,9 @@ def validate_measurements(measurements: pd.DataFrame, *, with_closing: bool = Fa
 
     reason = pd.Series("", index=df.index)
     not_ok = df["status"] != "ok"
-    reason[not_ok] = df.loc[not_ok, "message"].where(df.loc[not_ok, "message"] != "", "status " + df.loc[not_ok, "status"])
+    reason[not_ok] = df.loc[not_ok, "message"].where(
+        df.loc[not_ok, "message"] != "", "status " + df.loc[not_ok, "status"]
+    )
     for col in ("orientation_deg", "cycle", "step", "torque_nm", "angle_deg", "torque_std_nm", "angle_std_deg"):
         nan = (~not_ok) & (reason == "") & ~np.isfinite(df[col])
         reason[nan] = f"marked ok but {col} is not a finite number"
@@ -180,8 +182,17 @@ class Loop:
             avg[inv, np.arange(inv.size)] = 1.0 / cnt[inv]
             srcs = avg @ src[m]
             order = np.argsort(-tau if descending else tau, kind="stable")
-            out.append((tau[order], th[order], np.sqrt(var[order]), tstd[order], uniq[order],
-                        np.full(order.size, descending), srcs[order]))
+            out.append(
+                (
+                    tau[order],
+                    th[order],
+                    np.sqrt(var[order]),
+                    tstd[order],
+                    uniq[order],
+                    np.full(order.size, descending),
+                    srcs[order],
+                )
+            )
         return tuple(np.concatenate(parts) for parts in zip(*out))
 
 

@@ -348,10 +348,18 @@ def fit_three_segment(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std
     try:
         cov_a, cov_t = linearised_covariance(jac, w, s_all**2, jac_tau, g_var)
     except np.linalg.LinAlgError:
-        raise AnalysisError("three-segment fit: the break torques are not identified (singular normal matrix)") from None
+        raise AnalysisError(
+            "three-segment fit: the break torques are not identified (singular normal matrix)"
+        ) from None
     conv = np.diag([1.0, 1.0, -1 / coef[2] ** 2, -1 / coef[3] ** 2, -1 / coef[4] ** 2, 1.0, 1.0])
     s_a, s_t = parameter_stds(_SEG_NAMES, conv @ cov_a @ conv.T, conv @ cov_t @ conv.T)
     return {
-        "k1": 1 / coef[2], "k2": 1 / coef[3], "k3": 1 / coef[4], "t1": t1, "t2": t2,
-        "std_angle": s_a, "std_torque": s_t, "residual_rms_rad": float(np.sqrt(np.mean(r * r))),
+        "k1": 1 / coef[2],
+        "k2": 1 / coef[3],
+        "k3": 1 / coef[4],
+        "t1": t1,
+        "t2": t2,
+        "std_angle": s_a,
+        "std_torque": s_t,
+        "residual_rms_rad": float(np.sqrt(np.mean(r * r))),
     }

@@ -249,13 +249,20 @@ def _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_group
         raise AnalysisError(f"angle and torque sequences differ in length ({th.size} vs {tau.size})")
     if not np.all(np.isfinite(th)):
         raise AnalysisError("angle sequence contains a non-finite value (NaN or inf)")
-    sa = np.zeros_like(tau) if angle_std_rad is None else np.broadcast_to(np.asarray(angle_std_rad, float), tau.shape).copy()
+    sa = (np.zeros_like(tau) if angle_std_rad is None
+          else np.broadcast_to(np.asarray(angle_std_rad, float), tau.shape).copy())
     if torque_sources is not None:
         src = np.asarray(torque_sources, dtype=float)
         if src.ndim != 2 or src.shape[0] != tau.size or not np.all(np.isfinite(src)):
-            raise AnalysisError(f"torque_sources must be a finite (n_samples, n_sources) array with n_samples = {tau.size}")
+            raise AnalysisError(
+                f"torque_sources must be a finite (n_samples, n_sources) array with n_samples = {tau.size}"
+            )
         return tau, th, sa, src
-    st = np.zeros_like(tau) if torque_std_nm is None else np.broadcast_to(np.asarray(torque_std_nm, float), tau.shape).copy()
+    st = (
+        np.zeros_like(tau)
+        if torque_std_nm is None
+        else np.broadcast_to(np.asarray(torque_std_nm, float), tau.shape).copy()
+    )
     groups = np.arange(tau.size) if torque_groups is None else np.asarray(torque_groups, dtype=int).reshape(-1)
     if groups.shape != tau.shape:
         raise AnalysisError("torque_groups must give one group index per sample")
@@ -312,8 +319,11 @@ class BilinearFit:
     def predict(self, torque_nm) -> np.ndarray:
         """Model angles (rad) for a torque sequence that starts at this fit's first sample."""
         return bilinear_response(
-            torque_nm, k_u=self.k_u_nm_per_rad, k_l=self.k_l_nm_per_rad,
-            tau_c=self.tau_c_nm, theta_start=self.theta0_rad,
+            torque_nm,
+            k_u=self.k_u_nm_per_rad,
+            k_l=self.k_l_nm_per_rad,
+            tau_c=self.tau_c_nm,
+            theta_start=self.theta0_rad,
         )
 
 
@@ -325,8 +335,9 @@ def _bilinear_linear_solve(un, lo, th, w):
     return coef, float(np.sum(w * r * r))
 
 
-def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None,
-                 torque_groups=None, torque_sources=None, n_grid=400) -> BilinearFit:
+def fit_bilinear(
+    torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None, torque_groups=None, torque_sources=None, n_grid=400
+) -> BilinearFit:
     """Fit the bilinear stiffness-switching model to a torque–angle sequence.
 
     Parameters
@@ -366,8 +377,16 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     ``cov = G·diag(σθ²)·Gᵀ + (G·J_τ·L)(G·J_τ·L)ᵀ``, so correlated torque errors
     (``cov(δτ) = L·Lᵀ``) are propagated with all their correlations.
     """
-    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
-                                       torque_sources, model="bilinear", min_samples=6)
+    tau, th, sa, sources = _fit_inputs(
+        torque_nm,
+        angle_rad,
+        angle_std_rad,
+        torque_std_nm,
+        torque_groups,
+        torque_sources,
+        model="bilinear",
+        min_samples=6,
+    )
     w = least_squares_weights(sa)
     amp = float(np.max(np.abs(tau)))
 
@@ -379,8 +398,9 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     sse = np.array([profile(tc)[1] for tc in grid])
     i = int(np.argmin(sse))
     lo_b, hi_b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
-    res = optimize.minimize_scalar(lambda tc: profile(tc)[1], bounds=(lo_b, hi_b), method="bounded",
-                                   options={"xatol": amp * 1e-9})
+    res = optimize.minimize_scalar(
+        lambda tc: profile(tc)[1], bounds=(lo_b, hi_b), method="bounded", options={"xatol": amp * 1e-9}
+    )
     tc = float(res.x)
     levels = np.unique(np.abs(tau[tau != 0]))
     if tc <= levels.min() or tc >= amp - 1e-12 * amp:
@@ -412,9 +432,14 @@ def fit_bilinear(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     cov_a, cov_t = conv @ cov_a @ conv.T, conv @ cov_t @ conv.T
     s_a, s_t = parameter_stds(["theta0", "k_u", "k_l", "tau_c"], cov_a, cov_t)
     return BilinearFit(
-        k_u_nm_per_rad=1.0 / c_u, k_l_nm_per_rad=1.0 / c_l, tau_c_nm=tc, theta0_rad=theta0,
-        std_angle=s_a, std_torque=s_t,
-        residual_rms_rad=float(np.sqrt(np.mean(r * r))), n_points=int(tau.size),
+        k_u_nm_per_rad=1.0 / c_u,
+        k_l_nm_per_rad=1.0 / c_l,
+        tau_c_nm=tc,
+        theta0_rad=theta0,
+        std_angle=s_a,
+        std_torque=s_t,
+        residual_rms_rad=float(np.sqrt(np.mean(r * r))),
+        n_points=int(tau.size),
         reduced_chi2=_reduced_chi2(r, sa, 4),
     )
 
@@ -431,7 +456,7 @@ def _psi_table(a: float, rho: float, n: float):
     e = np.exp(-_T_GRID)
     v = 1.0 - e  # |u|
     vn = v**n
-    f_pos = 1.0 - vn                      # u > 0, moving up: towards saturation
+    f_pos = 1.0 - vn  # u > 0, moving up: towards saturation
     f_neg = 1.0 - vn * (1.0 - 2.0 * rho)  # u < 0, moving up: away from saturation
     # dv = e dt; at large t the ratio e/f_pos tends to 1/n (f_pos ≈ n(1−v) = n e)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -556,8 +581,9 @@ class BoucWenFit:
     def predict(self, torque_nm) -> np.ndarray:
         """Model angles (rad) for a torque sequence (periodic start)."""
         p = self.params
-        return bouc_wen_response(torque_nm, k_e=p["k_e"], z_s=p["z_s"], a=p["a"], rho=p["rho"],
-                                 n=p["n"], theta0=p["theta0"])
+        return bouc_wen_response(
+            torque_nm, k_e=p["k_e"], z_s=p["z_s"], a=p["a"], rho=p["rho"], n=p["n"], theta0=p["theta0"]
+        )
 
 
 _BW_NAMES = ["theta0", "k_e", "z_s", "a", "rho", "n"]
@@ -593,8 +619,16 @@ def _bw_unpack(q):
     return q[0], math.exp(q[1]), math.exp(q[2]), math.exp(q[3]), min(math.exp(q[4]), 0.5), math.exp(q[5])
 
 
-def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None, torque_groups=None,
-                 torque_sources=None, initial=None) -> BoucWenFit:
+def fit_bouc_wen(
+    torque_nm,
+    angle_rad,
+    *,
+    angle_std_rad=None,
+    torque_std_nm=None,
+    torque_groups=None,
+    torque_sources=None,
+    initial=None,
+) -> BoucWenFit:
     """Fit the torque-driven Bouc–Wen model to a loop (periodic start).
 
     Parameters
@@ -624,8 +658,16 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     positive parameters, started from a small set of sharpness/exponent guesses; the
     best is kept. Uncertainties: first-order propagation as in :func:`fit_bilinear`.
     """
-    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
-                                       torque_sources, model="Bouc–Wen", min_samples=8)
+    tau, th, sa, sources = _fit_inputs(
+        torque_nm,
+        angle_rad,
+        angle_std_rad,
+        torque_std_nm,
+        torque_groups,
+        torque_sources,
+        model="Bouc–Wen",
+        min_samples=8,
+    )
     w = least_squares_weights(sa)
     sw = np.sqrt(w)
     amp = float(np.max(np.abs(tau)))
@@ -640,8 +682,16 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     if initial is None:
         starts = _bw_starts(tau, th, sa, amp)
     else:
-        starts = [[initial["theta0"], math.log(initial["k_e"]), math.log(initial["z_s"]), math.log(initial["a"]),
-                   math.log(initial["rho"]), math.log(initial["n"])]]
+        starts = [
+            [
+                initial["theta0"],
+                math.log(initial["k_e"]),
+                math.log(initial["z_s"]),
+                math.log(initial["a"]),
+                math.log(initial["rho"]),
+                math.log(initial["n"]),
+            ]
+        ]
     lower = np.array([-np.inf, -np.inf, -np.inf, -np.inf, math.log(1e-12), math.log(0.3)])
     upper = np.array([np.inf, np.inf, np.inf, np.inf, math.log(0.5), math.log(40.0)])
     best = None
@@ -667,7 +717,10 @@ def fit_bouc_wen(torque_nm, angle_rad, *, angle_std_rad=None, torque_std_nm=None
     conv = np.diag([1.0] + list(vals[1:]))  # d exp(x) = exp(x) dx
     s_a, s_t = parameter_stds(_BW_NAMES, conv @ cov_a @ conv, conv @ cov_t @ conv)
     return BoucWenFit(
-        params=dict(zip(_BW_NAMES, (float(v) for v in vals))), std_angle=s_a, std_torque=s_t,
-        residual_rms_rad=float(np.sqrt(np.mean(r * r))), n_points=int(tau.size),
+        params=dict(zip(_BW_NAMES, (float(v) for v in vals))),
+        std_angle=s_a,
+        std_torque=s_t,
+        residual_rms_rad=float(np.sqrt(np.mean(r * r))),
+        n_points=int(tau.size),
         reduced_chi2=_reduced_chi2(r, sa, len(_BW_NAMES)),
     )

@@ -107,7 +107,9 @@ class Issue:
     reason: str
 
     def __str__(self) -> str:
-        where = "session" if self.orientation_deg is None else f"orientation {self.orientation_deg:g}°, cycle {self.cycle}"
+        where = (
+            "session" if self.orientation_deg is None else f"orientation {self.orientation_deg:g}°, cycle {self.cycle}"
+        )
         return f"{where}: {self.figure}: {self.reason}"
 
 
@@ -219,8 +221,10 @@ def _jsonable(obj):
 
 
 def _records(frame: pd.DataFrame) -> list:
-    return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
-            for r in frame.to_dict(orient="records")]
+    return [
+        {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in r.items()}
+        for r in frame.to_dict(orient="records")
+    ]
 
 
 class _Collector:
@@ -407,7 +411,8 @@ def _loop_problem(loop: Loop) -> str | None:
         return f"phase(s) {', '.join(missing)} missing: the loop is not closed"
     few = [f"{p} ({n})" for p, n in counts.items() if n < _MIN_PHASE_POINTS_FOR_LOOP]
     if few:
-        return f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least {_MIN_PHASE_POINTS_FOR_LOOP} per phase"
+        return (f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least "
+                f"{_MIN_PHASE_POINTS_FOR_LOOP} per phase")
     lo, hi = float(loop.torque_nm.min()), float(loop.torque_nm.max())
     if not (lo < 0 < hi):
         return f"torque never reverses sign in this cycle (range {lo:.4g} to {hi:.4g} N·m): there is no loop"
@@ -426,8 +431,9 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
             "hysteresis": np.degrees(hyst), "hysteresis_loss": np.degrees(loss),
             "secant_stiffness": metrics.secant_stiffness(td, yd, ta, ya, lower_nm=sec_lo, upper_nm=sec_hi, tol=tol),
             "loop_energy": energy,
-            "loss_factor": metrics.loss_factor(energy, tau[:, top].mean(1), th[:, top].mean(1),
-                                               tau[:, bottom].mean(1), th[:, bottom].mean(1)),
+            "loss_factor": metrics.loss_factor(
+                energy, tau[:, top].mean(1), th[:, top].mean(1), tau[:, bottom].mean(1), th[:, bottom].mean(1)
+            ),
         }
         for f in settings["lost_motion_fractions"]:
             out[_lm_name(f)] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * lm_ref, tol=tol))
@@ -625,8 +631,12 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     try:
         bil: BilinearFit = fit_bilinear(loop.torque_nm, loop.angle_rad, **kw)
     except AnalysisError as exc:
-        for name, unit in (("bilinear_k_u", "nm_per_rad"), ("bilinear_k_l", "nm_per_rad"), ("bilinear_tau_c", "nm"),
-                           ("bilinear_residual_rms", "deg")):
+        for name, unit in (
+            ("bilinear_k_u", "nm_per_rad"),
+            ("bilinear_k_l", "nm_per_rad"),
+            ("bilinear_tau_c", "nm"),
+            ("bilinear_residual_rms", "deg"),
+        ):
             col.fail(name, unit, str(exc))
     else:
         out["bilinear"] = bil
@@ -705,8 +715,12 @@ def _wide(figures: pd.DataFrame) -> pd.DataFrame:
     f["col"] = f["figure"] + np.where(suffix != "", "_" + suffix, "")
     f["col_std"] = f["figure"] + "_std" + np.where(suffix != "", "_" + suffix, "")
     order = list(dict.fromkeys(c for pair in zip(f["col"], f["col_std"]) for c in pair))
-    val = f.pivot_table(index=["orientation_deg", "cycle"], columns="col", values="value", aggfunc="first", dropna=False)
-    std = f.pivot_table(index=["orientation_deg", "cycle"], columns="col_std", values="std", aggfunc="first", dropna=False)
+    val = f.pivot_table(
+        index=["orientation_deg", "cycle"], columns="col", values="value", aggfunc="first", dropna=False
+    )
+    std = f.pivot_table(
+        index=["orientation_deg", "cycle"], columns="col_std", values="std", aggfunc="first", dropna=False
+    )
     wide = pd.concat([val, std], axis=1).reindex(columns=order)
     wide.columns.name = None
     return wide.reset_index()
@@ -725,10 +739,16 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     off = np.abs(frac - np.rint(frac)) > 0.01
     if off.any():
         i = int(np.flatnonzero(off)[0])
-        out.append(Issue(None, None, "torque uncertainty",
-                         f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
-                         f"{rig.step_mass_kg:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
-                         "the 'pieces' torque model counts a partial piece as a whole one"))
+        out.append(
+            Issue(
+                None,
+                None,
+                "torque uncertainty",
+                f"{int(off.sum())} image(s) carry a pan load that is not a whole number of "
+                f"{rig.step_mass_kg:g} kg pieces (first: {usable['image'].iloc[i]}, {mass[i]:g} kg); "
+                "the 'pieces' torque model counts a partial piece as a whole one",
+            )
+        )
     sources, _ = torque_sources(usable, correlation="pieces", rig=rig)
     model_std = np.sqrt(np.sum(sources**2, axis=1))
     table_std = usable["torque_std_nm"].to_numpy(float)
@@ -736,10 +756,16 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     bad = np.abs(table_std - model_std) > 0.05 * np.maximum(model_std, table_std) + 1e-9 * scale
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        out.append(Issue(None, None, "torque uncertainty",
-                         f"torque_std_nm of {int(bad.sum())} image(s) differs from the rig's weight-piece model "
-                         f"(first: {usable['image'].iloc[i]}, table {table_std[i]:.3g} N·m, model "
-                         f"{model_std[i]:.3g} N·m); the uncertainties use the rig"))
+        out.append(
+            Issue(
+                None,
+                None,
+                "torque uncertainty",
+                f"torque_std_nm of {int(bad.sum())} image(s) differs from the rig's weight-piece model "
+                f"(first: {usable['image'].iloc[i]}, table {table_std[i]:.3g} N·m, model "
+                f"{model_std[i]:.3g} N·m); the uncertainties use the rig",
+            )
+        )
     return out
 
 

@@ -124,7 +124,8 @@ def check_rig(rig) -> TorqueRig:
 
     Examples
     --------
-    >>> check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)).friction_torque_std_nm
+    >>> rig = check_rig(dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05))
+    >>> rig.friction_torque_std_nm
     0.0
     """
     if isinstance(rig, TorqueRig):
@@ -208,8 +209,9 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9, 
         L = group_sources(groups, std)
         return done(L, ["level"] * L.shape[1])
     if rig is None:
-        raise _error("torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, "
-                     "arm_radius_m)")
+        raise _error(
+            "torque_correlation='pieces' needs the rig (step_mass_kg, mass_std_kg, gravity_m_per_s2, arm_radius_m)"
+        )
     rig = check_rig(rig)
     import pandas as pd
 
@@ -218,8 +220,10 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9, 
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         where = f"image {frame['image'].iloc[i]!r}" if "image" in frame else f"row {i}"
-        raise _error(f"measurements table, {where}: mass_kg is {str(frame['mass_kg'].iloc[i])!r}; the 'pieces' torque "
-                     "model needs the mass on each pan (kg, >= 0)")
+        raise _error(
+            f"measurements table, {where}: mass_kg is {str(frame['mass_kg'].iloc[i])!r}; the 'pieces' torque "
+            "model needs the mass on each pan (kg, >= 0)"
+        )
     n = pieces_per_pan(mass.reshape(-1), rig.step_mass_kg)
     sign = np.asarray(frame["phase"].map(PHASE_SIGN), dtype=float)
     sign = np.where(np.isfinite(sign), sign, np.sign(tau))

@@ -8,8 +8,8 @@ and its measured angle is ``reference_angle_deg[0] + rotation``. Marker identity
 themselves: the rotation is the candidate nearest ``reference_angle_deg -
 reference_angle_deg[0]`` (:func:`vision_torsion.angle.sequence_angles` with
 predictions), so rows may come in any order and rotations may be large; an error
-of 90° or more would be read as a swap (the check's tolerance is far smaller). One bad image gets status ``failed`` and the
-run goes on.
+of 90° or more would be read as a swap (the check's tolerance is far smaller). One bad
+image gets status ``failed`` and the run goes on.
 
 Outputs (written atomically and as a set to the output folder, ``DIR/results`` by
 default; nothing else in DIR is touched, and ``DIR`` itself is refused as the output
@@ -57,14 +57,13 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..correction import load_correction
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
 from ..fileio import check_output_dir, output_set, write_csv, write_json
-from ..textfiles import read_toml
 from ..measure import measure_sequence
 from ..pair import measure_pair
 from ..settings import MeasureSettings
-from ..textfiles import csv_delimiter, decode_utf8
-from ..correction import load_correction
+from ..textfiles import csv_delimiter, decode_utf8, read_toml
 
 __all__ = [
     "AccuracyResult",
@@ -180,9 +179,7 @@ def read_reference_table(folder) -> pd.DataFrame:
     ii, ia = header.index("image"), header.index("reference_angle_deg")
     body = [(n, r) for n, r in enumerate(rows[1:], start=2) if any(c.strip() for c in r)]
     if len(body) < 3:
-        raise ReferenceTableError(
-            f"{path}: {len(body)} row(s); need at least 3 (the reference image and two more)"
-        )
+        raise ReferenceTableError(f"{path}: {len(body)} row(s); need at least 3 (the reference image and two more)")
     seen, names, angles = {}, [], []
     for line, r in body:
         if len(r) != len(header):
@@ -223,8 +220,15 @@ def load_spec(path) -> AccuracySpec:
         raise ReferenceTableError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
     for key in ("tolerance_deg", "reference_std_deg"):
         v = d.get(key, 0.0 if key == "reference_std_deg" else DEFAULT_TOLERANCE_DEG)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 or (key == "tolerance_deg" and not v > 0):
-            raise ReferenceTableError(f"{p}: {key} must be a {'positive' if key == 'tolerance_deg' else 'non-negative'} number, got {v!r}")
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or not v >= 0
+            or (key == "tolerance_deg" and not v > 0)
+        ):
+            raise ReferenceTableError(
+                f"{p}: {key} must be a {'positive' if key == 'tolerance_deg' else 'non-negative'} number, got {v!r}"
+            )
     try:
         settings = MeasureSettings.from_dict(d["markers"]) if "markers" in d else None
     except (VisionTorsionError, TypeError) as exc:
@@ -281,7 +285,15 @@ def _plot(path, table, tolerance):
     hi = float(table["reference_angle_deg"].max()) + 1
     ax.axhspan(-tolerance, tolerance, color="tab:green", alpha=0.15, label=f"±{tolerance:g}° tolerance")
     ax.axhline(0.0, color="0.5", lw=0.8)
-    ax.errorbar(ok["reference_angle_deg"], ok["error_deg"], yerr=ok["angle_std_deg"], fmt="o", ms=4, capsize=2, label="error (±1σ)")
+    ax.errorbar(
+        ok["reference_angle_deg"],
+        ok["error_deg"],
+        yerr=ok["angle_std_deg"],
+        fmt="o",
+        ms=4,
+        capsize=2,
+        label="error (±1σ)",
+    )
     bad = ok[ok["error_deg"].abs() > tolerance]
     if len(bad):
         ax.plot(bad["reference_angle_deg"], bad["error_deg"], "rx", ms=8, label="outside tolerance")
@@ -348,22 +360,46 @@ def check_accuracy(
     table = read_reference_table(folder)
     out = Path(out_dir) if out_dir is not None else folder / "results"
     if out.resolve() == folder.resolve():
-        raise OutputError(f"{out}: the output folder cannot be the image folder itself (results "
-                          "written among the images would be taken for images); use a subfolder "
-                          "such as results/")
+        raise OutputError(
+            f"{out}: the output folder cannot be the image folder itself (results "
+            "written among the images would be taken for images); use a subfolder "
+            "such as results/"
+        )
     check_output_dir(out)
     names, refs = list(table["image"]), table["reference_angle_deg"].to_numpy()
     ref_pair = measure_pair(folder / names[0], settings=settings, name=f"reference {names[0]}")
     _, angles, reasons = measure_sequence(
-        ref_pair, [(folder / name, name) for name in names[1:]], settings=settings, correction=corr, progress=progress,
+        ref_pair,
+        [(folder / name, name) for name in names[1:]],
+        settings=settings,
+        correction=corr,
+        progress=progress,
         predictions=refs[1:] - refs[0],
     )
-    rows = [dict(image=names[0], reference_angle_deg=refs[0], measured_angle_deg=refs[0], error_deg=0.0, angle_std_deg=np.nan, status="reference")]
+    rows = [
+        dict(
+            image=names[0],
+            reference_angle_deg=refs[0],
+            measured_angle_deg=refs[0],
+            error_deg=0.0,
+            angle_std_deg=np.nan,
+            status="reference",
+        )
+    ]
     for name, ref, ang, why in zip(names[1:], refs[1:], angles, reasons):
-        row = dict(image=name, reference_angle_deg=ref, measured_angle_deg=np.nan, error_deg=np.nan, angle_std_deg=np.nan, status=f"failed: {why}")
+        row = dict(
+            image=name,
+            reference_angle_deg=ref,
+            measured_angle_deg=np.nan,
+            error_deg=np.nan,
+            angle_std_deg=np.nan,
+            status=f"failed: {why}",
+        )
         if ang is not None:
             measured = refs[0] + ang.angle_deg
-            row.update(measured_angle_deg=measured, error_deg=measured - ref, angle_std_deg=ang.angle_std_deg, status="ok")
+            row.update(
+                measured_angle_deg=measured, error_deg=measured - ref, angle_std_deg=ang.angle_std_deg, status="ok"
+            )
         rows.append(row)
     frame = pd.DataFrame(rows, columns=ACCURACY_COLUMNS)
     ok = frame[frame["status"] == "ok"]
@@ -373,7 +409,9 @@ def check_accuracy(
             f"{folder}: only {len(ok)} image(s) measured besides the reference; need at least 2 "
             f"({n_failed} failed: {'; '.join(r for r in reasons if r)})"
         )
-    figures = _statistics(ok["reference_angle_deg"].to_numpy(), ok["measured_angle_deg"].to_numpy(), n_failed, tol, spec.reference_std_deg)
+    figures = _statistics(
+        ok["reference_angle_deg"].to_numpy(), ok["measured_angle_deg"].to_numpy(), n_failed, tol, spec.reference_std_deg
+    )
     result = AccuracyResult(table=frame, out_dir=out, **figures)
     summary = result.summary()
     summary.update(folder=str(folder), correction=None if corr is None else corr.method, description=spec.description)

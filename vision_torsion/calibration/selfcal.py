@@ -62,6 +62,7 @@ import math
 
 import numpy as np
 from scipy.optimize import least_squares
+
 from ..angle import sequence_angles
 from ..batch import measure_each
 from ..circlefit import fit_ellipse

@@ -110,9 +110,12 @@ def progress_enabled(args) -> bool:
     return not getattr(args, "quiet", False) and sys.stderr.isatty()
 
 
-def failure_line(image: str, message: str) -> str:
-    """One line for a failed item, naming the image once (most messages already do)."""
-    if message.startswith("suspect:"):  # measured, but not good data (vision_torsion.quality)
+def failure_line(image: str, message: str, *, status: str = "failed") -> str:
+    """One line for a failed item, naming the image once (most messages already do).
+
+    A ``suspect`` item (measured, but not good data: :mod:`vision_torsion.quality`)
+    is not called failed; the status decides, not the message's wording."""
+    if status == "suspect":
         return f"{image}: {message}"
     return f"failed: {message}" if image in message else f"failed: {image}: {message}"
 

@@ -28,7 +28,9 @@ def register(sub) -> None:
     _add_output(plane, "plane_correction.toml")
     plane.add_argument("--fit-k1", action="store_true", help="also fit radial distortion k1 (weakly determined)")
     plane.add_argument("--k1", type=float, default=0.0, help="known radial distortion k1 (default 0)")
-    plane.add_argument("--focal-length", type=float, metavar="PX", help="f of the distortion model (default max(width, height))")
+    plane.add_argument(
+        "--focal-length", type=float, metavar="PX", help="f of the distortion model (default max(width, height))"
+    )
     add_marker_options(plane)
     add_common_options(plane)
     plane.set_defaults(func=run_plane)
@@ -37,9 +39,13 @@ def register(sub) -> None:
         help="calibrate from chessboard or circle-grid images",
         description="Lens distortion (3+ views) and the plane homography (the first view, target on the disk).",
     )
-    target.add_argument("images", nargs="+", metavar="IMAGE", help="target images; the first shows the target on the disk")
+    target.add_argument(
+        "images", nargs="+", metavar="IMAGE", help="target images; the first shows the target on the disk"
+    )
     target.add_argument("--pattern", choices=("chessboard", "circles"), default="chessboard")
-    target.add_argument("--pattern-size", nargs=2, type=int, required=True, metavar=("COLS", "ROWS"), help="inner corners or circles")
+    target.add_argument(
+        "--pattern-size", nargs=2, type=int, required=True, metavar=("COLS", "ROWS"), help="inner corners or circles"
+    )
     target.add_argument("--square-mm", type=float, default=1.0, help="pattern pitch in mm (does not affect angles)")
     _add_output(target, "target_correction.toml")
     add_common_options(target)
@@ -48,8 +54,12 @@ def register(sub) -> None:
 
 def _add_output(parser, default_name: str) -> None:
     add_output_option(parser, "the current folder")
-    parser.add_argument("--name", default=default_name, metavar="FILE",
-                        help=f"file name of the correction in OUT_DIR; .toml or .json (default {default_name})")
+    parser.add_argument(
+        "--name",
+        default=default_name,
+        metavar="FILE",
+        help=f"file name of the correction in OUT_DIR; .toml or .json (default {default_name})",
+    )
 
 
 def _destination(args):
@@ -70,7 +80,10 @@ def _destination(args):
 
 def _report(corr, path) -> int:
     shown = {k: v for k, v in corr.info.items() if not isinstance(v, list) or len(v) <= 2}
-    print(f"wrote {path} ({corr.method}); " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in shown.items()))
+    print(
+        f"wrote {path} ({corr.method}); "
+        + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in shown.items())
+    )
     return 0
 
 
@@ -95,7 +108,6 @@ def run_plane(args) -> int:
 
 
 def run_target(args) -> int:
-    from pathlib import Path
 
     from ..calibration.target import calibrate_from_target
 

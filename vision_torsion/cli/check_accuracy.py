@@ -23,7 +23,11 @@ def register(sub) -> None:
     p.add_argument("folder", metavar="DIR", help="folder with the images and reference.csv")
     add_output_option(p, "DIR/results; DIR itself is refused: nothing is written among the images")
     p.add_argument("--tolerance", type=float, metavar="DEG", help="pass band ±DEG (default: the spec's, else 0.02)")
-    p.add_argument("--spec", metavar="FILE", help="a check spec (TOML file), or the name of a ready one: rotary_stage, synthetic_selfcheck")
+    p.add_argument(
+        "--spec",
+        metavar="FILE",
+        help="a check spec (TOML file), or the name of a ready one: rotary_stage, synthetic_selfcheck",
+    )
     add_marker_options(p)
     # marker options given on the command line override the spec's; unset ones do not
     p.set_defaults(polarity=None, fit=None, pair=None, func=run)

@@ -15,7 +15,13 @@ def register(sub) -> None:
             "stiffness-switching model), measure every image, analyse and write the report."
         ),
     )
-    p.add_argument("out_dir", nargs="?", default="vision-torsion-demo", metavar="OUT_DIR", help="demo folder (default ./vision-torsion-demo)")
+    p.add_argument(
+        "out_dir",
+        nargs="?",
+        default="vision-torsion-demo",
+        metavar="OUT_DIR",
+        help="demo folder (default ./vision-torsion-demo)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic session")
     add_jobs_option(p)
     add_common_options(p)

@@ -63,5 +63,5 @@ def run(args) -> int:
         print(f"wrote {len(written)} overlay(s) to {args.overlay}")
     for row in res.table.itertuples():
         if row.status != "ok":
-            print(f"  {failure_line(row.image, row.message)}", file=sys.stderr)
+            print(f"  {failure_line(row.image, row.message, status=row.status)}", file=sys.stderr)
     return 1 if res.n_failed else 0

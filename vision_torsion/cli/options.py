@@ -18,26 +18,44 @@ __all__ = ["add_marker_options", "add_jobs_option", "settings_from_args", "add_o
 def add_marker_options(parser) -> None:
     """--polarity, --radius-range, --fit, --pair and --correction."""
     g = parser.add_argument_group("markers")
-    g.add_argument("--polarity", choices=POLARITIES, default="dark", help="dark markers on a bright disk (default) or bright on dark")
     g.add_argument(
-        "--radius-range", nargs=2, type=float, metavar=("MIN", "MAX"), help="marker radius range in pixels"
+        "--polarity",
+        choices=POLARITIES,
+        default="dark",
+        help="dark markers on a bright disk (default) or bright on dark",
     )
-    g.add_argument("--fit", choices=FIT_METHODS, default="pixels",
-                   help="marker fit: pixels (default: the disc model fitted to the pixels), or a fit to "
-                        "edge points: geometric, algebraic (the paper's), ellipse")
-    g.add_argument("--pair", choices=("largest", "distinct"), default="largest",
-                   help="the target: the two largest markers of equal radius (default), or two of "
-                        "clearly different radii (identity certain at any angle)")
+    g.add_argument("--radius-range", nargs=2, type=float, metavar=("MIN", "MAX"), help="marker radius range in pixels")
     g.add_argument(
-        "--correction", metavar="FILE", help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres"
+        "--fit",
+        choices=FIT_METHODS,
+        default="pixels",
+        help="marker fit: pixels (default: the disc model fitted to the pixels), or a fit to "
+        "edge points: geometric, algebraic (the paper's), ellipse",
+    )
+    g.add_argument(
+        "--pair",
+        choices=("largest", "distinct"),
+        default="largest",
+        help="the target: the two largest markers of equal radius (default), or two of "
+        "clearly different radii (identity certain at any angle)",
+    )
+    g.add_argument(
+        "--correction",
+        metavar="FILE",
+        help="plane/lens correction (TOML or JSON from `calibrate`) applied to the marker centres",
     )
 
 
 def add_jobs_option(parser) -> None:
     """-j/--jobs: how many images are read and decoded at once."""
-    parser.add_argument("-j", "--jobs", type=int, metavar="N",
-                        help="images read and decoded at once (default: all cores); up to 3 "
-                             "as threads of this process, more as worker processes")
+    parser.add_argument(
+        "-j",
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="images read and decoded at once (default: all cores); up to 3 "
+        "as threads of this process, more as worker processes",
+    )
 
 
 def settings_from_args(args) -> MeasureSettings:
@@ -58,8 +76,7 @@ def add_output_option(parser, default: str) -> None:
 
 def add_force_option(parser, what: str = "the folder") -> None:
     """--force: a command that creates a new folder refuses a non-empty one without it."""
-    parser.add_argument("--force", action="store_true",
-                        help=f"write into {what} even if it exists and is not empty")
+    parser.add_argument("--force", action="store_true", help=f"write into {what} even if it exists and is not empty")
 
 
 def check_new_folder(path, *, force: bool) -> None:

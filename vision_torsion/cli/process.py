@@ -39,7 +39,8 @@ def run(args) -> int:
     result = process_session(args.session_dir, out_dir=args.out_dir, jobs=args.jobs,
                              progress=progress_enabled(args))
     for image, message in result.failures:
-        print(failure_line(image, message), file=sys.stderr)
+        print(failure_line(image, message, status="suspect" if image in result.suspect else "failed"),
+              file=sys.stderr)
     print_pending(result, quiet=args.quiet)
     print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed, "
           f"{result.n_pending} pending of {result.n_images} images ({result.n_measured} "

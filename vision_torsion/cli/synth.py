@@ -20,7 +20,13 @@ def register(sub) -> None:
         description="Render images at the scene's sweep angles (or --angles) with reference.csv and truth.csv.",
     )
     a.add_argument("out_dir", metavar="OUT_DIR")
-    a.add_argument("--scene", required=True, metavar="FILE", help="scene TOML file, or the name of a ready scene: standard, small_target, low_contrast, distractors, jpeg, twelve_bit, tilted")
+    a.add_argument(
+        "--scene",
+        required=True,
+        metavar="FILE",
+        help="scene TOML file, or the name of a ready scene: standard, small_target, low_contrast, "
+        "distractors, jpeg, twelve_bit, tilted",
+    )
     a.add_argument("--angles", nargs="+", type=float, metavar="DEG", help="rotation angles in degrees (CCW)")
     a.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     add_force_option(a, "OUT_DIR")
@@ -35,7 +41,12 @@ def register(sub) -> None:
         ),
     )
     s.add_argument("out_dir", metavar="OUT_DIR")
-    s.add_argument("--scene", required=True, metavar="FILE", help="scene TOML file with a [session] table, or a ready scene's name: paper_session")
+    s.add_argument(
+        "--scene",
+        required=True,
+        metavar="FILE",
+        help="scene TOML file with a [session] table, or a ready scene's name: paper_session",
+    )
     s.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     add_force_option(s, "OUT_DIR")
     add_common_options(s)
@@ -51,7 +62,9 @@ def run_accuracy(args) -> int:
 
     check_output_dir(args.out_dir)  # writable, with space, before rendering
 
-    out = write_accuracy_folder(load_scene(args.scene), args.out_dir, angles_deg=args.angles, seed=args.seed, progress=progress_enabled(args))
+    out = write_accuracy_folder(
+        load_scene(args.scene), args.out_dir, angles_deg=args.angles, seed=args.seed, progress=progress_enabled(args)
+    )
     print(f"wrote accuracy folder {out}")
     return 0
 
@@ -64,7 +77,8 @@ def run_session(args) -> int:
 
     check_output_dir(args.out_dir)  # writable, with space, before rendering
     scene, spec = load_session_scene(args.scene)
-    out = write_session_folder(scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args),
-                               overwrite=args.force)
+    out = write_session_folder(
+        scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args), overwrite=args.force
+    )
     print(f"wrote session folder {out}")
     return 0

@@ -222,7 +222,8 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
             ax.axhline(s["mean"], color="tab:red", lw=0.8, ls="--", label="session mean")
         test = s.get("orientation_test", {})
         verdict = ("orientation effect found" if test.get("significant")
-                   else "no orientation effect found" if test.get("significant") is False else "orientation effect not tested")
+                   else "no orientation effect found" if test.get("significant") is False
+                   else "orientation effect not tested")
         unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
         ax.set_ylabel(unit or "(no unit)")
         ax.set_title(f"{words}{f' ({unit})' if unit else ''}\n{verdict}", fontsize=9)

@@ -21,13 +21,16 @@ __all__ = ["render_html", "fmt_value"]
 _CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;background:#f6f7f9}
 main{max-width:1180px;margin:0 auto;padding:24px 28px 60px;background:#fff}
-h1{font-size:26px;margin:0 0 4px}h2{font-size:19px;margin:34px 0 10px;border-bottom:2px solid #d8dde6;padding-bottom:4px}
+h1{font-size:26px;margin:0 0 4px}
+h2{font-size:19px;margin:34px 0 10px;border-bottom:2px solid #d8dde6;padding-bottom:4px}
 h3{font-size:15px;margin:18px 0 6px}p,li{line-height:1.45;font-size:14px}.muted{color:#5b6575;font-size:13px}
-table{border-collapse:collapse;font-size:12.5px;margin:8px 0 14px}th,td{border:1px solid #d8dde6;padding:4px 7px;text-align:right}
+table{border-collapse:collapse;font-size:12.5px;margin:8px 0 14px}
+th,td{border:1px solid #d8dde6;padding:4px 7px;text-align:right}
 th{background:#eef1f6;text-align:center}td.l,th.l{text-align:left}tr:nth-child(even) td{background:#fafbfc}
 .grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(360px,1fr));gap:12px}
 figure{margin:6px 0}figure img{max-width:100%;border:1px solid #e3e6eb}figcaption{font-size:12.5px;color:#5b6575}
-.ok{color:#1a7f37;font-weight:600}.bad{color:#b42318;font-weight:600}.note{background:#fff8e6;border-left:4px solid #f0b429;padding:8px 12px;font-size:13px}
+.ok{color:#1a7f37;font-weight:600}.bad{color:#b42318;font-weight:600}
+.note{background:#fff8e6;border-left:4px solid #f0b429;padding:8px 12px;font-size:13px}
 .scroll{max-height:420px;overflow:auto;border:1px solid #e3e6eb}
 .meta{display:flex;flex-wrap:wrap;gap:4px 22px;margin:8px 0 4px;font-size:13px}.meta b{color:#5b6575;font-weight:600}
 td{overflow-wrap:break-word}
@@ -69,8 +72,17 @@ def _table(frame: pd.DataFrame, left=()) -> str:
     for row in frame.itertuples(index=False):
         cells = []
         for c, v in zip(frame.columns, row):
-            text = v if isinstance(v, str) else ("—" if v is None or (isinstance(v, float) and not math.isfinite(v))
-                                                 else f"{v:.4g}" if isinstance(v, float) else str(v))
+            text = (
+                v
+                if isinstance(v, str)
+                else (
+                    "—"
+                    if v is None or (isinstance(v, float) and not math.isfinite(v))
+                    else f"{v:.4g}"
+                    if isinstance(v, float)
+                    else str(v)
+                )
+            )
             cells.append(f'<td class="{"l" if c in left else ""}">{html.escape(str(text))}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
@@ -90,17 +102,22 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
 def _table1(stiff: pd.DataFrame) -> str:
     if stiff.empty:
         return '<p class="muted">No stiffness could be computed.</p>'
-    out = pd.DataFrame({
-        "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
-        "phase": stiff["phase"].str.replace("_", " "),
-        "torque range (N·m)": [f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
-                               for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])],
-        "stiffness k (N·m/rad)": [fmt_value(v, s) for v, s in zip(stiff["stiffness_nm_per_rad"],
-                                                                   stiff["stiffness_std_nm_per_rad"])],
-        "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
-        "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
-        "cycles": stiff["n_cycles"].astype(str),
-    })
+    out = pd.DataFrame(
+        {
+            "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
+            "phase": stiff["phase"].str.replace("_", " "),
+            "torque range (N·m)": [
+                f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
+                for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])
+            ],
+            "stiffness k (N·m/rad)": [
+                fmt_value(v, s) for v, s in zip(stiff["stiffness_nm_per_rad"], stiff["stiffness_std_nm_per_rad"])
+            ],
+            "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
+            "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
+            "cycles": stiff["n_cycles"].astype(str),
+        }
+    )
     return _table(out, left=("orientation", "phase"))
 
 
@@ -131,19 +148,26 @@ def _header(metadata) -> str:
 
     from .. import __version__
 
-    items = [("software", f"vision-torsion {__version__}"),
-             ("report date", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))]
+    items = [
+        ("software", f"vision-torsion {__version__}"),
+        ("report date", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")),
+    ]
     for key, value in (metadata or {}).items():
         if value is None or (isinstance(value, str) and not value.strip()):
             continue
-        items.append((str(key).replace("_", " "), ", ".join(map(str, value)) if isinstance(value, (list, tuple))
-                      else str(value)))
-    return '<div class="meta">' + "".join(
-        f"<span><b>{html.escape(k)}:</b> {html.escape(v)}</span>" for k, v in items) + "</div>"
+        items.append(
+            (str(key).replace("_", " "), ", ".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value))
+        )
+    return (
+        '<div class="meta">'
+        + "".join(f"<span><b>{html.escape(k)}:</b> {html.escape(v)}</span>" for k, v in items)
+        + "</div>"
+    )
 
 
-def render_html(*, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(),
-                metadata=None) -> str:
+def render_html(
+    *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None
+) -> str:
     """Assemble the report page.
 
     Parameters
@@ -161,25 +185,39 @@ def render_html(*, title, conditions, analysis, stiffness, metrics, figures, fai
     """
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     issues = pd.DataFrame(
-        [("session" if i.orientation_deg is None else f"{i.orientation_deg:g}°", "" if i.cycle is None else str(i.cycle),
-          i.figure, i.reason) for i in analysis.issues if i.figure != "*"],
-        columns=["orientation", "cycle", "figure", "why"])
+        [
+            (
+                "session" if i.orientation_deg is None else f"{i.orientation_deg:g}°",
+                "" if i.cycle is None else str(i.cycle),
+                i.figure,
+                i.reason,
+            )
+            for i in analysis.issues
+            if i.figure != "*"
+        ],
+        columns=["orientation", "cycle", "figure", "why"],
+    )
     s = analysis.settings
     loops_html = "".join(
         f"<figure>{_img(png, f'loop {o:g} deg')}<figcaption>Orientation {o:g}°: data (±1σ), bilinear fit (red), "
-        f"Bouc–Wen fit (blue dashed).</figcaption></figure>" for o, png in figures["loops"])
+        f"Bouc–Wen fit (blue dashed).</figcaption></figure>"
+        for o, png in figures["loops"]
+    )
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
     parts = [
         f"<h1>{html.escape(title)}</h1>",
         _header(metadata),
         '<p class="muted">Torsional stiffness and hysteresis report generated by vision-torsion. '
         "Uncertainties are 1σ standard uncertainties (±) unless marked u95 (expanded, k = 2).</p>",
-        "<h2>Test conditions</h2>", _conditions(conditions, analysis, len(failed)),
+        "<h2>Test conditions</h2>",
+        _conditions(conditions, analysis, len(failed)),
         "<h2>Hysteresis loops</h2>",
         f"<figure>{_img(figures['overlay'], 'all loops')}<figcaption>All orientations and cycles overlaid."
         "</figcaption></figure>",
-        "<h3>One orientation at a time, with the model fits</h3>", f'<div class="grid">{loops_html}</div>',
-        "<h2>Stiffness per phase and orientation (paper, Table 1)</h2>", _table1(stiffness),
+        "<h3>One orientation at a time, with the model fits</h3>",
+        f'<div class="grid">{loops_html}</div>',
+        "<h2>Stiffness per phase and orientation (paper, Table 1)</h2>",
+        _table1(stiffness),
         f"<figure>{_img(figures['stiffness'], 'phase stiffness')}</figure>",
         "<h2>Catalogue metrics and model fits per orientation</h2>",
         '<p class="muted">Mean over cycles ± standard uncertainty of that mean. The orientation test is a '
@@ -199,13 +237,21 @@ def render_html(*, title, conditions, analysis, stiffness, metrics, figures, fai
         "<li>Fit uncertainties reflect measurement noise only; compare the residual RMS of a model with the "
         "angle uncertainty to judge whether the model describes the data.</li></ul>",
         "<h2>Failed images</h2>",
-        _table(failed_view, left=("image", "phase", "message")) if len(failed) else '<p class="ok">None: every image was measured.</p>',
+        _table(failed_view, left=("image", "phase", "message"))
+        if len(failed)
+        else '<p class="ok">None: every image was measured.</p>',
         "<h2>Figures that could not be computed</h2>",
-        (f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "why"))}</div>' if len(issues)
-         else '<p class="ok">None: every figure was computed.</p>'),
+        (
+            f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "why"))}</div>'
+            if len(issues)
+            else '<p class="ok">None: every figure was computed.</p>'
+        ),
     ]
     for sec_title, sec_html in extra_sections or ():
         parts += [f"<h2>{html.escape(sec_title)}</h2>", sec_html]
-    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body><main>"
-            + "\n".join(parts) + "</main></body></html>\n")
+    return (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body><main>"
+        + "\n".join(parts)
+        + "</main></body></html>\n"
+    )

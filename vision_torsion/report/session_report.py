@@ -91,8 +91,9 @@ def _step_table(summary: pd.DataFrame) -> pd.DataFrame:
         key = (int(r.step_from), int(r.step_to))
         row = rows.setdefault(key, {"step": f"{r.step_from}→{r.step_to}"})
         if r.n_loops:
-            row[r.phase.replace("_", " ")] = (f"{fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)} "
-                                              f"@ {r.torque_mid_nm:+.3g}")
+            row[r.phase.replace("_", " ")] = (
+                f"{fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)} @ {r.torque_mid_nm:+.3g}"
+            )
         else:
             row[r.phase.replace("_", " ")] = "flagged*"
     columns = ["step"] + [p.replace("_", " ") for p in phases]
@@ -117,13 +118,15 @@ def _stiffness_section(measurements: pd.DataFrame):
     except VisionTorsionError as exc:
         return _STIFFNESS_TITLE, f"<p>Not computed: {html.escape(str(exc))}.</p>"
     lines = [ln[2:] for ln in section.markdown.splitlines() if ln.startswith("- ")]
-    parts = ["<ul>" + "".join(f"<li>{html.escape(ln)}</li>" for ln in lines) + "</ul>",
-             '<p class="muted">Each cell: mean over loops of Δτ/Δθ (N·m/rad) ± its standard uncertainty '
-             "(scatter between loops, Type A, combined with the propagated angle and torque uncertainty), "
-             "@ the mid-step torque (N·m). *flagged: the step starts or ends at zero torque (it may cross the "
-             "backlash dead zone) or its angle change is not measurable; per-loop values and reasons are in "
-             "<code>stiffness_steps.csv</code>.</p>",
-             _table(_step_table(section.summary), left=("step",))]
+    parts = [
+        "<ul>" + "".join(f"<li>{html.escape(ln)}</li>" for ln in lines) + "</ul>",
+        '<p class="muted">Each cell: mean over loops of Δτ/Δθ (N·m/rad) ± its standard uncertainty '
+        "(scatter between loops, Type A, combined with the propagated angle and torque uncertainty), "
+        "@ the mid-step torque (N·m). *flagged: the step starts or ends at zero torque (it may cross the "
+        "backlash dead zone) or its angle change is not measurable; per-loop values and reasons are in "
+        "<code>stiffness_steps.csv</code>.</p>",
+        _table(_step_table(section.summary), left=("step",)),
+    ]
     for name, fig in section.figures.items():
         parts.append(f"<figure>{_img(png_bytes(fig), name.replace('_', ' '))}</figure>")
     return _STIFFNESS_TITLE, "\n".join(parts), section.steps
@@ -151,16 +154,27 @@ def _pending_section(waiting: pd.DataFrame, unlisted) -> tuple[str, str]:
 
     parts = []
     if len(waiting):
-        parts.append(f"<p>{len(waiting)} planned image(s) are not photographed yet; the "
-                     "figures above use the images that exist.</p><table><tr><th>image</th>"
-                     "<th>orientation (°)</th><th>cycle</th><th>phase</th><th>step</th><th>why</th></tr>")
+        parts.append(
+            f"<p>{len(waiting)} planned image(s) are not photographed yet; the "
+            "figures above use the images that exist.</p><table><tr><th>image</th>"
+            "<th>orientation (°)</th><th>cycle</th><th>phase</th><th>step</th><th>why</th></tr>"
+        )
         for r in waiting.itertuples():
-            parts.append("<tr>" + "".join(f"<td>{html.escape(str(v))}</td>" for v in
-                         (r.image, r.orientation_deg, r.cycle, r.phase, r.step, r.message)) + "</tr>")
+            parts.append(
+                "<tr>"
+                + "".join(
+                    f"<td>{html.escape(str(v))}</td>"
+                    for v in (r.image, r.orientation_deg, r.cycle, r.phase, r.step, r.message)
+                )
+                + "</tr>"
+            )
         parts.append("</table>")
     if unlisted:
-        parts.append("<p>Image files that no manifest row names (not analysed):</p><ul>"
-                     + "".join(f"<li>{html.escape(n)}</li>" for n in unlisted) + "</ul>")
+        parts.append(
+            "<p>Image files that no manifest row names (not analysed):</p><ul>"
+            + "".join(f"<li>{html.escape(n)}</li>" for n in unlisted)
+            + "</ul>"
+        )
     return "Pending images", "\n".join(parts)
 
 
@@ -242,7 +256,9 @@ def demo_scene():
     return scene, SessionSpec(orientation_variation=0.03, angle_sign=-1)
 
 
-def run_demo(out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False) -> SessionReport:
+def run_demo(
+    out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False
+) -> SessionReport:
     """Render the paper-like synthetic session, process it and write its report.
 
     Parameters

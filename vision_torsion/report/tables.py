@@ -106,7 +106,10 @@ def metrics_table(analysis) -> pd.DataFrame:
         for o in orients:
             m, sd, _ = _lookup(po, o, fig)
             row[o] = (m * scale, sd * scale)
-        scale_or_nan = (lambda v: np.nan if v is None else v * scale)
+
+        def scale_or_nan(v, scale=scale):
+            return np.nan if v is None else v * scale
+
         row["mean"] = scale_or_nan(s["mean"])
         row["mean_std"] = scale_or_nan(s["mean_std"])
         row["sd"] = scale_or_nan(s["sd"])

@@ -22,10 +22,10 @@ from pathlib import Path
 import tomli_w
 
 from ..errors import SessionError, VisionTorsionError
-from ..textfiles import read_toml
 from ..fileio import atomic_write_text
 from ..measurements import TorqueRig
 from ..settings import MeasureSettings
+from ..textfiles import read_toml
 
 __all__ = [
     "RigConfig",

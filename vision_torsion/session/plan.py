@@ -35,10 +35,9 @@ from pathlib import Path
 from ..errors import SessionError
 from ..fileio import atomic_write_text
 from ..images import IMAGE_SUFFIXES
-from .config import (CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig,
-                     config_from_dict, write_config)
-from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from ..measurements import CYCLE_PHASES, PHASES
+from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
+from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from .torque import couple_torque
 
 __all__ = ["SessionPlan", "plan_session", "plan_rows", "CAPTURE_SHEET_NAME"]
@@ -129,19 +128,25 @@ def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".pn
     >>> cfg = config_from_dict({"rig": {"arm_radius_m": 0.05, "mass_tolerance_kg": 0},
     ...     "protocol": {"orientations_deg": [0], "max_torque_nm": 0.04,
     ...                  "step_mass_kg": 0.02}})
-    >>> [(r["phase"], r["step"], r["mass_kg"]) for r in plan_rows(cfg, 2)][:4]
-    [('reference', '0', '0'), ('positive_unloading', '0', '0.04'), ('positive_unloading', '1', '0.02'), ('positive_unloading', '2', '0')]
+    >>> [(r["phase"], r["step"], r["mass_kg"]) for r in plan_rows(cfg, 2)][:4]  # doctest: +NORMALIZE_WHITESPACE
+    [('reference', '0', '0'), ('positive_unloading', '0', '0.04'), ('positive_unloading', '1', '0.02'),
+     ('positive_unloading', '2', '0')]
     """
     proto = config.protocol
-    widths = dict(cycle_width=len(str(proto.cycles)),
-                  step_width=max(2, len(str(steps_per_phase))), suffix=suffix)
+    widths = dict(cycle_width=len(str(proto.cycles)), step_width=max(2, len(str(steps_per_phase))), suffix=suffix)
     rows = []
 
     def add(orientation, cycle, phase, step, pieces):
-        rows.append({
-            "image": _image_name(orientation, cycle, phase, step, **widths),
-            "orientation_deg": _num(orientation), "cycle": str(cycle), "phase": phase,
-            "step": str(step), "mass_kg": _num(pieces * proto.step_mass_kg)})
+        rows.append(
+            {
+                "image": _image_name(orientation, cycle, phase, step, **widths),
+                "orientation_deg": _num(orientation),
+                "cycle": str(cycle),
+                "phase": phase,
+                "step": str(step),
+                "mass_kg": _num(pieces * proto.step_mass_kg),
+            }
+        )
 
     for orientation in proto.orientations_deg:
         add(orientation, 1, "reference", 0, 0)
@@ -173,65 +178,97 @@ def _capture_sheet(plan: SessionPlan) -> str:
         f"step mass {_num(step * 1000)} g per pan = {per_step:.5f} N·m per step "
         "(τ = 2·m·g·r).",
         f"Maximum torque {plan.max_torque_nm:.5f} N·m = {n} steps"
-        + ("." if plan.exact else
-           f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of "
-           "steps; snapped down; the nearest achievable maxima are "
-           f"{plan.nearest_max_torques_nm[0]:.5f} and {plan.nearest_max_torques_nm[1]:.5f} N·m)."),
+        + (
+            "."
+            if plan.exact
+            else f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of "
+            "steps; snapped down; the nearest achievable maxima are "
+            f"{plan.nearest_max_torques_nm[0]:.5f} and {plan.nearest_max_torques_nm[1]:.5f} N·m)."
+        ),
         "",
-        "\"+ pans\" are the two pans whose wires turn the disk in the positive direction, "
-        "\"− pans\" the other two. Masses are per pan: both pans of a pair always carry "
+        '"+ pans" are the two pans whose wires turn the disk in the positive direction, '
+        '"− pans" the other two. Masses are per pan: both pans of a pair always carry '
         "the same mass. Wait for the disk to settle before each photograph, and save it "
         "under the file name given (relative to this folder).",
         "",
     ]
     if cfg.markers.pair == "distinct":
-        lines += ["Target: two markers of clearly different radii (the smaller at most 0.85× the "
-                  "larger), so which marker is which is certain at any angle.", ""]
+        lines += [
+            "Target: two markers of clearly different radii (the smaller at most 0.85× the "
+            "larger), so which marker is which is certain at any angle.",
+            "",
+        ]
     else:
-        lines += ["Target: two equal markers. Which is which is tracked from image to image: keep "
-                  "the turn between consecutive photographs small (under 30°), or use a target "
-                  "with two markers of clearly different radii (`plan --target distinct`).", ""]
+        lines += [
+            "Target: two equal markers. Which is which is tracked from image to image: keep "
+            "the turn between consecutive photographs small (under 30°), or use a target "
+            "with two markers of clearly different radii (`plan --target distinct`).",
+            "",
+        ]
     current = None
     number = 0
     for row in plan.rows:
         orientation = row["orientation_deg"]
         if orientation != current:
             current = orientation
-            lines += [f"## Orientation {orientation}°", "",
-                      f"Rotate the flexspline to {orientation}° relative to the circular "
-                      "spline. Remove all weights.", "",
-                      "| # | cycle | phase | step | + pans (each) | − pans (each) | "
-                      "torque (N·m) | save as | done |",
-                      "|---|---|---|---|---|---|---|---|---|"]
+            lines += [
+                f"## Orientation {orientation}°",
+                "",
+                f"Rotate the flexspline to {orientation}° relative to the circular spline. Remove all weights.",
+                "",
+                "| # | cycle | phase | step | + pans (each) | − pans (each) | torque (N·m) | save as | done |",
+                "|---|---|---|---|---|---|---|---|---|",
+            ]
         pieces = round(float(row["mass_kg"]) / step)
-        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig,
-                               step_mass_kg=step).torque_nm
+        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig, step_mass_kg=step).torque_nm
         plus = _pan_text(pieces if row["phase"].startswith("positive") else 0, step)
         minus = _pan_text(pieces if row["phase"].startswith("negative") else 0, step)
         number += 1
-        lines.append(f"| {number} | {row['cycle']} | {row['phase']} | {row['step']} | "
-                     f"{plus} | {minus} | {torque:+.5f} | `{row['image']}` | ☐ |")
+        lines.append(
+            f"| {number} | {row['cycle']} | {row['phase']} | {row['step']} | "
+            f"{plus} | {minus} | {torque:+.5f} | `{row['image']}` | ☐ |"
+        )
         if row["phase"] == "reference" and plan.preconditioning_cycles:
-            lines.insert(len(lines) - 1, f"| | | *preconditioning, no photographs* | | load to "
-                         f"+{plan.max_torque_nm:.5f} and −{plan.max_torque_nm:.5f} N·m "
-                         f"{plan.preconditioning_cycles} time(s), then unload | | | | ☐ |")
+            lines.insert(
+                len(lines) - 1,
+                f"| | | *preconditioning, no photographs* | | load to "
+                f"+{plan.max_torque_nm:.5f} and −{plan.max_torque_nm:.5f} N·m "
+                f"{plan.preconditioning_cycles} time(s), then unload | | | | ☐ |",
+            )
         if row["phase"] == "reference":
-            lines.append(f"| | | *pre-load, no photographs* | | add {_num(step * 1000)} g "
-                         f"to each + pan {n} times | empty | → {plan.max_torque_nm:+.5f} | "
-                         "| ☐ |")
+            lines.append(
+                f"| | | *pre-load, no photographs* | | add {_num(step * 1000)} g "
+                f"to each + pan {n} times | empty | → {plan.max_torque_nm:+.5f} | "
+                "| ☐ |"
+            )
     return "\n".join(lines) + "\n"
 
 
-def plan_session(out_dir, *, max_torque_nm: float | None = None, step_mass_kg: float,
-                 arm_radius_m: float, steps: int | None = None,
-                 orientations_deg=DEFAULT_ORIENTATIONS_DEG,
-                 cycles: int = 1, gravity_m_per_s2: float = 9.81,
-                 mass_tolerance_kg: float = 1e-4, friction_torque_std_nm: float = 0.0,
-                 arm_radius_std_m: float = 0.0, gravity_std_m_per_s2: float = 0.0,
-                 polarity: str = "dark", radius_range=None, angle_sign: int = 1,
-                 image_suffix: str = ".png", overwrite: bool = False,
-                 target: str = "equal", preconditioning_cycles: int = 0, closing: bool = False,
-                 header: dict | None = None, pdf: bool = False) -> SessionPlan:
+def plan_session(
+    out_dir,
+    *,
+    max_torque_nm: float | None = None,
+    step_mass_kg: float,
+    arm_radius_m: float,
+    steps: int | None = None,
+    orientations_deg=DEFAULT_ORIENTATIONS_DEG,
+    cycles: int = 1,
+    gravity_m_per_s2: float = 9.81,
+    mass_tolerance_kg: float = 1e-4,
+    friction_torque_std_nm: float = 0.0,
+    arm_radius_std_m: float = 0.0,
+    gravity_std_m_per_s2: float = 0.0,
+    polarity: str = "dark",
+    radius_range=None,
+    angle_sign: int = 1,
+    image_suffix: str = ".png",
+    overwrite: bool = False,
+    target: str = "equal",
+    preconditioning_cycles: int = 0,
+    closing: bool = False,
+    header: dict | None = None,
+    pdf: bool = False,
+) -> SessionPlan:
     """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
 
     Parameters
@@ -303,13 +340,13 @@ def plan_session(out_dir, *, max_torque_nm: float | None = None, step_mass_kg: f
     """
     folder = Path(out_dir)
     if (max_torque_nm is None) == (steps is None):
-        raise SessionError("plan_session: give either max_torque_nm or steps (steps per phase), "
-                           "not both or neither")
+        raise SessionError("plan_session: give either max_torque_nm or steps (steps per phase), not both or neither")
     if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
         raise SessionError(f"plan_session: steps must be a whole number >= 1, got {steps!r}")
     if int(preconditioning_cycles) != preconditioning_cycles or preconditioning_cycles < 0:
-        raise SessionError("plan_session: preconditioning_cycles must be a whole number >= 0, "
-                           f"got {preconditioning_cycles!r}")
+        raise SessionError(
+            f"plan_session: preconditioning_cycles must be a whole number >= 0, got {preconditioning_cycles!r}"
+        )
     if steps is not None:
         max_torque_nm = float(f"{steps * 2.0 * step_mass_kg * gravity_m_per_s2 * arm_radius_m:.12g}")
     markers = {"polarity": polarity}
@@ -321,48 +358,76 @@ def plan_session(out_dir, *, max_torque_nm: float | None = None, step_mass_kg: f
         markers["radius_range"] = list(radius_range)
     doc = {
         "angle_sign": angle_sign,
-        "rig": {"arm_radius_m": arm_radius_m, "gravity_m_per_s2": gravity_m_per_s2,
-                "mass_tolerance_kg": mass_tolerance_kg,
-                "friction_torque_std_nm": friction_torque_std_nm,
-                "arm_radius_std_m": arm_radius_std_m,
-                "gravity_std_m_per_s2": gravity_std_m_per_s2},
+        "rig": {
+            "arm_radius_m": arm_radius_m,
+            "gravity_m_per_s2": gravity_m_per_s2,
+            "mass_tolerance_kg": mass_tolerance_kg,
+            "friction_torque_std_nm": friction_torque_std_nm,
+            "arm_radius_std_m": arm_radius_std_m,
+            "gravity_std_m_per_s2": gravity_std_m_per_s2,
+        },
         "markers": markers,
-        "protocol": {"orientations_deg": [float(o) for o in orientations_deg],
-                     "max_torque_nm": max_torque_nm, "step_mass_kg": step_mass_kg,
-                     "cycles": cycles},
+        "protocol": {
+            "orientations_deg": [float(o) for o in orientations_deg],
+            "max_torque_nm": max_torque_nm,
+            "step_mass_kg": step_mass_kg,
+            "cycles": cycles,
+        },
     }
     config = config_from_dict(doc, source="plan_session")
     if image_suffix.lower() not in IMAGE_SUFFIXES:
-        raise SessionError(f"plan_session: image_suffix {image_suffix!r} is not an image "
-                           f"type; expected one of {', '.join(IMAGE_SUFFIXES)}")
+        raise SessionError(
+            f"plan_session: image_suffix {image_suffix!r} is not an image "
+            f"type; expected one of {', '.join(IMAGE_SUFFIXES)}"
+        )
     per_step = 2.0 * step_mass_kg * config.rig.gravity_m_per_s2 * arm_radius_m
     n = math.floor(max_torque_nm / per_step + 1e-9)
     planned_max = float(f"{n * per_step:.12g}")  # no 0.35316000000000003 in the file
     if n < 1:
-        raise SessionError(f"plan_session: max_torque_nm {max_torque_nm:g} is less than one "
-                           f"step (2·step_mass_kg·g·r = {per_step:.6g} N·m)")
+        raise SessionError(
+            f"plan_session: max_torque_nm {max_torque_nm:g} is less than one "
+            f"step (2·step_mass_kg·g·r = {per_step:.6g} N·m)"
+        )
     existing = [name for name in (CONFIG_NAME, MANIFEST_NAME) if (folder / name).exists()]
     if existing and not overwrite:
-        raise SessionError(f"{folder}: already holds a session ({', '.join(existing)}); "
-                           "choose another folder or overwrite")
-    planned = config_from_dict({**doc, "protocol": {**doc["protocol"],
-                                                    "max_torque_nm": planned_max}})
-    plan = SessionPlan(folder=folder, config=planned,
-                       rows=tuple(plan_rows(planned, n, suffix=image_suffix, closing=closing)),
-                       steps_per_phase=n, requested_max_torque_nm=float(max_torque_nm),
-                       max_torque_nm=planned_max, torque_per_step_nm=per_step,
-                       preconditioning_cycles=int(preconditioning_cycles), closing=bool(closing),
-                       header=dict(header or {}))
+        raise SessionError(
+            f"{folder}: already holds a session ({', '.join(existing)}); choose another folder or overwrite"
+        )
+    planned = config_from_dict({**doc, "protocol": {**doc["protocol"], "max_torque_nm": planned_max}})
+    plan = SessionPlan(
+        folder=folder,
+        config=planned,
+        rows=tuple(plan_rows(planned, n, suffix=image_suffix, closing=closing)),
+        steps_per_phase=n,
+        requested_max_torque_nm=float(max_torque_nm),
+        max_torque_nm=planned_max,
+        torque_per_step_nm=per_step,
+        preconditioning_cycles=int(preconditioning_cycles),
+        closing=bool(closing),
+        header=dict(header or {}),
+    )
     if not plan.exact:
         below, above = plan.nearest_max_torques_nm
-        logger.warning("maximum torque %.6g N·m is not a whole number of %.6g kg steps; "
-                       "planned %d steps = %.6g N·m (the nearest achievable maxima are %.6g N·m "
-                       "with %d steps and %.6g N·m with %d; or give --steps)", max_torque_nm,
-                       step_mass_kg, n, plan.max_torque_nm, below, n, above, n + 1)
+        logger.warning(
+            "maximum torque %.6g N·m is not a whole number of %.6g kg steps; "
+            "planned %d steps = %.6g N·m (the nearest achievable maxima are %.6g N·m "
+            "with %d steps and %.6g N·m with %d; or give --steps)",
+            max_torque_nm,
+            step_mass_kg,
+            n,
+            plan.max_torque_nm,
+            below,
+            n,
+            above,
+            n + 1,
+        )
     (folder / "images").mkdir(parents=True, exist_ok=True)
-    write_config(folder / CONFIG_NAME, planned,
-                 header="vision-torsion session (written by `vision-torsion plan`).\n"
-                        "Units are in the key names; see the README for the format.")
+    write_config(
+        folder / CONFIG_NAME,
+        planned,
+        header="vision-torsion session (written by `vision-torsion plan`).\n"
+        "Units are in the key names; see the README for the format.",
+    )
     atomic_write_text(folder / MANIFEST_NAME, manifest_text(REQUIRED_COLUMNS, plan.rows))
     atomic_write_text(folder / CAPTURE_SHEET_NAME, _capture_sheet(plan))
     from .sheet import write_capture_sheet

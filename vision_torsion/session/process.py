@@ -39,8 +39,8 @@ import multiprocessing
 import os
 from collections import defaultdict, deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
-from itertools import islice
 from dataclasses import dataclass
+from itertools import islice
 from pathlib import Path
 
 from tqdm import tqdm
@@ -53,8 +53,8 @@ from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
-from .load import Session, load_session, unlisted_images
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
+from .load import Session, load_session, unlisted_images
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
@@ -95,6 +95,8 @@ class ProcessResult:
         or whose orientation's reference image is not: a partly shot session.
     unlisted : tuple of str
         Image files in the session (or bound camera) folder that no row names.
+    suspect : tuple of str
+        The images among `failures` whose status is ``suspect`` (the others failed).
     """
 
     measurements_path: Path
@@ -106,6 +108,7 @@ class ProcessResult:
     failures: tuple[tuple[str, str], ...]
     pending: tuple[tuple[str, str], ...] = ()
     unlisted: tuple[str, ...] = ()
+    suspect: tuple[str, ...] = ()
 
     @property
     def n_pending(self) -> int:
@@ -434,4 +437,5 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
                          n_cached=sources.count("cached"),
                          failures=failures,
                          pending=tuple((r["image"], r["message"]) for r in waiting),
-                         unlisted=unlisted)
+                         unlisted=unlisted,
+                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT))

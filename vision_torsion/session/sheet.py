@@ -69,7 +69,8 @@ def sign_picture_svg(angle_sign: int) -> str:
     plus_x, minus_x = (cx - r, cx + r) if ccw else (cx + r, cx - r)
     return f"""<svg xmlns="http://www.w3.org/2000/svg" width="360" height="300" viewBox="0 0 360 300" role="img"
  aria-label="sign convention">
-<defs><marker id="arrow" viewBox="0 0 10 10" refX="8" refY="5" markerWidth="7" markerHeight="7" orient="auto-start-reverse">
+<defs><marker id="arrow" viewBox="0 0 10 10" refX="8" refY="5" markerWidth="7" markerHeight="7"
+ orient="auto-start-reverse">
 <path d="M0,0 L10,5 L0,10 z" fill="#1f5fbf"/></marker></defs>
 <circle cx="{cx}" cy="{cy}" r="{r}" fill="#f4f4f4" stroke="#444" stroke-width="2"/>
 <line x1="{x1:.1f}" y1="{y1:.1f}" x2="{x2:.1f}" y2="{y2:.1f}" stroke="#999" stroke-width="2" stroke-dasharray="6 4"/>
@@ -102,20 +103,25 @@ def capture_sheet_html(plan) -> str:
     rig = cfg.rig
     esc = html.escape
     fields = "".join(
-        f"<tr><th>{label}</th><td>{esc(str(plan.header.get(key, '')))}</td></tr>"
-        for key, label in _HEADER_FIELDS)
+        f"<tr><th>{label}</th><td>{esc(str(plan.header.get(key, '')))}</td></tr>" for key, label in _HEADER_FIELDS
+    )
     below, above = plan.nearest_max_torques_nm
-    snapped = ("" if plan.exact else
-               f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of steps: "
-               f"the nearest achievable maxima are {below:.5f} N·m with {n} steps and "
-               f"{above:.5f} N·m with {n + 1})")
+    snapped = (
+        ""
+        if plan.exact
+        else f" (requested {plan.requested_max_torque_nm:g} N·m is not a whole number of steps: "
+        f"the nearest achievable maxima are {below:.5f} N·m with {n} steps and "
+        f"{above:.5f} N·m with {n + 1})"
+    )
     ccw = cfg.angle_sign > 0
-    words = (f"<b>Sign convention.</b> The <b>+ pans</b> are the two pans whose wires make "
-             f"<b>positive torque</b>; loading them turns the disk, and the line from one marker to "
-             f"the other, <b>{'counter-clockwise' if ccw else 'clockwise'}</b> as seen in the camera "
-             f"image (session.toml: angle_sign = {cfg.angle_sign:+d}). Before the first loaded "
-             "photograph, load one + piece and check the turn on the camera's screen: if the line "
-             "turns the other way, the pans are swapped or angle_sign is wrong; fix it now.")
+    words = (
+        f"<b>Sign convention.</b> The <b>+ pans</b> are the two pans whose wires make "
+        f"<b>positive torque</b>; loading them turns the disk, and the line from one marker to "
+        f"the other, <b>{'counter-clockwise' if ccw else 'clockwise'}</b> as seen in the camera "
+        f"image (session.toml: angle_sign = {cfg.angle_sign:+d}). Before the first loaded "
+        "photograph, load one + piece and check the turn on the camera's screen: if the line "
+        "turns the other way, the pans are swapped or angle_sign is wrong; fix it now."
+    )
     sections = []
     current = None
     body: list[str] = []
@@ -123,11 +129,13 @@ def capture_sheet_html(plan) -> str:
 
     def close_section():
         if current is not None:
-            sections.append(f'<section><h2>Orientation {esc(current)}°</h2><p>Rotate the flexspline to '
-                            f'{esc(current)}° relative to the circular spline. Remove all weights.</p>'
-                            '<table><tr><th>#</th><th>cycle</th><th>phase</th><th>step</th>'
-                            '<th>+ pans (each)</th><th>− pans (each)</th><th>torque (N·m)</th>'
-                            '<th>save as</th><th>done</th></tr>' + "".join(body) + "</table></section>")
+            sections.append(
+                f"<section><h2>Orientation {esc(current)}°</h2><p>Rotate the flexspline to "
+                f"{esc(current)}° relative to the circular spline. Remove all weights.</p>"
+                "<table><tr><th>#</th><th>cycle</th><th>phase</th><th>step</th>"
+                "<th>+ pans (each)</th><th>− pans (each)</th><th>torque (N·m)</th>"
+                "<th>save as</th><th>done</th></tr>" + "".join(body) + "</table></section>"
+            )
 
     for row in plan.rows:
         if row["orientation_deg"] != current:
@@ -135,25 +143,33 @@ def capture_sheet_html(plan) -> str:
             current, body = row["orientation_deg"], []
         phase = row["phase"]
         if phase == "reference" and plan.preconditioning_cycles:
-            body.append(f'<tr class="quiet"><td></td><td></td><td colspan="5">preconditioning, no '
-                        f'photographs: load to +{plan.max_torque_nm:.5f} N·m and −{plan.max_torque_nm:.5f}'
-                        f' N·m {plan.preconditioning_cycles} time(s), then remove all weights</td>'
-                        '<td></td><td>☐</td></tr>')
+            body.append(
+                f'<tr class="quiet"><td></td><td></td><td colspan="5">preconditioning, no '
+                f"photographs: load to +{plan.max_torque_nm:.5f} N·m and −{plan.max_torque_nm:.5f}"
+                f" N·m {plan.preconditioning_cycles} time(s), then remove all weights</td>"
+                "<td></td><td>☐</td></tr>"
+            )
         if phase == "closing":
-            body.append('<tr class="quiet"><td></td><td></td><td colspan="5">unload to zero step by '
-                        'step, no photographs</td><td></td><td>☐</td></tr>')
+            body.append(
+                '<tr class="quiet"><td></td><td></td><td colspan="5">unload to zero step by '
+                "step, no photographs</td><td></td><td>☐</td></tr>"
+            )
         pieces = round(float(row["mass_kg"]) / step)
         torque = couple_torque(float(row["mass_kg"]), phase, rig, step_mass_kg=step).torque_nm
         plus = _pan(pieces if phase.startswith("positive") else 0, step)
         minus = _pan(pieces if phase.startswith("negative") else 0, step)
         number += 1
-        body.append(f"<tr><td>{number}</td><td>{row['cycle']}</td><td>{esc(phase)}</td><td>{row['step']}</td>"
-                    f"<td>{plus}</td><td>{minus}</td><td>{torque:+.5f}</td><td><code>{esc(row['image'])}"
-                    "</code></td><td>☐</td></tr>")
+        body.append(
+            f"<tr><td>{number}</td><td>{row['cycle']}</td><td>{esc(phase)}</td><td>{row['step']}</td>"
+            f"<td>{plus}</td><td>{minus}</td><td>{torque:+.5f}</td><td><code>{esc(row['image'])}"
+            "</code></td><td>☐</td></tr>"
+        )
         if phase == "reference":
-            body.append(f'<tr class="quiet"><td></td><td></td><td colspan="5">pre-load, no photographs: '
-                        f'add {step * 1000:g} g to each + pan {n} times → {plan.max_torque_nm:+.5f} N·m</td>'
-                        '<td></td><td>☐</td></tr>')
+            body.append(
+                f'<tr class="quiet"><td></td><td></td><td colspan="5">pre-load, no photographs: '
+                f"add {step * 1000:g} g to each + pan {n} times → {plan.max_torque_nm:+.5f} N·m</td>"
+                "<td></td><td>☐</td></tr>"
+            )
     close_section()
     per_step = plan.torque_per_step_nm
     return f"""<!DOCTYPE html>
@@ -220,10 +236,20 @@ def write_capture_sheet(plan, *, pdf: bool = True, timeout_s: float = 60.0) -> t
     target = plan.folder / CAPTURE_SHEET_PDF
     with tempfile.TemporaryDirectory() as profile:
         tmp_pdf = Path(profile) / "sheet.pdf"
-        cmd = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-               "--disable-component-update", "--disable-sync", "--no-first-run",
-               f"--user-data-dir={profile}", "--no-pdf-header-footer",
-               f"--print-to-pdf={tmp_pdf}", page.resolve().as_uri()]
+        cmd = [
+            exe,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            f"--user-data-dir={profile}",
+            "--no-pdf-header-footer",
+            f"--print-to-pdf={tmp_pdf}",
+            page.resolve().as_uri(),
+        ]
         try:
             subprocess.run(cmd, capture_output=True, timeout=timeout_s, check=True)
             data = tmp_pdf.read_bytes()

@@ -43,7 +43,6 @@ import math
 import os
 import sys
 import time
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,8 +52,8 @@ from ..errors import SessionError
 from ..fileio import atomic_write_text
 from ..images import IMAGE_SUFFIXES
 from ..measure import natural_key
-from .binding import Binding, load_binding, write_binding
 from .bind import row_text
+from .binding import Binding, load_binding, write_binding
 from .live import LIVE_PAGE_NAME, LivePoint, live_page
 from .load import load_session
 from .steps import StepPoint, check_steps

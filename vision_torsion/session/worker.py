@@ -32,7 +32,19 @@ from ..pair import measure_pair
 from ..settings import MeasureSettings
 from .cache import CacheLog
 
-__all__ = ["measure_task", "read_task", "finish_task", "ReadImage", "digest", "content_hash", "start_worker", "exit_with", "in_process", "one_thread", "one_thread_here"]
+__all__ = [
+    "measure_task",
+    "read_task",
+    "finish_task",
+    "ReadImage",
+    "digest",
+    "content_hash",
+    "start_worker",
+    "exit_with",
+    "in_process",
+    "one_thread",
+    "one_thread_here",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -139,8 +151,7 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
     def measure(read: ReadImage):
         if read.error is not None:
             raise read.error
-        return _Cache.measure(read.image, settings=_settings_from(settings_json), name=path,
-                              candidates=read.candidates)
+        return _Cache.measure(read.image, settings=_settings_from(settings_json), name=path, candidates=read.candidates)
 
     done = attempt(measure, read, name=path)
     if done.unexpected:  # a bug, not the image: not cached, so the next run tries again
@@ -177,8 +188,7 @@ def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:
     return finish_task(read_task(task), task)
 
 
-def start_worker(cache_dir: str, run: str, known: frozenset, measure=measure_pair,
-                 main_pid: int | None = None) -> None:
+def start_worker(cache_dir: str, run: str, known: frozenset, measure=measure_pair, main_pid: int | None = None) -> None:
     """Worker initializer: one thread for BLAS and OpenCV (:func:`one_thread`), the
     keys already cached, a cache log of this run, the measuring function
     (:func:`~vision_torsion.pair.measure_pair` unless the caller passed another), and

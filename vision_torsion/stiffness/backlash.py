@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
 from ..errors import AnalysisError
 from ..numerics import fit_breakpoints, numeric_jacobian
 from .branches import BranchSplit

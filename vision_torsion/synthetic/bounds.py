@@ -53,7 +53,9 @@ def _marker_patch(scene: Scene, mapping, params, box):
         _paint_circle(sub, Shifted(), X, Y, r, F)
     lt = scene.lighting
     if lt.gradient_x or lt.gradient_y or lt.vignetting:
-        sub *= _light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting)[y0:y1, x0:x1]
+        sub *= _light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting)[
+            y0:y1, x0:x1
+        ]
     s = scene.optics.blur_sigma_px
     if s > 0:
         sub = cv2.GaussianBlur(sub, (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT)
@@ -96,7 +98,10 @@ def centre_covariance_bound(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
         for k in range(5):
             dp = np.zeros(5)
             dp[k] = steps[k]
-            J[:, k] = ((_marker_patch(scene, mapping, p0 + dp, box) - _marker_patch(scene, mapping, p0 - dp, box)) / (2 * steps[k])).ravel()
+            J[:, k] = (
+                (_marker_patch(scene, mapping, p0 + dp, box) - _marker_patch(scene, mapping, p0 - dp, box))
+                / (2 * steps[k])
+            ).ravel()
         fisher = (J / var[:, None]).T @ J
         out.append(np.linalg.inv(fisher)[:2, :2])
     return np.array(out)

@@ -161,7 +161,8 @@ def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
         _paint_circle(canvas, mapping, cx, cy, r, scene.markers.level)
     if d.wire:
         ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
-        cov = band_coverage(xs, ys, point=(disk.center_x + d.wire_offset_px, disk.center_y), direction_deg=d.wire_angle_deg, width=d.wire_width_px)
+        cov = band_coverage(xs, ys, point=(disk.center_x + d.wire_offset_px, disk.center_y),
+                            direction_deg=d.wire_angle_deg, width=d.wire_width_px)
         canvas += (d.wire_level - canvas) * cov
     if d.dust:
         identity = CameraMapping(scene.replace(optics={"tilt_deg": 0.0, "radial_k1": 0.0}))

@@ -33,8 +33,8 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from ..errors import SceneError
-from ..textfiles import read_toml
 from ..fileio import write_csv, write_json
+from ..textfiles import read_toml
 from .folders import truth_row, write_rendered
 from .render import render
 from .scene import Scene, check_markers_in_frame, scene_from_dict, table_to_dataclass
@@ -130,7 +130,15 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
     pieces = _piece_masses(spec, max(n_max, 1), rng)
     cum = np.concatenate([np.zeros((4, 1)), np.cumsum(pieces, axis=1)], axis=1)
     g_r = spec.gravity_m_per_s2 * spec.arm_radius_m
-    sign = frame["phase"].map({"reference": 0, "positive_unloading": 1, "negative_loading": -1, "negative_unloading": -1, "positive_loading": 1})
+    sign = frame["phase"].map(
+        {
+            "reference": 0,
+            "positive_unloading": 1,
+            "negative_loading": -1,
+            "negative_unloading": -1,
+            "positive_loading": 1,
+        }
+    )
     k = np.rint(per_pan).astype(int)
     pos = g_r * (cum[0, k] + cum[1, k])
     neg = g_r * (cum[2, k] + cum[3, k])
@@ -151,7 +159,15 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
                 k_l=spec.k_l_nm_per_rad * c_scale[1],
                 tau_c=max(spec.tau_c_nm * c_scale[2], 0.0),
             )
-            params.append({"orientation_deg": float(orient), "cycle": int(cycle), "k_u_nm_per_rad": p["k_u"], "k_l_nm_per_rad": p["k_l"], "tau_c_nm": p["tau_c"]})
+            params.append(
+                {
+                    "orientation_deg": float(orient),
+                    "cycle": int(cycle),
+                    "k_u_nm_per_rad": p["k_u"],
+                    "k_l_nm_per_rad": p["k_l"],
+                    "tau_c_nm": p["tau_c"],
+                }
+            )
             tau = torque[cidx]
             if theta_prev is None:
                 th = bilinear_response(tau, **p)
@@ -221,8 +237,17 @@ def write_session_folder(
     # before anything is written
     config = config_from_dict(
         {
-            "rig": {"arm_radius_m": spec.arm_radius_m, "gravity_m_per_s2": spec.gravity_m_per_s2, "mass_tolerance_kg": spec.mass_tolerance_kg},
-            "protocol": {"orientations_deg": list(spec.orientations_deg), "max_torque_nm": spec.max_torque_nm, "step_mass_kg": spec.step_mass_kg, "cycles": spec.cycles},
+            "rig": {
+                "arm_radius_m": spec.arm_radius_m,
+                "gravity_m_per_s2": spec.gravity_m_per_s2,
+                "mass_tolerance_kg": spec.mass_tolerance_kg,
+            },
+            "protocol": {
+                "orientations_deg": list(spec.orientations_deg),
+                "max_torque_nm": spec.max_torque_nm,
+                "step_mass_kg": spec.step_mass_kg,
+                "cycles": spec.cycles,
+            },
         },
         source=str(out),
     )
@@ -241,8 +266,14 @@ def write_session_folder(
         disk_angle = spec.angle_sign * rec["true_angle_deg"]
         r = render(scene, disk_angle, seed=np.random.default_rng(rngs[i]))
         write_rendered(out / rec["image"], r, scene)
-        rows.append(truth_row(rec["image"], r, true_torque_nm=rec["true_torque_nm"], true_angle_deg_reported=rec["true_angle_deg"]))
-    table = pd.DataFrame(rows).rename(columns={"true_angle_deg": "disk_rotation_deg", "true_angle_deg_reported": "true_angle_deg"})
+        rows.append(
+            truth_row(
+                rec["image"], r, true_torque_nm=rec["true_torque_nm"], true_angle_deg_reported=rec["true_angle_deg"]
+            )
+        )
+    table = pd.DataFrame(rows).rename(
+        columns={"true_angle_deg": "disk_rotation_deg", "true_angle_deg_reported": "true_angle_deg"}
+    )
     write_csv(out / "truth.csv", table)
     write_json(out / "truth.json", params)
     return out
