@@ -58,11 +58,19 @@ CASES = {
 ORIENTATION_CASES = ("no_effect_1_cycle", "no_effect_3_cycles", "effect_10pct_3_cycles")
 ORIENT_FIGURES = ("k_positive_unloading", "hysteresis", "k_negative_loading_secant")
 # a straight line through these phases, or the bilinear model on these loops, is a misfit
-MISFIT = {"bilinear": ("k_negative_loading", "k_positive_loading"),
-          "masing": ("k_negative_loading", "k_positive_loading", "k_positive_unloading", "k_negative_unloading",
-                     "bilinear_k_u", "bilinear_k_l", "bilinear_tau_c"),
-          "three_segment": ("k_negative_loading", "k_positive_loading", "bilinear_k_u", "bilinear_k_l",
-                            "bilinear_tau_c")}
+MISFIT = {
+    "bilinear": ("k_negative_loading", "k_positive_loading"),
+    "masing": (
+        "k_negative_loading",
+        "k_positive_loading",
+        "k_positive_unloading",
+        "k_negative_unloading",
+        "bilinear_k_u",
+        "bilinear_k_l",
+        "bilinear_tau_c",
+    ),
+    "three_segment": ("k_negative_loading", "k_positive_loading", "bilinear_k_u", "bilinear_k_l", "bilinear_tau_c"),
+}
 
 
 def run_one(task):
@@ -79,8 +87,18 @@ def run_one(task):
         kw["catalogue_breaks_nm"] = (0.1, 0.25)
     a = analyze_session(df, **kw)
     f = a.figures
-    res = {"ok": 0, "miss": 0, "covered": 0, "shown": 0, "withheld": 0, "flagged": 0, "misfit_shown": 0,
-           "by_figure": {}, "k_within_1pct": [], "orientation": {}}
+    res = {
+        "ok": 0,
+        "miss": 0,
+        "covered": 0,
+        "shown": 0,
+        "withheld": 0,
+        "flagged": 0,
+        "misfit_shown": 0,
+        "by_figure": {},
+        "k_within_1pct": [],
+        "orientation": {},
+    }
     for r in f.itertuples(index=False):
         key = (float(r.orientation_deg), int(r.cycle))
         t = truth.get(key, {}).get(r.figure)
@@ -156,9 +174,23 @@ def main(argv=None):
 
 def _aggregate(agg, results):
     for case, noise, rep, res in results:
-        a = agg.setdefault((case, noise), {"sessions": 0, "ok": 0, "miss": 0, "shown": 0, "covered": 0,
-                                           "withheld": 0, "flagged": 0, "misfit_shown": 0, "sessions_ok": 0,
-                                           "k_ok": [], "orient": {k: 0 for k in ORIENT_FIGURES}, "by_figure": {}})
+        a = agg.setdefault(
+            (case, noise),
+            {
+                "sessions": 0,
+                "ok": 0,
+                "miss": 0,
+                "shown": 0,
+                "covered": 0,
+                "withheld": 0,
+                "flagged": 0,
+                "misfit_shown": 0,
+                "sessions_ok": 0,
+                "k_ok": [],
+                "orient": {k: 0 for k in ORIENT_FIGURES},
+                "by_figure": {},
+            },
+        )
         a["sessions"] += 1
         for k in ("ok", "miss", "shown", "covered", "withheld", "flagged", "misfit_shown"):
             a[k] += res[k]
@@ -174,12 +206,15 @@ def _aggregate(agg, results):
 
 def _write(agg, args, wall, path, cpu, rows, show=False):
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = [f"bench_figures: {args.reps} sessions per case and noise, {when}, wall {wall:.0f} s, "
-             f"load {os.getloadavg()[0]:.1f}", "",
-             "| case | noise (°) | sessions | figures ok (covered/withheld/flagged of all) | sessions with no miss "
-             "| worst figure: ok | shown unflagged: within u95 | misfit shown unflagged "
-             "| orientation 'significant' (k_pu / hyst / k_nl secant) | K1–K3 within 1 % |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"bench_figures: {args.reps} sessions per case and noise, {when}, wall {wall:.0f} s, "
+        f"load {os.getloadavg()[0]:.1f}",
+        "",
+        "| case | noise (°) | sessions | figures ok (covered/withheld/flagged of all) | sessions with no miss "
+        "| worst figure: ok | shown unflagged: within u95 | misfit shown unflagged "
+        "| orientation 'significant' (k_pu / hyst / k_nl secant) | K1–K3 within 1 % |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     out = []
     for (case, noise), a in agg.items():
         n_fig = a["ok"] + a["miss"]
@@ -187,20 +222,33 @@ def _write(agg, args, wall, path, cpu, rows, show=False):
         orient = " / ".join(f"{100 * a['orient'][k] / a['sessions']:.0f} %" for k in ORIENT_FIGURES)
         k_ok = f"{100 * np.mean(a['k_ok']):.0f} % of {len(a['k_ok'])}" if a["k_ok"] else "–"
         cov = f"{100 * a['covered'] / a['shown']:.1f} %" if a["shown"] else "–"
-        lines.append(f"| {case} | {noise:g} | {a['sessions']} | {100 * a['ok'] / max(n_fig, 1):.1f} % "
-                     f"({a['covered']}/{a['withheld']}/{a['flagged']} of {n_fig}) | "
-                     f"{100 * a['sessions_ok'] / a['sessions']:.0f} % | {100 * worst[0]:.0f} % {worst[1]} | "
-                     f"{cov} | {a['misfit_shown']} | {orient} | {k_ok} |")
-        out.append({"case": case, "noise_deg": noise, **{k: v for k, v in a.items() if k != "k_ok"},
-                    "k_within_1pct": float(np.mean(a["k_ok"])) if a["k_ok"] else None})
+        lines.append(
+            f"| {case} | {noise:g} | {a['sessions']} | {100 * a['ok'] / max(n_fig, 1):.1f} % "
+            f"({a['covered']}/{a['withheld']}/{a['flagged']} of {n_fig}) | "
+            f"{100 * a['sessions_ok'] / a['sessions']:.0f} % | {100 * worst[0]:.0f} % {worst[1]} | "
+            f"{cov} | {a['misfit_shown']} | {orient} | {k_ok} |"
+        )
+        out.append(
+            {
+                "case": case,
+                "noise_deg": noise,
+                **{k: v for k, v in a.items() if k != "k_ok"},
+                "k_within_1pct": float(np.mean(a["k_ok"])) if a["k_ok"] else None,
+            }
+        )
     if cpu is not None:
         lines += ["", f"analyze_table of a {rows}-row table: {cpu:.2f} s CPU (one core, best of 3); target ≤ 3 s"]
     text = "\n".join(lines)
     if show:
         print(text)
     path.with_suffix(".md").write_text(text + "\n")
-    path.write_text(json.dumps({"date": when, "reps": args.reps, "wall_s": wall, "analyze_cpu_s": cpu, "rows": rows,
-                                "cases": out}, indent=1, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
+    path.write_text(
+        json.dumps(
+            {"date": when, "reps": args.reps, "wall_s": wall, "analyze_cpu_s": cpu, "rows": rows, "cases": out},
+            indent=1,
+            default=lambda o: o.item() if hasattr(o, "item") else str(o),
+        )
+    )
 
 
 if __name__ == "__main__":

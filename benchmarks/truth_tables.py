@@ -138,8 +138,18 @@ def protocol(cycles):
     return rows
 
 
-def session_table(kind, *, orientations=(0, 60, 120, 180, 240, 300), cycles=1, angle_std_deg=0.0005,
-                  orientation_effect=0.0, repeatability=0.02, creep_deg=0.0, fail=None, rng):
+def session_table(
+    kind,
+    *,
+    orientations=(0, 60, 120, 180, 240, 300),
+    cycles=1,
+    angle_std_deg=0.0005,
+    orientation_effect=0.0,
+    repeatability=0.02,
+    creep_deg=0.0,
+    fail=None,
+    rng,
+):
     """A measurements table and the truth of every loop.
 
     Returns
@@ -174,7 +184,7 @@ def session_table(kind, *, orientations=(0, 60, 120, 180, 240, 300), cycles=1, a
                 ii = [ii[0] - 1] + ii  # the cycle starts at the previous one's +Tmax
             model = make_model(kind, scales[c])
             warm = np.concatenate([tau_true[ii], tau_true[ii][1:]])  # one cycle to reach the periodic state
-            th = model.path(warm)[len(ii) - 1:]
+            th = model.path(warm)[len(ii) - 1 :]
             th = th - th[0]
             base = theta[ii[0]] if c > 1 else 0.0
             theta[ii] = base + th
@@ -187,12 +197,22 @@ def session_table(kind, *, orientations=(0, 60, 120, 180, 240, 300), cycles=1, a
         theta_deg = np.degrees(theta) + creep_deg * t_frac + rng.normal(0.0, angle_std_deg, theta.size)
         theta_deg -= theta_deg[0]
         for i, (phase, c, step, n) in enumerate(meta):
-            rows.append({
-                "image": f"o{o:03d}_{i:04d}.png", "orientation_deg": float(o), "cycle": c, "phase": phase,
-                "step": step, "mass_kg": n * STEP_MASS_KG, "torque_nm": tau_nom[i],
-                "torque_std_nm": G * R_M * math.sqrt(2 * n) * MASS_STD_KG,
-                "angle_deg": theta_deg[i], "angle_std_deg": angle_std_deg, "status": "ok", "message": "",
-            })
+            rows.append(
+                {
+                    "image": f"o{o:03d}_{i:04d}.png",
+                    "orientation_deg": float(o),
+                    "cycle": c,
+                    "phase": phase,
+                    "step": step,
+                    "mass_kg": n * STEP_MASS_KG,
+                    "torque_nm": tau_nom[i],
+                    "torque_std_nm": G * R_M * math.sqrt(2 * n) * MASS_STD_KG,
+                    "angle_deg": theta_deg[i],
+                    "angle_std_deg": angle_std_deg,
+                    "status": "ok",
+                    "message": "",
+                }
+            )
     df = pd.DataFrame(rows)
     if fail == "zero":  # the zero-torque image after the first unloading, first orientation
         m = (df.orientation_deg == orientations[0]) & (df.phase == "positive_unloading") & (df.step == N_STEPS)
@@ -231,8 +251,10 @@ def loop_truth(kind, model) -> dict:
     (td, yd), (ta, ya) = _major_branches(model)
     grid = np.unique(np.concatenate([td, ta]))
     w = np.array([_interp(td, yd, x) - _interp(ta, ya, x) for x in grid])
-    out = {"hysteresis": math.degrees(float(np.max(np.abs(w)))),
-           "hysteresis_loss": math.degrees(_interp(td, yd, 0.0) - _interp(ta, ya, 0.0))}
+    out = {
+        "hysteresis": math.degrees(float(np.max(np.abs(w)))),
+        "hysteresis_loss": math.degrees(_interp(td, yd, 0.0) - _interp(ta, ya, 0.0)),
+    }
     for f in (0.03, 0.04):
         x = f * T_MAX
         mid = lambda t: 0.5 * (_interp(td, yd, t) + _interp(ta, ya, t))  # noqa: E731
@@ -250,10 +272,17 @@ def loop_truth(kind, model) -> dict:
     out["k_negative_unloading_secant"] = T_MAX / (_interp(ta, ya, 0.0) - ya[0])
     out["k_positive_loading_secant"] = T_MAX / (ya[-1] - _interp(ta, ya, 0.0))
     if kind == "bilinear":
-        out.update(bilinear_k_u=model.k_u, bilinear_k_l=model.k_l, bilinear_tau_c=model.tau_c,
-                   k_positive_unloading=model.k_u, k_negative_unloading=model.k_u,
-                   k_negative_loading_below=model.k_l, k_negative_loading_above=model.k_u,
-                   k_positive_loading_below=model.k_l, k_positive_loading_above=model.k_u)
+        out.update(
+            bilinear_k_u=model.k_u,
+            bilinear_k_l=model.k_l,
+            bilinear_tau_c=model.tau_c,
+            k_positive_unloading=model.k_u,
+            k_negative_unloading=model.k_u,
+            k_negative_loading_below=model.k_l,
+            k_negative_loading_above=model.k_u,
+            k_positive_loading_below=model.k_l,
+            k_positive_loading_above=model.k_u,
+        )
     if kind == "three_segment":
         out.update(k1=model.k[0], k2=model.k[1], k3=model.k[2])
     return out

@@ -18,6 +18,8 @@ Modules, one job each:
 - :mod:`.checks` — angle sign, gaps, loop closure and creep, outliers.
 """
 
+from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
+from .fitcheck import LackOfFit, fit_switch, lack_of_fit
 from .loops import validate_measurements
 from .metrics import (
     fit_three_segment,
@@ -38,8 +40,6 @@ from .models import (
     fit_bilinear,
     fit_bouc_wen,
 )
-from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
-from .fitcheck import LackOfFit, fit_switch, lack_of_fit
 from .preisach import PreisachFit, fit_preisach, preisach_response
 from .session import Issue, SessionAnalysis, analyze_session
 from .simulate import simulate_measurements, torque_levels

@@ -58,8 +58,18 @@ def _check_inputs(tau, branch):
     return sign
 
 
-def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, torque_std_nm,
-                     torque_sources=None, with_uncertainty=True, gate_sources=None) -> dict:
+def fit_fixed_breaks(
+    torque_nm,
+    angle_rad,
+    *,
+    branch,
+    breaks_nm,
+    angle_std_rad,
+    torque_std_nm,
+    torque_sources=None,
+    with_uncertainty=True,
+    gate_sources=None,
+) -> dict:
     """K1..K(m+1) of the loading branches with the break torques fixed (linear least squares).
 
     Parameters
@@ -119,8 +129,9 @@ def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, 
         lv = np.unique(x[(x >= lo - 1e-12) & (x <= hi + 1e-12)])
         counts.append(int(lv.size))
         if lv.size < 2:
-            raise AnalysisError(f"segment {lo:g} to {hi:g} N·m has {lv.size} measured torque level(s); "
-                                "a stiffness needs at least two")
+            raise AnalysisError(
+                f"segment {lo:g} to {hi:g} N·m has {lv.size} measured torque level(s); a stiffness needs at least two"
+            )
     a = _design(tau, sign, brk)
     comp = None
     w = 1.0 / np.where(sa > 0, sa**2, 1.0)
@@ -133,15 +144,30 @@ def fit_fixed_breaks(torque_nm, angle_rad, *, branch, breaks_nm, angle_std_rad, 
         comp = np.abs(comp_seg[seg])
         w = 1.0 / (sa**2 + (comp * st) ** 2)
     if not np.all(coef[2:] > 0):
-        raise AnalysisError("catalogue stiffness: a segment has a non-positive compliance (the branches are not "
-                            "monotone there)")
+        raise AnalysisError(
+            "catalogue stiffness: a segment has a non-positive compliance (the branches are not monotone there)"
+        )
     resid = th - a @ coef
     w_fit = w_used
-    check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=a.shape[1],
-                        torque_sources=gate_sources if with_uncertainty else None, jacobian=a, weights=w_fit)
+    check = lack_of_fit(
+        resid,
+        angle_std_rad=sa,
+        torque_std_nm=st,
+        compliance_rad_per_nm=comp,
+        n_params=a.shape[1],
+        torque_sources=gate_sources if with_uncertainty else None,
+        jacobian=a,
+        weights=w_fit,
+    )
     k = [1.0 / c for c in coef[2:]]
-    base = {"k": k, "check": check, "breaks_nm": brk, "points_per_segment": counts, "compliance": comp,
-            "residual_rad": resid}
+    base = {
+        "k": k,
+        "check": check,
+        "breaks_nm": brk,
+        "points_per_segment": counts,
+        "compliance": comp,
+        "residual_rad": resid,
+    }
     if not with_uncertainty:
         return base
     if torque_sources is None:
@@ -182,8 +208,9 @@ def _chi2(tau, th, sign, brk, sa, st):
     return float(np.sum(w_fit * r * r)), True
 
 
-def fit_catalogue_breaks(torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm, torque_sources=None,
-                         gate_sources=None) -> dict:
+def fit_catalogue_breaks(
+    torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm, torque_sources=None, gate_sources=None
+) -> dict:
     """Fit the break torques too: one break (two segments) or two (three), by the stated criterion.
 
     Returns the :func:`fit_fixed_breaks` dict of the chosen model plus
@@ -208,9 +235,10 @@ def fit_catalogue_breaks(torque_nm, angle_rad, *, branch, angle_std_rad, torque_
         vals = [(_chi2(tau, th, sign, [m], sa, st)[0], m) for m in mids[1:-1]]
         v, m = min(vals)
         i = int(np.flatnonzero(mids == m)[0])
-        res = optimize.minimize_scalar(lambda b: _chi2(tau, th, sign, [b], sa, st)[0],
-                                       bounds=(levels[i], levels[i + 1]), method="bounded")
-        return ([float(res.x)] if res.fun <= v else [float(m)])
+        res = optimize.minimize_scalar(
+            lambda b: _chi2(tau, th, sign, [b], sa, st)[0], bounds=(levels[i], levels[i + 1]), method="bounded"
+        )
+        return [float(res.x)] if res.fun <= v else [float(m)]
 
     def best_two():
         best = (np.inf, None)
@@ -221,9 +249,12 @@ def fit_catalogue_breaks(torque_nm, angle_rad, *, branch, angle_std_rad, torque_
                     best = (v, [mids[i], mids[j]])
         if best[1] is None:
             return None
-        res = optimize.minimize(lambda b: _chi2(tau, th, sign, sorted(b), sa, st)[0] if b[0] < b[1] else np.inf,
-                                np.array(best[1]), method="Nelder-Mead",
-                                options={"xatol": levels[-1] * 1e-6, "maxiter": 200})
+        res = optimize.minimize(
+            lambda b: _chi2(tau, th, sign, sorted(b), sa, st)[0] if b[0] < b[1] else np.inf,
+            np.array(best[1]),
+            method="Nelder-Mead",
+            options={"xatol": levels[-1] * 1e-6, "maxiter": 200},
+        )
         return sorted(res.x.tolist()) if res.fun <= best[0] else best[1]
 
     b1 = best_one()
@@ -235,8 +266,19 @@ def fit_catalogue_breaks(torque_nm, angle_rad, *, branch, angle_std_rad, torque_
     crit = float(stats.chi2.isf(TWO_BREAK_ALPHA, 2))
     delta = c1 - c2
     two = r2 is not None and (r1 is None or delta > crit)
-    out = fit_fixed_breaks(tau, th, branch=sign, breaks_nm=b2 if two else b1, angle_std_rad=sa, torque_std_nm=st,
-                           torque_sources=torque_sources, gate_sources=gate_sources)
-    out.update(n_breaks=2 if two else 1, delta_chi2=float(delta) if np.isfinite(delta) else None,
-               criterion=f"two breaks kept when they lower χ² by more than {crit:.3g} (χ²₂ at {TWO_BREAK_ALPHA:g})")
+    out = fit_fixed_breaks(
+        tau,
+        th,
+        branch=sign,
+        breaks_nm=b2 if two else b1,
+        angle_std_rad=sa,
+        torque_std_nm=st,
+        torque_sources=torque_sources,
+        gate_sources=gate_sources,
+    )
+    out.update(
+        n_breaks=2 if two else 1,
+        delta_chi2=float(delta) if np.isfinite(delta) else None,
+        criterion=f"two breaks kept when they lower χ² by more than {crit:.3g} (χ²₂ at {TWO_BREAK_ALPHA:g})",
+    )
     return out

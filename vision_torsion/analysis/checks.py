@@ -114,9 +114,15 @@ def missing_levels(run_levels, expected_levels, *, resolution_nm=1e-9):
 def _pair(a, b, label):
     d = float(b["angle_deg"] - a["angle_deg"])
     s = math.hypot(float(a["angle_std_deg"]), float(b["angle_std_deg"]))
-    return {"check": label, "image_first": str(a["image"]), "image_last": str(b["image"]), "difference_deg": d,
-            "std_deg": s, "z": d / s if s > 0 else (math.inf if d else 0.0),
-            "creep": bool(abs(d) > CLOSURE_K * s) if s > 0 else bool(d != 0)}
+    return {
+        "check": label,
+        "image_first": str(a["image"]),
+        "image_last": str(b["image"]),
+        "difference_deg": d,
+        "std_deg": s,
+        "z": d / s if s > 0 else (math.inf if d else 0.0),
+        "creep": bool(abs(d) > CLOSURE_K * s) if s > 0 else bool(d != 0),
+    }
 
 
 def closure_checks(usable: pd.DataFrame, closing: pd.DataFrame) -> list:
@@ -141,15 +147,23 @@ def closure_checks(usable: pd.DataFrame, closing: pd.DataFrame) -> list:
         tmax = sub["torque_nm"].max()
         top = sub[np.isclose(sub["torque_nm"], tmax, rtol=0, atol=1e-9 * max(abs(tmax), 1.0))]
         if len(top) >= 2:
-            out.append({"orientation_deg": float(orient),
-                        **_pair(top.iloc[0], top.iloc[-1], "+Tmax at the start and at the end of the run")})
+            out.append(
+                {
+                    "orientation_deg": float(orient),
+                    **_pair(top.iloc[0], top.iloc[-1], "+Tmax at the start and at the end of the run"),
+                }
+            )
         c = closing[closing["orientation_deg"] == orient]
         first = sub[(sub["phase"] == "positive_unloading") & (sub["cycle"] == sub["cycle"].min())]
         if len(c) and len(first):
             end = first.iloc[-1]
             if abs(float(end["torque_nm"])) <= 1e-9:
-                out.append({"orientation_deg": float(orient),
-                            **_pair(end, c.iloc[-1], "zero torque after unloading: cycle 1 and the closing image")})
+                out.append(
+                    {
+                        "orientation_deg": float(orient),
+                        **_pair(end, c.iloc[-1], "zero torque after unloading: cycle 1 and the closing image"),
+                    }
+                )
     return out
 
 

@@ -39,8 +39,13 @@ from ..errors import AnalysisError
 from .uncertainty import least_squares_weights, linearised_covariance
 
 __all__ = [
-    "LACK_OF_FIT_ALPHA", "LackOfFit", "lack_of_fit", "path_compliance", "local_torque_std",
-    "fit_switch", "secant",
+    "LACK_OF_FIT_ALPHA",
+    "LackOfFit",
+    "lack_of_fit",
+    "path_compliance",
+    "local_torque_std",
+    "fit_switch",
+    "secant",
 ]
 
 #: Significance level of the lack-of-fit test.
@@ -82,14 +87,24 @@ class LackOfFit:
 
     def describe(self) -> str:
         """One sentence for a report: why the fit was rejected."""
-        return (f"lack of fit: χ²_red = {self.reduced_chi2:.3g} (dof {self.dof}, p = {self.p_value:.2g}); residual "
-                f"RMS {math.degrees(self.residual_rms_rad):.3g}° against {math.degrees(self.noise_rms_rad):.3g}° "
-                "of noise")
+        return (
+            f"lack of fit: χ²_red = {self.reduced_chi2:.3g} (dof {self.dof}, p = {self.p_value:.2g}); residual "
+            f"RMS {math.degrees(self.residual_rms_rad):.3g}° against {math.degrees(self.noise_rms_rad):.3g}° "
+            "of noise"
+        )
 
     def to_dict(self) -> dict:
-        return {"chi2": self.chi2, "dof": self.dof, "reduced_chi2": self.reduced_chi2, "p_value": self.p_value,
-                "rejected": self.rejected, "residual_rms_deg": math.degrees(self.residual_rms_rad),
-                "noise_rms_deg": math.degrees(self.noise_rms_rad), "testable": self.testable, "reason": self.reason}
+        return {
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "reduced_chi2": self.reduced_chi2,
+            "p_value": self.p_value,
+            "rejected": self.rejected,
+            "residual_rms_deg": math.degrees(self.residual_rms_rad),
+            "noise_rms_deg": math.degrees(self.noise_rms_rad),
+            "testable": self.testable,
+            "reason": self.reason,
+        }
 
 
 def local_torque_std(torque_std_nm, torque_common_std_nm=None) -> np.ndarray:
@@ -126,8 +141,18 @@ def path_compliance(torque_nm, model_angle_rad) -> np.ndarray:
     return out
 
 
-def lack_of_fit(residual_rad, *, angle_std_rad, torque_std_nm, compliance_rad_per_nm, n_params,
-                alpha=LACK_OF_FIT_ALPHA, torque_sources=None, jacobian=None, weights=None) -> LackOfFit:
+def lack_of_fit(
+    residual_rad,
+    *,
+    angle_std_rad,
+    torque_std_nm,
+    compliance_rad_per_nm,
+    n_params,
+    alpha=LACK_OF_FIT_ALPHA,
+    torque_sources=None,
+    jacobian=None,
+    weights=None,
+) -> LackOfFit:
     """Chi-square test of a fit's residuals against the noise the table implies.
 
     Parameters
@@ -178,11 +203,29 @@ def lack_of_fit(residual_rad, *, angle_std_rad, torque_std_nm, compliance_rad_pe
     rms = float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
     noise = float(np.sqrt(np.mean(var))) if r.size else float("nan")
     if dof <= 0:
-        return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
-                         f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)")
+        return LackOfFit(
+            float("nan"),
+            dof,
+            float("nan"),
+            float("nan"),
+            False,
+            rms,
+            noise,
+            False,
+            f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)",
+        )
     if not np.all(np.isfinite(var)) or np.any(var <= 0) or (torque_sources is not None and np.any(sa <= 0)):
-        return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
-                         "a sample has no positive angle or torque uncertainty to test the fit against")
+        return LackOfFit(
+            float("nan"),
+            dof,
+            float("nan"),
+            float("nan"),
+            False,
+            rms,
+            noise,
+            False,
+            "a sample has no positive angle or torque uncertainty to test the fit against",
+        )
     if torque_sources is None:
         chi2 = float(np.sum(r**2 / var))
     else:
@@ -209,8 +252,17 @@ def lack_of_fit(residual_rad, *, angle_std_rad, torque_std_nm, compliance_rad_pe
                 chol = np.linalg.cholesky(cov)
                 z = np.linalg.solve(chol, r)
             except np.linalg.LinAlgError:
-                return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False,
-                                 "the noise covariance is singular; the fit cannot be tested")
+                return LackOfFit(
+                    float("nan"),
+                    dof,
+                    float("nan"),
+                    float("nan"),
+                    False,
+                    rms,
+                    noise,
+                    False,
+                    "the noise covariance is singular; the fit cannot be tested",
+                )
             chi2 = float(z @ z)
     p = float(stats.chi2.sf(chi2, dof))
     return LackOfFit(chi2, dof, chi2 / dof, p, bool(p < alpha), rms, noise)
@@ -227,8 +279,10 @@ def secant(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm):
     th = np.asarray(angle_rad, float)
     dtau, dth = tau[-1] - tau[0], th[-1] - th[0]
     if dtau == 0 or not dth * dtau > 0:
-        raise AnalysisError(f"secant: the angle does not change with the torque's sign between the ends "
-                            f"(Δτ = {dtau:.4g} N·m, Δθ = {math.degrees(dth):.4g}°)")
+        raise AnalysisError(
+            f"secant: the angle does not change with the torque's sign between the ends "
+            f"(Δτ = {dtau:.4g} N·m, Δθ = {math.degrees(dth):.4g}°)"
+        )
     k = dtau / dth
     sa = np.asarray(angle_std_rad, float)
     st = np.asarray(torque_std_nm, float)
@@ -270,8 +324,9 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     x = sgn * (tau - tau[0])
     levels = np.unique(x)
     if levels.size < 2 * min_per_side + 1:
-        raise AnalysisError(f"a switch needs at least {2 * min_per_side + 1} torque levels in the phase, "
-                            f"got {levels.size}")
+        raise AnalysisError(
+            f"a switch needs at least {2 * min_per_side + 1} torque levels in the phase, got {levels.size}"
+        )
     y = sgn * th
 
     def design(ts):
@@ -285,7 +340,7 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         return coef, float(np.sum(w * r * r))
 
     mids = 0.5 * (levels[1:] + levels[:-1])
-    cands = mids[min_per_side - 1: mids.size - (min_per_side - 1)]
+    cands = mids[min_per_side - 1 : mids.size - (min_per_side - 1)]
     w = least_squares_weights(sa)
     best = None
     for _ in range(2):  # effective variance: the weights depend on the local compliance
@@ -293,8 +348,12 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         i = int(np.argmin(sse))
         lo_b = levels[max(i + min_per_side - 1, 0)]
         hi_b = levels[min(i + min_per_side, levels.size - 1)]
-        res = optimize.minimize_scalar(lambda ts: solve(ts, w)[1], bounds=(lo_b, hi_b), method="bounded",
-                                       options={"xatol": max(levels[-1], 1e-12) * 1e-9})
+        res = optimize.minimize_scalar(
+            lambda ts: solve(ts, w)[1],
+            bounds=(lo_b, hi_b),
+            method="bounded",
+            options={"xatol": max(levels[-1], 1e-12) * 1e-9},
+        )
         ts = float(res.x) if res.fun <= sse[i] else float(cands[i])
         coef, _ = solve(ts, w)
         comp = np.where(x < ts, coef[1], coef[2])
@@ -305,8 +364,9 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         w = 1.0 / var
     ts, coef = best
     if not (coef[1] > 0 and coef[2] > 0):
-        raise AnalysisError(f"switch fit gives a non-positive compliance (below {coef[1]:.3g}, above {coef[2]:.3g} "
-                            "rad/(N·m))")
+        raise AnalysisError(
+            f"switch fit gives a non-positive compliance (below {coef[1]:.3g}, above {coef[2]:.3g} rad/(N·m))"
+        )
     a = design(ts)
     comp = np.where(x < ts, coef[1], coef[2])
     if torque_sources is None:
@@ -321,8 +381,12 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
         cov_a, cov_t = linearised_covariance(a_full, w, sa**2, jac_tau, g_var)
     except np.linalg.LinAlgError:
         raise AnalysisError("switch fit: the compliances are not identified (singular normal matrix)") from None
-    out = {"switch_nm": ts, "n_params": 4, "std_angle": {"switch_nm": math.sqrt(max(cov_a[3, 3], 0.0))},
-           "std_torque": {"switch_nm": math.sqrt(max(cov_t[3, 3], 0.0))}}
+    out = {
+        "switch_nm": ts,
+        "n_params": 4,
+        "std_angle": {"switch_nm": math.sqrt(max(cov_a[3, 3], 0.0))},
+        "std_torque": {"switch_nm": math.sqrt(max(cov_t[3, 3], 0.0))},
+    }
     for j, name in ((1, "k_below"), (2, "k_above")):
         k = 1.0 / coef[j]
         out[name] = k

@@ -93,7 +93,7 @@ def _relays(h: np.ndarray):
     a_list, b_list, a_mir, b_mir = [], [], [], []
     seen = set()
     for i, al in enumerate(h):
-        for be in h[:i + 1]:  # be == al: a reversible element (nonlinear elasticity)
+        for be in h[: i + 1]:  # be == al: a reversible element (nonlinear elasticity)
             key = tuple(sorted([(round(al, 12), round(be, 12)), (round(-be, 12), round(-al, 12))]))
             if key in seen:
                 continue
@@ -166,8 +166,12 @@ class PreisachFit:
         a, b = self.alpha_nm, self.beta_nm
         am, bm = -b, -a
         x = _design(tau, a, b, am, bm)
-        coef = np.concatenate([[max(self.theta0_rad, 0.0), max(-self.theta0_rad, 0.0),
-                                self.elastic_compliance_rad_per_nm], self.weight_rad])
+        coef = np.concatenate(
+            [
+                [max(self.theta0_rad, 0.0), max(-self.theta0_rad, 0.0), self.elastic_compliance_rad_per_nm],
+                self.weight_rad,
+            ]
+        )
         return x @ coef
 
 
@@ -200,7 +204,9 @@ def _predict_many(fit: "PreisachFit", tau2d: np.ndarray) -> np.ndarray:
     # each relay and its mirror carry half the pair's weight (the whole, for a self-mirrored relay)
     aa = np.concatenate([a, -b[~self_mirror]])
     bb = np.concatenate([b, -a[~self_mirror]])
-    ww = np.concatenate([np.where(self_mirror, fit.weight_rad, 0.5 * fit.weight_rad), 0.5 * fit.weight_rad[~self_mirror]])
+    ww = np.concatenate(
+        [np.where(self_mirror, fit.weight_rad, 0.5 * fit.weight_rad), 0.5 * fit.weight_rad[~self_mirror]]
+    )
     keep = ww > 0
     aa, bb, ww = aa[keep], bb[keep], ww[keep]
     levels = fit.levels_nm if fit.levels_nm is not None else np.unique(np.concatenate([aa, bb]))
@@ -221,7 +227,7 @@ def _predict_many(fit: "PreisachFit", tau2d: np.ndarray) -> np.ndarray:
     state = ramp(top, a_lo, a_hi, up_open, down_open)
     out = np.empty_like(tau2d)
     for i in range(tau2d.shape[1]):
-        t = tau2d[:, i:i + 1]
+        t = tau2d[:, i : i + 1]
         lower = ramp(t, a_lo, a_hi, up_open, down_open)
         upper = ramp(t, b_lo, b_hi, up_open, down_open)
         state = np.minimum(np.maximum(state, lower), np.maximum(upper, lower))
@@ -229,16 +235,24 @@ def _predict_many(fit: "PreisachFit", tau2d: np.ndarray) -> np.ndarray:
     return fit.theta0_rad + fit.elastic_compliance_rad_per_nm * tau2d + out
 
 
-def preisach_response(torque_nm, *, alpha_nm, beta_nm, weight_rad, elastic_compliance_rad_per_nm,
-                      theta0_rad=0.0) -> np.ndarray:
+def preisach_response(
+    torque_nm, *, alpha_nm, beta_nm, weight_rad, elastic_compliance_rad_per_nm, theta0_rad=0.0
+) -> np.ndarray:
     """Angles (rad) of a symmetric discrete Preisach model along a torque path (see the module notes)."""
-    fit = PreisachFit(np.asarray(alpha_nm, float), np.asarray(beta_nm, float), np.asarray(weight_rad, float),
-                      float(theta0_rad), float(elastic_compliance_rad_per_nm), np.zeros(1))
+    fit = PreisachFit(
+        np.asarray(alpha_nm, float),
+        np.asarray(beta_nm, float),
+        np.asarray(weight_rad, float),
+        float(theta0_rad),
+        float(elastic_compliance_rad_per_nm),
+        np.zeros(1),
+    )
     return fit.predict(torque_nm)
 
 
-def fit_preisach(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, max_thresholds=64,
-                 torque_sources=None) -> PreisachFit:
+def fit_preisach(
+    torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, max_thresholds=64, torque_sources=None
+) -> PreisachFit:
     """Fit the symmetric discrete Preisach model to one loop by non-negative least squares.
 
     Parameters
@@ -307,9 +321,17 @@ def fit_preisach(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, max_thre
     # the data, and the projected χ² of the correlated model then reads about 2 on exact loops (found on
     # simulated bilinear sessions); the marginal σ is the conservative choice here
     check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
-    return PreisachFit(alpha_nm=a, beta_nm=b, weight_rad=coef[3:], theta0_rad=float(coef[0] - coef[1]),
-                       elastic_compliance_rad_per_nm=float(coef[2]), residual_rad=resid, n_params=n_pos,
-                       check=check, levels_nm=np.unique(np.round(tau, 12)))
+    return PreisachFit(
+        alpha_nm=a,
+        beta_nm=b,
+        weight_rad=coef[3:],
+        theta0_rad=float(coef[0] - coef[1]),
+        elastic_compliance_rad_per_nm=float(coef[2]),
+        residual_rad=resid,
+        n_params=n_pos,
+        check=check,
+        levels_nm=np.unique(np.round(tau, 12)),
+    )
 
 
 def density_summary(fit: PreisachFit) -> dict:

@@ -55,8 +55,8 @@ import numpy as np
 import pandas as pd
 
 from ..errors import AnalysisError
-from . import checks, metrics
 from ..numerics import numeric_jacobian
+from . import checks, metrics
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
 from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
@@ -69,8 +69,8 @@ from .uncertainty import (
     compact_sources,
     least_squares_weights,
     monte_carlo_std,
-    stds_of_draws,
     std_by_kind,
+    stds_of_draws,
     torque_sources,
 )
 
@@ -85,8 +85,22 @@ _TOL = 1e-9  # N·m: torque levels closer than this are the same level
 #: Kinds of torque-error source (:func:`.uncertainty.torque_sources`) kept apart in the budget.
 SOURCE_KINDS = ("weights", "g_r", "friction", "level")
 #: Columns of :attr:`SessionAnalysis.figures`.
-FIGURE_COLUMNS = ["orientation_deg", "cycle", "figure", "unit", "value", "std", "std_angle", "std_torque", "u95",
-                  "method", "flag", *[f"std_{k}" for k in SOURCE_KINDS], "std_lack_of_fit", "reduced_chi2"]
+FIGURE_COLUMNS = [
+    "orientation_deg",
+    "cycle",
+    "figure",
+    "unit",
+    "value",
+    "std",
+    "std_angle",
+    "std_torque",
+    "u95",
+    "method",
+    "flag",
+    *[f"std_{k}" for k in SOURCE_KINDS],
+    "std_lack_of_fit",
+    "reduced_chi2",
+]
 
 
 def _lm_name(fraction: float) -> str:
@@ -201,7 +215,8 @@ class SessionAnalysis:
             "checks": _jsonable(self.checks),
             "model_checks": [
                 {"orientation_deg": o, "cycle": c, "model": m, **chk.to_dict()}
-                for (o, c), f in self.fits.items() for m, chk in f.get("checks", {}).items()
+                for (o, c), f in self.fits.items()
+                for m, chk in f.get("checks", {}).items()
             ],
         }
 
@@ -233,21 +248,32 @@ class _Collector:
     def __init__(self, loop: Loop, issues: list):
         self.loop, self.issues, self.rows = loop, issues, []
 
-    def add(self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method="", *, parts=None, check=None,
-            flag=""):
+    def add(
+        self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method="", *, parts=None, check=None, flag=""
+    ):
         """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u."""
         infl, red = 1.0, np.nan
         if check is not None and check.testable:
             red = check.reduced_chi2
             if check.rejected:
                 infl = check.inflation
-                flag = "; ".join(x for x in (flag, f"flagged, uncertainty ×{infl:.3g} (√χ²_red): {check.describe()}") if x)
+                flag = "; ".join(
+                    x for x in (flag, f"flagged, uncertainty ×{infl:.3g} (√χ²_red): {check.describe()}") if x
+                )
         std0 = float(np.hypot(std_angle, std_torque))
         std = std0 * infl
         row = {
-            "orientation_deg": self.loop.orientation_deg, "cycle": self.loop.cycle, "figure": figure, "unit": unit,
-            "value": float(value), "std": std, "std_angle": float(std_angle) * infl,
-            "std_torque": float(std_torque) * infl, "u95": COVERAGE_FACTOR * std, "method": method, "flag": flag,
+            "orientation_deg": self.loop.orientation_deg,
+            "cycle": self.loop.cycle,
+            "figure": figure,
+            "unit": unit,
+            "value": float(value),
+            "std": std,
+            "std_angle": float(std_angle) * infl,
+            "std_torque": float(std_torque) * infl,
+            "u95": COVERAGE_FACTOR * std,
+            "method": method,
+            "flag": flag,
             "std_lack_of_fit": std0 * math.sqrt(max(infl**2 - 1.0, 0.0)) if np.isfinite(std0) else np.nan,
             "reduced_chi2": red,
         }
@@ -263,12 +289,20 @@ class _Collector:
 
 
 def _expected_start_end(phase, tmax, tmin):
-    return {"positive_unloading": (tmax, 0.0), "negative_loading": (0.0, tmin),
-            "negative_unloading": (tmin, 0.0), "positive_loading": (0.0, tmax)}[phase]
+    return {
+        "positive_unloading": (tmax, 0.0),
+        "negative_loading": (0.0, tmin),
+        "negative_unloading": (tmin, 0.0),
+        "positive_loading": (0.0, tmax),
+    }[phase]
 
 
-_PREVIOUS = {"negative_loading": "positive_unloading", "negative_unloading": "negative_loading",
-             "positive_loading": "negative_unloading", "positive_unloading": "positive_loading"}
+_PREVIOUS = {
+    "negative_loading": "positive_unloading",
+    "negative_unloading": "negative_loading",
+    "positive_loading": "negative_unloading",
+    "positive_unloading": "positive_loading",
+}
 
 
 def _phase_samples(seq: pd.DataFrame, loop: Loop, phase: str, tmax: float, tmin: float):
@@ -289,8 +323,15 @@ def _parts_first_order(gt_row_kinds: dict, index: int, scale: float) -> dict:
     return {k: float(v[index]) * scale for k, v in gt_row_kinds.items()}
 
 
-def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_local: np.ndarray,
-                   sources: np.ndarray, kinds: np.ndarray, levels: np.ndarray):
+def _phase_figures(
+    col: _Collector,
+    phase_rows: list,
+    seq: pd.DataFrame,
+    rows_local: np.ndarray,
+    sources: np.ndarray,
+    kinds: np.ndarray,
+    levels: np.ndarray,
+):
     """Stiffness of each phase: straight line (gated), two stiffnesses if it switches, secant."""
     loop = col.loop
     tau_all = seq["torque_nm"].to_numpy(float)
@@ -305,13 +346,24 @@ def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_lo
         src, knd = compact_sources(sources[pos], kinds)
         src_local = src[:, np.asarray(knd) != "g_r"]
         start, end = _expected_start_end(phase, tmax, tmin)
-        row = {"orientation_deg": loop.orientation_deg, "cycle": loop.cycle, "phase": phase,
-               "torque_from_nm": float(tau[0]) if tau.size else np.nan,
-               "torque_to_nm": float(tau[-1]) if tau.size else np.nan, "n_points": int(pos.size),
-               "stiffness_nm_per_rad": np.nan, "stiffness_std_nm_per_rad": np.nan, "residual_rms_deg": np.nan,
-               "reduced_chi2": np.nan, "stiffness_below_nm_per_rad": np.nan, "stiffness_above_nm_per_rad": np.nan,
-               "switch_torque_nm": np.nan, "secant_nm_per_rad": np.nan, "secant_std_nm_per_rad": np.nan,
-               "note": ""}
+        row = {
+            "orientation_deg": loop.orientation_deg,
+            "cycle": loop.cycle,
+            "phase": phase,
+            "torque_from_nm": float(tau[0]) if tau.size else np.nan,
+            "torque_to_nm": float(tau[-1]) if tau.size else np.nan,
+            "n_points": int(pos.size),
+            "stiffness_nm_per_rad": np.nan,
+            "stiffness_std_nm_per_rad": np.nan,
+            "residual_rms_deg": np.nan,
+            "reduced_chi2": np.nan,
+            "stiffness_below_nm_per_rad": np.nan,
+            "stiffness_above_nm_per_rad": np.nan,
+            "switch_torque_nm": np.nan,
+            "secant_nm_per_rad": np.nan,
+            "secant_std_nm_per_rad": np.nan,
+            "note": "",
+        }
         if pos.size == 0:
             col.fail(name, "nm_per_rad", f"phase {phase} is missing (no usable image)")
             _finish_phase_row(row, phase_rows)
@@ -327,20 +379,41 @@ def _phase_figures(col: _Collector, phase_rows: list, seq: pd.DataFrame, rows_lo
             res = None
         if res is not None:
             b = res["compliance_rad_per_nm"]
-            chk = lack_of_fit(res["residual_rad"], angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=b,
-                              n_params=2, torque_sources=src_local, jacobian=np.column_stack([np.ones_like(tau), tau]),
-                              weights=1.0 / np.maximum(sa**2 + (b * st) ** 2, 1e-300))
+            chk = lack_of_fit(
+                res["residual_rad"],
+                angle_std_rad=sa,
+                torque_std_nm=st,
+                compliance_rad_per_nm=b,
+                n_params=2,
+                torque_sources=src_local,
+                jacobian=np.column_stack([np.ones_like(tau), tau]),
+                weights=1.0 / np.maximum(sa**2 + (b * st) ** 2, 1e-300),
+            )
             row.update(residual_rms_deg=math.degrees(res["residual_rms_rad"]), reduced_chi2=chk.reduced_chi2)
             if chk.rejected:
                 switched = True
-                col.fail(name, "nm_per_rad", f"phase {phase}: a straight line does not fit, withheld ({chk.describe()}); "
-                         "the phase is given as its stiffness below and above the switch, and its secant")
+                col.fail(
+                    name,
+                    "nm_per_rad",
+                    f"phase {phase}: a straight line does not fit, withheld ({chk.describe()}); "
+                    "the phase is given as its stiffness below and above the switch, and its secant",
+                )
                 row["note"] = "straight line rejected (lack of fit)"
             else:
-                col.add(name, "nm_per_rad", res["value"], res["std_angle"], res["std_torque"], "first-order",
-                        parts=_slope_parts(tau, th, sa, st, src, knd, res["value"]), check=chk)
-                row.update(stiffness_nm_per_rad=res["value"],
-                           stiffness_std_nm_per_rad=math.hypot(res["std_angle"], res["std_torque"]))
+                col.add(
+                    name,
+                    "nm_per_rad",
+                    res["value"],
+                    res["std_angle"],
+                    res["std_torque"],
+                    "first-order",
+                    parts=_slope_parts(tau, th, sa, st, src, knd, res["value"]),
+                    check=chk,
+                )
+                row.update(
+                    stiffness_nm_per_rad=res["value"],
+                    stiffness_std_nm_per_rad=math.hypot(res["std_angle"], res["std_torque"]),
+                )
         if switched:
             _switch_figures(col, row, phase, tau, th, sa, st, src_local, src)
         _phase_secant(col, row, phase, tau, th, sa, seq["torque_std_nm"].to_numpy(float)[pos], start, end, missing)
@@ -366,27 +439,53 @@ def _switch_figures(col, row, phase, tau, th, sa, st, src_local, src):
         for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
             col.fail(n, u, f"phase {phase}: {exc}")
         return
-    chk = lack_of_fit(th - sw["model"], angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=sw["compliance"],
-                      n_params=sw["n_params"], torque_sources=src_local, jacobian=sw["design"], weights=sw["weights"])
+    chk = lack_of_fit(
+        th - sw["model"],
+        angle_std_rad=sa,
+        torque_std_nm=st,
+        compliance_rad_per_nm=sw["compliance"],
+        n_params=sw["n_params"],
+        torque_sources=src_local,
+        jacobian=sw["design"],
+        weights=sw["weights"],
+    )
     if chk.rejected:
         for n, u in zip(names, ("nm_per_rad", "nm_per_rad", "nm")):
-            col.fail(n, u, f"phase {phase}: two stiffnesses with one switch do not fit either, withheld "
-                           f"({chk.describe()}); see the secant and the model fits")
+            col.fail(
+                n,
+                u,
+                f"phase {phase}: two stiffnesses with one switch do not fit either, withheld "
+                f"({chk.describe()}); see the secant and the model fits",
+            )
         return
     for n, key in zip(names[:2], ("k_below", "k_above")):
         col.add(n, "nm_per_rad", sw[key], sw["std_angle"][key], sw["std_torque"][key], "first-order", check=chk)
-    col.add(names[2], "nm", sw["switch_nm"], sw["std_angle"]["switch_nm"], sw["std_torque"]["switch_nm"],
-            "first-order (switch torque from the phase start)", check=chk)
-    row.update(stiffness_below_nm_per_rad=sw["k_below"], stiffness_above_nm_per_rad=sw["k_above"],
-               switch_torque_nm=sw["switch_nm"])
+    col.add(
+        names[2],
+        "nm",
+        sw["switch_nm"],
+        sw["std_angle"]["switch_nm"],
+        sw["std_torque"]["switch_nm"],
+        "first-order (switch torque from the phase start)",
+        check=chk,
+    )
+    row.update(
+        stiffness_below_nm_per_rad=sw["k_below"],
+        stiffness_above_nm_per_rad=sw["k_above"],
+        switch_torque_nm=sw["switch_nm"],
+    )
 
 
 def _phase_secant(col, row, phase, tau, th, sa, st, start, end, missing):
     name = f"k_{phase}_secant"
     if abs(tau[0] - start) > _TOL or abs(tau[-1] - end) > _TOL:
         which = "starting" if abs(tau[0] - start) > _TOL else "last"
-        col.fail(name, "nm_per_rad", f"phase {phase}: its {which} image ({start if which == 'starting' else end:+.4g} "
-                 "N·m) is missing, so the secant over the phase cannot be formed")
+        col.fail(
+            name,
+            "nm_per_rad",
+            f"phase {phase}: its {which} image ({start if which == 'starting' else end:+.4g} "
+            "N·m) is missing, so the secant over the phase cannot be formed",
+        )
         return
     try:
         k, s_a, s_t = secant(tau, th, angle_std_rad=sa, torque_std_nm=st)
@@ -411,8 +510,10 @@ def _loop_problem(loop: Loop) -> str | None:
         return f"phase(s) {', '.join(missing)} missing: the loop is not closed"
     few = [f"{p} ({n})" for p, n in counts.items() if n < _MIN_PHASE_POINTS_FOR_LOOP]
     if few:
-        return (f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least "
-                f"{_MIN_PHASE_POINTS_FOR_LOOP} per phase")
+        return (
+            f"too few usable images in phase(s) {', '.join(few)}: the loop needs at least "
+            f"{_MIN_PHASE_POINTS_FOR_LOOP} per phase"
+        )
     lo, hi = float(loop.torque_nm.min()), float(loop.torque_nm.max())
     if not (lo < 0 < hi):
         return f"torque never reverses sign in this cycle (range {lo:.4g} to {hi:.4g} N·m): there is no loop"
@@ -428,7 +529,8 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
         hyst, loss = metrics.loop_width(td, yd, ta, ya, tol=tol)
         energy = metrics.loop_energy(tau, th)
         out = {
-            "hysteresis": np.degrees(hyst), "hysteresis_loss": np.degrees(loss),
+            "hysteresis": np.degrees(hyst),
+            "hysteresis_loss": np.degrees(loss),
             "secant_stiffness": metrics.secant_stiffness(td, yd, ta, ya, lower_nm=sec_lo, upper_nm=sec_hi, tol=tol),
             "loop_energy": energy,
             "loss_factor": metrics.loss_factor(
@@ -443,8 +545,13 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
 
 
 def _mc_units(settings):
-    units = {"hysteresis": "deg", "hysteresis_loss": "deg", "secant_stiffness": "nm_per_rad", "loop_energy": "j",
-             "loss_factor": "1"}
+    units = {
+        "hysteresis": "deg",
+        "hysteresis_loss": "deg",
+        "secant_stiffness": "nm_per_rad",
+        "loop_energy": "j",
+        "loss_factor": "1",
+    }
     units.update({_lm_name(f): "deg" for f in settings["lost_motion_fractions"]})
     return units
 
@@ -479,8 +586,10 @@ def _gap_reasons(settings, tau, is_desc, levels) -> dict:
         for rn, at in where:
             g = checks.gap_between(runs[rn], levels, at)
             if g:
-                out[name] = (f"{at:+.4g} N·m is not bracketed by adjacent measured levels in the {rn} run "
-                             f"(missing {', '.join(f'{v:+.4g}' for v in g)} N·m): not interpolated across the gap, withheld")
+                out[name] = (
+                    f"{at:+.4g} N·m is not bracketed by adjacent measured levels in the {rn} run "
+                    f"(missing {', '.join(f'{v:+.4g}' for v in g)} N·m): not interpolated across the gap, withheld"
+                )
                 return
 
     point("hysteresis_loss", [("descending", 0.0), ("ascending", 0.0)])
@@ -533,8 +642,16 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
     # step of extrapolation for the draws (the nominal value itself is never extrapolated)
     gaps_ = np.diff(np.unique(tau))
     evaluate_mc = _mc_evaluator(is_desc, top, bottom, settings, tol=0.5 * float(gaps_.min()) if gaps_.size else _TOL)
-    std_a, std_t, by_kind = monte_carlo_std(evaluate_mc, tau, th, angle_std_rad=th_std, torque_sources=sources,
-                                            n_draws=settings["n_draws"], seed=seed, kinds=kinds)
+    std_a, std_t, by_kind = monte_carlo_std(
+        evaluate_mc,
+        tau,
+        th,
+        angle_std_rad=th_std,
+        torque_sources=sources,
+        n_draws=settings["n_draws"],
+        seed=seed,
+        kinds=kinds,
+    )
     method = "monte-carlo"
     if pre is not None and not pre.check.rejected and sources.shape[1]:
         std_t, by_kind = _torque_through_model(evaluate, loop, pre, th, kinds, settings["n_draws"], seed)
@@ -553,7 +670,6 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
 
 def _catalogue_figures(col: _Collector, settings: dict, runs):
     tau, th, th_std, is_desc, sources, kinds = runs
-    loop = col.loop
     seg_mask = (is_desc & (tau <= 0)) | (~is_desc & (tau >= 0))
     t, y, sa = tau[seg_mask], th[seg_mask], th_std[seg_mask]
     branch = np.where(is_desc[seg_mask], -1, 1)
@@ -564,12 +680,27 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
     breaks = settings.get("catalogue_breaks_nm")
     try:
         if breaks is not None:
-            res = fit_fixed_breaks(t, y, branch=branch, breaks_nm=breaks, angle_std_rad=sa, torque_std_nm=st_local,
-                                   torque_sources=src, gate_sources=src_local)
+            res = fit_fixed_breaks(
+                t,
+                y,
+                branch=branch,
+                breaks_nm=breaks,
+                angle_std_rad=sa,
+                torque_std_nm=st_local,
+                torque_sources=src,
+                gate_sources=src_local,
+            )
             method = "linear least squares, catalogue T1/T2 fixed"
         elif settings["fit_breaks"]:
-            res = fit_catalogue_breaks(t, y, branch=branch, angle_std_rad=sa, torque_std_nm=st_local,
-                                       torque_sources=src, gate_sources=src_local)
+            res = fit_catalogue_breaks(
+                t,
+                y,
+                branch=branch,
+                angle_std_rad=sa,
+                torque_std_nm=st_local,
+                torque_sources=src,
+                gate_sources=src_local,
+            )
             method = "breaks fitted (uncertainty with the breaks held)"
         else:
             for n, u in names:
@@ -605,8 +736,13 @@ def _mc_reason(name, tau, settings):
     return f"the two runs do not overlap in torque or the loop is degenerate (torque {lo:.4g} to {hi:.4g} N·m)"
 
 
-_BW_UNITS = {"k_e": ("nm_per_rad", 1.0), "z_s": ("deg", 180 / math.pi), "a": ("per_nm", 1.0),
-             "rho": ("1", 1.0), "n": ("1", 1.0)}
+_BW_UNITS = {
+    "k_e": ("nm_per_rad", 1.0),
+    "z_s": ("deg", 180 / math.pi),
+    "a": ("per_nm", 1.0),
+    "rho": ("1", 1.0),
+    "n": ("1", 1.0),
+}
 _BW_BOUNDS = {"rho": (1e-12, 0.5), "n": (0.3, 40.0)}
 
 
@@ -641,27 +777,53 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     else:
         out["bilinear"] = bil
         model = bil.predict(loop.torque_nm)
-        chk = lack_of_fit(loop.angle_rad - model, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
-                          compliance_rad_per_nm=path_compliance(loop.torque_nm, model), n_params=4,
-                          torque_sources=loop.local_sources(), jacobian=_bilinear_jacobian(bil, loop.torque_nm),
-                          weights=least_squares_weights(loop.angle_std_rad))
+        chk = lack_of_fit(
+            loop.angle_rad - model,
+            angle_std_rad=loop.angle_std_rad,
+            torque_std_nm=st,
+            compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+            n_params=4,
+            torque_sources=loop.local_sources(),
+            jacobian=_bilinear_jacobian(bil, loop.torque_nm),
+            weights=least_squares_weights(loop.angle_std_rad),
+        )
         out["checks"]["bilinear"] = chk
-        for name, attr, unit in (("k_u", "k_u_nm_per_rad", "nm_per_rad"), ("k_l", "k_l_nm_per_rad", "nm_per_rad"),
-                                 ("tau_c", "tau_c_nm", "nm")):
-            col.add(f"bilinear_{name}", unit, getattr(bil, attr), bil.std_angle[name], bil.std_torque[name],
-                    "first-order", check=chk)
+        for name, attr, unit in (
+            ("k_u", "k_u_nm_per_rad", "nm_per_rad"),
+            ("k_l", "k_l_nm_per_rad", "nm_per_rad"),
+            ("tau_c", "tau_c_nm", "nm"),
+        ):
+            col.add(
+                f"bilinear_{name}",
+                unit,
+                getattr(bil, attr),
+                bil.std_angle[name],
+                bil.std_torque[name],
+                "first-order",
+                check=chk,
+            )
         col.add("bilinear_residual_rms", "deg", math.degrees(bil.residual_rms_rad), method="fit statistic")
     if settings["fit_preisach"]:
         try:
-            pre = fit_preisach(loop.torque_nm, loop.angle_rad, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
-                               torque_sources=loop.local_sources())
+            pre = fit_preisach(
+                loop.torque_nm,
+                loop.angle_rad,
+                angle_std_rad=loop.angle_std_rad,
+                torque_std_nm=st,
+                torque_sources=loop.local_sources(),
+            )
         except AnalysisError as exc:
             col.fail("preisach_residual_rms", "deg", str(exc))
         else:
             out["preisach"] = pre
             out["checks"]["preisach"] = pre.check
-            col.add("preisach_residual_rms", "deg", math.degrees(pre.residual_rms_rad), method="fit statistic",
-                    flag=f"Preisach model rejected: {pre.check.describe()}" if pre.check.rejected else "")
+            col.add(
+                "preisach_residual_rms",
+                "deg",
+                math.degrees(pre.residual_rms_rad),
+                method="fit statistic",
+                flag=f"Preisach model rejected: {pre.check.describe()}" if pre.check.rejected else "",
+            )
     if not settings["fit_bouc_wen"]:
         return out
     try:
@@ -673,20 +835,37 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
         return out
     out["bouc_wen"] = bw
     model = bw.predict(loop.torque_nm)
-    chk = lack_of_fit(loop.angle_rad - model, angle_std_rad=loop.angle_std_rad, torque_std_nm=st,
-                      compliance_rad_per_nm=path_compliance(loop.torque_nm, model), n_params=6,
-                      torque_sources=loop.local_sources())
+    chk = lack_of_fit(
+        loop.angle_rad - model,
+        angle_std_rad=loop.angle_std_rad,
+        torque_std_nm=st,
+        compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+        n_params=6,
+        torque_sources=loop.local_sources(),
+    )
     out["checks"]["bouc_wen"] = chk
     for name, (unit, scale) in _BW_UNITS.items():
         v = bw.params[name]
         lo_hi = _BW_BOUNDS.get(name)
         on_bound = lo_hi is not None and (v <= lo_hi[0] * 1.001 or v >= lo_hi[1] * 0.999)
         if on_bound:
-            col.add(f"bouc_wen_{name}", unit, v * scale, method="first-order",
-                    flag=f"parameter on its bound ({lo_hi[0]:g} to {lo_hi[1]:g}): not identified, no uncertainty given")
+            col.add(
+                f"bouc_wen_{name}",
+                unit,
+                v * scale,
+                method="first-order",
+                flag=f"parameter on its bound ({lo_hi[0]:g} to {lo_hi[1]:g}): not identified, no uncertainty given",
+            )
         else:
-            col.add(f"bouc_wen_{name}", unit, v * scale, bw.std_angle[name] * scale, bw.std_torque[name] * scale,
-                    "first-order", check=chk)
+            col.add(
+                f"bouc_wen_{name}",
+                unit,
+                v * scale,
+                bw.std_angle[name] * scale,
+                bw.std_torque[name] * scale,
+                "first-order",
+                check=chk,
+            )
     col.add("bouc_wen_residual_rms", "deg", math.degrees(bw.residual_rms_rad), method="fit statistic")
     return out
 
@@ -700,11 +879,16 @@ def _outlier_issues(col: _Collector, pre):
     sig = np.sqrt(loop.angle_std_rad**2 + (comp * loop.local_std()) ** 2)
     found = checks.outliers(loop.images, pre.residual_rad, sig)
     for image, z in found:
-        col.issues.append(Issue(loop.orientation_deg, loop.cycle, "outlier",
-                                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit): a forgotten or "
-                                "extra weight, or a missed or extra shot?"))
+        col.issues.append(
+            Issue(
+                loop.orientation_deg,
+                loop.cycle,
+                "outlier",
+                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit): a forgotten or "
+                "extra weight, or a missed or extra shot?",
+            )
+        )
     return found
-
 
 
 def _wide(figures: pd.DataFrame) -> pd.DataFrame:
@@ -769,10 +953,24 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     return out
 
 
-def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, catalogue_breaks_nm=None,
-                    fit_breaks=True, secant_interval_nm=None, gear_ratio=None, torque_correlation=None, rig=None,
-                    lost_motion_fractions=(0.03, 0.04), secant_interval=(0.5, 1.0), n_draws=400, seed=0,
-                    fit_bouc_wen=False, fit_preisach=True) -> SessionAnalysis:
+def analyze_session(
+    measurements,
+    *,
+    max_torque_nm=None,
+    rated_torque_nm=None,
+    catalogue_breaks_nm=None,
+    fit_breaks=True,
+    secant_interval_nm=None,
+    gear_ratio=None,
+    torque_correlation=None,
+    rig=None,
+    lost_motion_fractions=(0.03, 0.04),
+    secant_interval=(0.5, 1.0),
+    n_draws=400,
+    seed=0,
+    fit_bouc_wen=False,
+    fit_preisach=True,
+) -> SessionAnalysis:
     """Analyse the torque–angle table of a session: every figure of every loop, checked.
 
     Parameters
@@ -847,7 +1045,9 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
     if n_draws < 10:
         raise AnalysisError(f"n_draws must be at least 10, got {n_draws}")
     if not (0 <= secant_interval[0] < secant_interval[1] <= 1):
-        raise AnalysisError(f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}")
+        raise AnalysisError(
+            f"secant_interval must be fractions 0 <= a < b <= 1 of the max torque, got {secant_interval}"
+        )
     fr = list(lost_motion_fractions)
     if not fr or not all(isinstance(f, (int, float)) and 0 < f < 1 for f in fr):
         raise AnalysisError(f"lost_motion_fractions must be fractions in (0, 1), got {lost_motion_fractions}")
@@ -857,7 +1057,9 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
     if catalogue_breaks_nm is not None:
         cb = [float(v) for v in catalogue_breaks_nm]
         if len(cb) != 2 or not (0 < cb[0] < cb[1]):
-            raise AnalysisError(f"catalogue_breaks_nm must be (T1, T2) with 0 < T1 < T2 (N·m), got {catalogue_breaks_nm}")
+            raise AnalysisError(
+                f"catalogue_breaks_nm must be (T1, T2) with 0 < T1 < T2 (N·m), got {catalogue_breaks_nm}"
+            )
         catalogue_breaks_nm = cb
     if torque_correlation is None:
         torque_correlation = "level" if rig is None else "pieces"
@@ -876,17 +1078,24 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
         raise AnalysisError(f"secant_interval_nm must be (a, b) with 0 <= a < b (N·m), got {secant_interval_nm}")
     lm_ref = float(rated_torque_nm) if rated_torque_nm is not None else float(max_torque_nm)
     settings = {
-        "max_torque_nm": float(max_torque_nm), "torque_correlation": torque_correlation,
-        "lost_motion_fractions": [float(f) for f in fr], "lost_motion_reference_nm": lm_ref,
-        "lost_motion_reference": "rated torque T_R" if rated_torque_nm is not None else
-        "maximum test torque (no rated torque given)",
+        "max_torque_nm": float(max_torque_nm),
+        "torque_correlation": torque_correlation,
+        "lost_motion_fractions": [float(f) for f in fr],
+        "lost_motion_reference_nm": lm_ref,
+        "lost_motion_reference": "rated torque T_R"
+        if rated_torque_nm is not None
+        else "maximum test torque (no rated torque given)",
         "rated_torque_nm": None if rated_torque_nm is None else float(rated_torque_nm),
         "secant_interval": [float(f) for f in secant_interval],
         "secant_interval_nm": [float(v) for v in secant_interval_nm],
-        "catalogue_breaks_nm": catalogue_breaks_nm, "fit_breaks": bool(fit_breaks),
+        "catalogue_breaks_nm": catalogue_breaks_nm,
+        "fit_breaks": bool(fit_breaks),
         "gear_ratio": None if gear_ratio is None else float(gear_ratio),
-        "n_draws": int(n_draws), "seed": int(seed), "fit_bouc_wen": bool(fit_bouc_wen),
-        "fit_preisach": bool(fit_preisach), "coverage_factor": COVERAGE_FACTOR,
+        "n_draws": int(n_draws),
+        "seed": int(seed),
+        "fit_bouc_wen": bool(fit_bouc_wen),
+        "fit_preisach": bool(fit_preisach),
+        "coverage_factor": COVERAGE_FACTOR,
         "rig": None if rig is None else rig.to_dict(),
     }
     issues: list[Issue] = []
@@ -898,17 +1107,29 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
         issues.append(Issue(orient, cycle, "*", f"image {r.image} ({r.phase}, step {r.step}) excluded: {r.message}"))
     inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"])
     if inverted:
-        issues.append(Issue(None, None, "angle sign",
-                            "angle_sign looks inverted; set angle_sign = -1 in session.toml (the angle falls as the "
-                            "torque rises; or multiply angle_deg by -1). Every figure is withheld until then."))
+        issues.append(
+            Issue(
+                None,
+                None,
+                "angle sign",
+                "angle_sign looks inverted; set angle_sign = -1 in session.toml (the angle falls as the "
+                "torque rises; or multiply angle_deg by -1). Every figure is withheld until then.",
+            )
+        )
     closure = checks.closure_checks(usable, closing)
     creep = {}
     for c in closure:
         if c["creep"]:
             creep.setdefault(c["orientation_deg"], []).append(c)
-            issues.append(Issue(c["orientation_deg"], None, "creep",
-                                f"{c['check']}: the angle moved by {c['difference_deg']:+.4g}° ({c['z']:+.1f}σ; "
-                                f"{c['image_first']} → {c['image_last']}): creep or a disturbed rig"))
+            issues.append(
+                Issue(
+                    c["orientation_deg"],
+                    None,
+                    "creep",
+                    f"{c['check']}: the angle moved by {c['difference_deg']:+.4g}° ({c['z']:+.1f}σ; "
+                    f"{c['image_first']} → {c['image_last']}): creep or a disturbed rig",
+                )
+            )
     levels = np.unique(np.round(usable["torque_nm"].to_numpy(float) / _TOL) * _TOL)
     all_sources, _, kinds = torque_sources(usable, correlation=torque_correlation, rig=rig, return_kinds=True)
     rows, phase_rows, fits, outlier_rows = [], [], {}, []
@@ -923,28 +1144,44 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
             col = _Collector(lp, issues)
             if inverted:
                 col.fail("*", "", "angle_sign looks inverted (set angle_sign = -1): figures withheld")
-                fits[(lp.orientation_deg, lp.cycle)] = {"bilinear": None, "bouc_wen": None, "preisach": None,
-                                                        "checks": {}}
+                fits[(lp.orientation_deg, lp.cycle)] = {
+                    "bilinear": None,
+                    "bouc_wen": None,
+                    "preisach": None,
+                    "checks": {},
+                }
                 rows.extend(col.rows)
                 continue
             _phase_figures(col, phase_rows, seq, local, sources, kinds, levels)
             problem = _loop_problem(lp)
             if problem is None:
                 fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
-                runs = _model_free_figures(col, settings, seed + i, levels,
-                                           pre=fits[(lp.orientation_deg, lp.cycle)]["preisach"])
+                runs = _model_free_figures(
+                    col, settings, seed + i, levels, pre=fits[(lp.orientation_deg, lp.cycle)]["preisach"]
+                )
                 _catalogue_figures(col, settings, runs)
                 for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
-                    outlier_rows.append({"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image,
-                                         "z": z})
+                    outlier_rows.append(
+                        {"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image, "z": z}
+                    )
             else:
-                for name, unit in {**_mc_units(settings), "k1": "nm_per_rad", "k2": "nm_per_rad", "k3": "nm_per_rad",
-                                   "bilinear_k_u": "nm_per_rad", "bilinear_k_l": "nm_per_rad",
-                                   "bilinear_tau_c": "nm"}.items():
+                for name, unit in {
+                    **_mc_units(settings),
+                    "k1": "nm_per_rad",
+                    "k2": "nm_per_rad",
+                    "k3": "nm_per_rad",
+                    "bilinear_k_u": "nm_per_rad",
+                    "bilinear_k_l": "nm_per_rad",
+                    "bilinear_tau_c": "nm",
+                }.items():
                     col.add(name, unit, np.nan)
                 issues.append(Issue(lp.orientation_deg, lp.cycle, "loop figures", problem))
-                fits[(lp.orientation_deg, lp.cycle)] = {"bilinear": None, "bouc_wen": None, "preisach": None,
-                                                        "checks": {}}
+                fits[(lp.orientation_deg, lp.cycle)] = {
+                    "bilinear": None,
+                    "bouc_wen": None,
+                    "preisach": None,
+                    "checks": {},
+                }
             if float(orient) in creep:
                 for r in col.rows:
                     if np.isfinite(r["value"]) and not r["flag"]:
@@ -956,11 +1193,18 @@ def analyze_session(measurements, *, max_torque_nm=None, rated_torque_nm=None, c
     _output_side(summary, settings)
     phases = pd.DataFrame(phase_rows)
     return SessionAnalysis(
-        figures=figures, loops=_wide(figures), phases=phases, summary=summary,
-        per_orientation=per_orientation, issues=issues, failed_images=failed, settings=settings,
-        loop_data=loops, fits=fits, n_images=int(len(measurements)),
-        checks={"angle_sign_inverted": bool(inverted), "closure": closure,
-                "outliers": outlier_rows},
+        figures=figures,
+        loops=_wide(figures),
+        phases=phases,
+        summary=summary,
+        per_orientation=per_orientation,
+        issues=issues,
+        failed_images=failed,
+        settings=settings,
+        loop_data=loops,
+        fits=fits,
+        n_images=int(len(measurements)),
+        checks={"angle_sign_inverted": bool(inverted), "closure": closure, "outliers": outlier_rows},
     )
 
 
@@ -978,6 +1222,9 @@ def _output_side(summary: dict, settings: dict) -> None:
         return
     for name, s in summary.items():
         if s.get("unit") == "nm_per_rad" and s.get("mean") is not None:
-            s["output_side"] = {"gear_ratio": i, "mean_nm_per_rad": s["mean"] * i * i,
-                                "mean_std_nm_per_rad": None if s.get("mean_std") is None else s["mean_std"] * i * i,
-                                "caveat": OUTPUT_SIDE_CAVEAT}
+            s["output_side"] = {
+                "gear_ratio": i,
+                "mean_nm_per_rad": s["mean"] * i * i,
+                "mean_std_nm_per_rad": None if s.get("mean_std") is None else s["mean_std"] * i * i,
+                "caveat": OUTPUT_SIDE_CAVEAT,
+            }

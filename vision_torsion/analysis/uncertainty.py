@@ -79,9 +79,21 @@ from ..errors import AnalysisError, RigError
 from ..measurements import PHASE_SIGN, TorqueRig, pieces_per_pan
 
 __all__ = [
-    "COVERAGE_FACTOR", "TORQUE_MODELS", "RIG_KEYS", "check_rig", "torque_groups", "torque_sources",
-    "pieces_per_pan", "group_sources", "compact_sources", "monte_carlo_std", "linearised_covariance", "torque_source_jacobian",
-    "std_by_kind", "PHASE_DIRECTION", "stds_of_draws",
+    "COVERAGE_FACTOR",
+    "TORQUE_MODELS",
+    "RIG_KEYS",
+    "check_rig",
+    "torque_groups",
+    "torque_sources",
+    "pieces_per_pan",
+    "group_sources",
+    "compact_sources",
+    "monte_carlo_std",
+    "linearised_covariance",
+    "torque_source_jacobian",
+    "std_by_kind",
+    "PHASE_DIRECTION",
+    "stds_of_draws",
 ]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
@@ -137,8 +149,14 @@ def check_rig(rig) -> TorqueRig:
 
 
 #: Direction of the torque change that led to an image of each phase (+1 rising).
-PHASE_DIRECTION = {"reference": 0, "positive_unloading": -1, "negative_loading": -1, "negative_unloading": 1,
-                   "positive_loading": 1, "closing": -1}
+PHASE_DIRECTION = {
+    "reference": 0,
+    "positive_unloading": -1,
+    "negative_loading": -1,
+    "negative_unloading": 1,
+    "positive_loading": 1,
+    "closing": -1,
+}
 
 
 def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9, return_kinds=False):
@@ -198,8 +216,10 @@ def torque_sources(frame, *, correlation="level", rig=None, resolution_nm=1e-9, 
     std = np.asarray(frame["torque_std_nm"], dtype=float).reshape(-1)
     if correlation not in TORQUE_MODELS:
         raise _error(f"torque_correlation must be one of {', '.join(TORQUE_MODELS)}, got {correlation!r}")
-    groups = torque_groups(tau, correlation="independent" if correlation == "independent" else "level",
-                           resolution_nm=resolution_nm)
+    groups = torque_groups(
+        tau, correlation="independent" if correlation == "independent" else "level", resolution_nm=resolution_nm
+    )
+
     def done(L, kinds):
         return (L, groups, np.asarray(kinds, dtype=object)) if return_kinds else (L, groups)
 
@@ -316,8 +336,19 @@ def _group_std(groups: np.ndarray, torque_std_nm: np.ndarray) -> np.ndarray:
     return out
 
 
-def monte_carlo_std(evaluate, torque_nm, angle_rad, *, angle_std_rad, torque_std_nm=None, groups=None,
-                    torque_sources=None, n_draws=400, seed=0, kinds=None):
+def monte_carlo_std(
+    evaluate,
+    torque_nm,
+    angle_rad,
+    *,
+    angle_std_rad,
+    torque_std_nm=None,
+    groups=None,
+    torque_sources=None,
+    n_draws=400,
+    seed=0,
+    kinds=None,
+):
     """Standard deviation of each figure of a loop from angle and from torque errors.
 
     Parameters

@@ -26,18 +26,28 @@ HEADLINE_FIGURES = [
     ("hysteresis_loss", "Hysteresis loss (width at 0 N·m)", "arcmin", 60.0),
     ("lost_motion_3pct", "Lost motion ±3 %", "arcmin", 60.0),
     ("lost_motion_4pct", "Lost motion ±4 %", "arcmin", 60.0),
-    ("k1", "K1", "N·m/rad", 1.0), ("k2", "K2", "N·m/rad", 1.0), ("k3", "K3", "N·m/rad", 1.0),
+    ("k1", "K1", "N·m/rad", 1.0),
+    ("k2", "K2", "N·m/rad", 1.0),
+    ("k3", "K3", "N·m/rad", 1.0),
     ("k_positive_unloading", "k positive unloading", "N·m/rad", 1.0),
     ("k_negative_loading_below", "k negative loading, below the switch", "N·m/rad", 1.0),
     ("k_negative_loading_above", "k negative loading, above the switch", "N·m/rad", 1.0),
     ("k_negative_loading_secant", "k negative loading, secant", "N·m/rad", 1.0),
     ("secant_stiffness", "Secant stiffness", "N·m/rad", 1.0),
     ("loop_energy", "Loop energy", "J", 1.0),
-    ("bilinear_k_u", "Bilinear k_u", "N·m/rad", 1.0), ("bilinear_k_l", "Bilinear k_l", "N·m/rad", 1.0),
+    ("bilinear_k_u", "Bilinear k_u", "N·m/rad", 1.0),
+    ("bilinear_k_l", "Bilinear k_l", "N·m/rad", 1.0),
 ]
-_PARTS = [("angle_noise", "angle noise"), ("repeatability", "repeatability (Type A)"), ("weights", "weights"),
-          ("g_r", "g and r"), ("friction", "friction"), ("level", "torque (per level)"),
-          ("torque_total", "torque (all)"), ("lack_of_fit", "lack of fit")]
+_PARTS = [
+    ("angle_noise", "angle noise"),
+    ("repeatability", "repeatability (Type A)"),
+    ("weights", "weights"),
+    ("g_r", "g and r"),
+    ("friction", "friction"),
+    ("level", "torque (per level)"),
+    ("torque_total", "torque (all)"),
+    ("lack_of_fit", "lack of fit"),
+]
 
 
 def _g2(v, scale):
@@ -62,14 +72,16 @@ def budget_section(analysis):
             row["output side (i²·K)"] = fmt_value(o["mean_nm_per_rad"], o["mean_std_nm_per_rad"])
         rows.append(row)
     frame = pd.DataFrame(rows).fillna("")
-    text = ("<p class=\"muted\">Standard uncertainty of each session mean and its parts (1σ, in the unit shown). "
-            "Repeatability is the observed scatter between loops (sd/√n); the propagated angle noise is inside it, "
-            "the larger of the two is used. Weights, g and r, friction and lack of fit are common to all loops and "
-            "do not average down. U95 = k·u with k from Student's t at the effective degrees of freedom.</p>")
+    text = (
+        '<p class="muted">Standard uncertainty of each session mean and its parts (1σ, in the unit shown). '
+        "Repeatability is the observed scatter between loops (sd/√n); the propagated angle noise is inside it, "
+        "the larger of the two is used. Weights, g and r, friction and lack of fit are common to all loops and "
+        "do not average down. U95 = k·u with k from Student's t at the effective degrees of freedom.</p>"
+    )
     if any(s.get("output_side") for s in analysis.summary.values()):
         from ..analysis.session import OUTPUT_SIDE_CAVEAT
 
-        text += f"<p class=\"note\">{html.escape(OUTPUT_SIDE_CAVEAT)}</p>"
+        text += f'<p class="note">{html.escape(OUTPUT_SIDE_CAVEAT)}</p>'
     return "Uncertainty budget of the headline figures", text + _table(frame, left=("figure", "unit"))
 
 
@@ -77,17 +89,27 @@ def model_section(analysis):
     rows = []
     for (o, c), f in sorted(analysis.fits.items()):
         for model, chk in f.get("checks", {}).items():
-            rows.append({"orientation": f"{o:g}°", "cycle": str(c), "model": model,
-                         "residual RMS (deg)": f"{math.degrees(chk.residual_rms_rad):.3g}",
-                         "noise RMS (deg)": f"{math.degrees(chk.noise_rms_rad):.3g}",
-                         "χ²_red": "—" if not chk.testable else f"{chk.reduced_chi2:.3g}",
-                         "dof": str(chk.dof), "p": "—" if not chk.testable else f"{chk.p_value:.2g}",
-                         "verdict": ("not testable: " + chk.reason) if not chk.testable else
-                         ("REJECTED: flagged, u × √χ²_red" if chk.rejected else "fits")})
-    text = ("<p class=\"muted\">Each model's residuals against the noise the table implies (angle noise and the "
-            "torque error through the local compliance); rejected at p &lt; 0.001. A rejected model's parameters "
-            "are flagged and their uncertainty multiplied by √χ²_red; a straight-line phase stiffness that does "
-            "not fit is withheld and replaced by the stiffnesses below and above the switch.</p>")
+            rows.append(
+                {
+                    "orientation": f"{o:g}°",
+                    "cycle": str(c),
+                    "model": model,
+                    "residual RMS (deg)": f"{math.degrees(chk.residual_rms_rad):.3g}",
+                    "noise RMS (deg)": f"{math.degrees(chk.noise_rms_rad):.3g}",
+                    "χ²_red": "—" if not chk.testable else f"{chk.reduced_chi2:.3g}",
+                    "dof": str(chk.dof),
+                    "p": "—" if not chk.testable else f"{chk.p_value:.2g}",
+                    "verdict": ("not testable: " + chk.reason)
+                    if not chk.testable
+                    else ("REJECTED: flagged, u × √χ²_red" if chk.rejected else "fits"),
+                }
+            )
+    text = (
+        '<p class="muted">Each model\'s residuals against the noise the table implies (angle noise and the '
+        "torque error through the local compliance); rejected at p &lt; 0.001. A rejected model's parameters "
+        "are flagged and their uncertainty multiplied by √χ²_red; a straight-line phase stiffness that does "
+        "not fit is withheld and replaced by the stiffnesses below and above the switch.</p>"
+    )
     return "Do the models fit? (lack-of-fit test)", text + _table(pd.DataFrame(rows), left=("model", "verdict"))
 
 
@@ -95,21 +117,47 @@ def checks_section(analysis):
     ch = analysis.checks or {}
     parts = []
     if ch.get("angle_sign_inverted"):
-        parts.append('<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml. Every figure '
-                     "is withheld until then.</p>")
-    clo = pd.DataFrame([{"orientation": f"{c['orientation_deg']:g}°", "comparison": c["check"],
-                         "images": f"{c['image_first']} → {c['image_last']}",
-                         "Δθ (deg)": fmt_value(c["difference_deg"], c["std_deg"]), "z": f"{c['z']:+.1f}",
-                         "verdict": "CREEP / DRIFT (figures flagged)" if c["creep"] else "closes within the noise"}
-                        for c in ch.get("closure", [])])
-    parts.append("<h3>Loop closure and creep (the same load state twice)</h3>"
-                 + (_table(clo, left=("comparison", "images", "verdict")) if len(clo) else
-                    '<p class="muted">No load state was photographed twice (a plan with a closing image gives one '
-                    "per orientation).</p>"))
-    out = pd.DataFrame([{"orientation": f"{r['orientation_deg']:g}°", "cycle": str(r["cycle"]), "image": r["image"],
-                         "off by (σ)": f"{r['z']:+.1f}"} for r in ch.get("outliers", [])])
-    parts.append("<h3>Images more than 4σ off their loop's model</h3>"
-                 + (_table(out, left=("image",)) if len(out) else '<p class="ok">None.</p>'))
+        parts.append(
+            '<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml. Every figure '
+            "is withheld until then.</p>"
+        )
+    clo = pd.DataFrame(
+        [
+            {
+                "orientation": f"{c['orientation_deg']:g}°",
+                "comparison": c["check"],
+                "images": f"{c['image_first']} → {c['image_last']}",
+                "Δθ (deg)": fmt_value(c["difference_deg"], c["std_deg"]),
+                "z": f"{c['z']:+.1f}",
+                "verdict": "CREEP / DRIFT (figures flagged)" if c["creep"] else "closes within the noise",
+            }
+            for c in ch.get("closure", [])
+        ]
+    )
+    parts.append(
+        "<h3>Loop closure and creep (the same load state twice)</h3>"
+        + (
+            _table(clo, left=("comparison", "images", "verdict"))
+            if len(clo)
+            else '<p class="muted">No load state was photographed twice (a plan with a closing image gives one '
+            "per orientation).</p>"
+        )
+    )
+    out = pd.DataFrame(
+        [
+            {
+                "orientation": f"{r['orientation_deg']:g}°",
+                "cycle": str(r["cycle"]),
+                "image": r["image"],
+                "off by (σ)": f"{r['z']:+.1f}",
+            }
+            for r in ch.get("outliers", [])
+        ]
+    )
+    parts.append(
+        "<h3>Images more than 4σ off their loop's model</h3>"
+        + (_table(out, left=("image",)) if len(out) else '<p class="ok">None.</p>')
+    )
     return "Checks on the data", "\n".join(parts)
 
 
@@ -119,8 +167,10 @@ def preisach_section(analysis):
 
     fits = [(k, f["preisach"]) for k, f in sorted(analysis.fits.items()) if f.get("preisach") is not None]
     if not fits:
-        return ("Preisach model: element distribution",
-                '<p class="muted">No loop could be fitted (reasons in the list of figures not computed).</p>')
+        return (
+            "Preisach model: element distribution",
+            '<p class="muted">No loop could be fitted (reasons in the list of figures not computed).</p>',
+        )
     (o, c), pre = fits[0]
     fig = Figure(figsize=(6.0, 4.6), layout="constrained")
     ax = fig.add_subplot()
@@ -129,8 +179,10 @@ def preisach_section(analysis):
     hyst = m & pre.hysteretic
     rev = m & ~pre.hysteretic
     scale = 400.0 / max(float(w.max()), 1e-300)
-    for a_, b_, sel, colour, label in ((pre.alpha_nm, pre.beta_nm, hyst, "tab:red", "hysteretic (α > β)"),
-                                       (pre.alpha_nm, pre.beta_nm, rev, "tab:blue", "reversible (α = β)")):
+    for a_, b_, sel, colour, label in (
+        (pre.alpha_nm, pre.beta_nm, hyst, "tab:red", "hysteretic (α > β)"),
+        (pre.alpha_nm, pre.beta_nm, rev, "tab:blue", "reversible (α = β)"),
+    ):
         if sel.any():
             ax.scatter(b_[sel], a_[sel], s=w[sel] * scale, color=colour, alpha=0.6, label=label)
             ax.scatter(-a_[sel], -b_[sel], s=w[sel] * scale, color=colour, alpha=0.25)
@@ -146,10 +198,12 @@ def preisach_section(analysis):
     buf = io.BytesIO()
     FigureCanvasAgg(fig).print_png(buf)
     verdict = "fits" if not pre.check.rejected else "REJECTED (" + pre.check.describe() + ")"
-    text = (f"<p>Relays that switch up at α and down at β, with weights ≥ 0 fitted by non-negative least squares "
-            f"(no starting values); each with its mirror (−β, −α). The paper's bilinear loop is a uniform square "
-            f"0 < α < τ_c, −τ_c < β < 0. This loop: {html.escape(verdict)}; "
-            f"{int(np.sum(m))} elements in use.</p>")
+    text = (
+        f"<p>Relays that switch up at α and down at β, with weights ≥ 0 fitted by non-negative least squares "
+        f"(no starting values); each with its mirror (−β, −α). The paper's bilinear loop is a uniform square "
+        f"0 < α < τ_c, −τ_c < β < 0. This loop: {html.escape(verdict)}; "
+        f"{int(np.sum(m))} elements in use.</p>"
+    )
     return "Preisach model: element distribution", text + _img(buf.getvalue(), "Preisach element distribution")
 
 

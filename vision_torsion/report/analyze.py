@@ -58,8 +58,13 @@ def analysis_options(config) -> dict:
     lost-motion fractions, the secant interval and whether to fit the breaks.
     """
     proto, gear, test = config.protocol, config.gear, config.test
-    kw = dict(max_torque_nm=proto.max_torque_nm, rig=config.torque_rig, rated_torque_nm=gear.rated_torque_nm,
-              gear_ratio=gear.ratio, fit_breaks=test.fit_breaks)
+    kw = dict(
+        max_torque_nm=proto.max_torque_nm,
+        rig=config.torque_rig,
+        rated_torque_nm=gear.rated_torque_nm,
+        gear_ratio=gear.ratio,
+        fit_breaks=test.fit_breaks,
+    )
     if gear.t1_nm is not None and gear.t2_nm is not None:
         kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
     if test.lost_motion_fractions is not None:
@@ -82,12 +87,18 @@ def test_metadata(config) -> dict:
 
 
 _LABELS = {
-    ("gear", "name"): "gear", ("gear", "serial"): "serial number", ("gear", "ratio"): "gear ratio i",
-    ("gear", "rated_torque_nm"): "rated torque T_R (N·m)", ("gear", "t1_nm"): "catalogue T1 (N·m)",
-    ("gear", "t2_nm"): "catalogue T2 (N·m)", ("test", "operator"): "operator",
-    ("test", "temperature_c"): "temperature (°C)", ("test", "notes"): "notes",
+    ("gear", "name"): "gear",
+    ("gear", "serial"): "serial number",
+    ("gear", "ratio"): "gear ratio i",
+    ("gear", "rated_torque_nm"): "rated torque T_R (N·m)",
+    ("gear", "t1_nm"): "catalogue T1 (N·m)",
+    ("gear", "t2_nm"): "catalogue T2 (N·m)",
+    ("test", "operator"): "operator",
+    ("test", "temperature_c"): "temperature (°C)",
+    ("test", "notes"): "notes",
     ("test", "lost_motion_fractions"): "lost motion at (fractions of T_R)",
-    ("test", "secant_interval_nm"): "secant interval (N·m)", ("test", "fit_breaks"): "fit break torques",
+    ("test", "secant_interval_nm"): "secant interval (N·m)",
+    ("test", "fit_breaks"): "fit break torques",
 }
 
 
@@ -101,8 +112,18 @@ def _read_table(table) -> tuple[pd.DataFrame, str]:
     return read_measurements(path, name=str(path)), str(path)
 
 
-def analyze_table(table, *, session=None, out_dir=None, conditions=None, extra_sections=(), failures=None,
-                  title="Torsional stiffness and hysteresis report", n_draws=400, seed=0):
+def analyze_table(
+    table,
+    *,
+    session=None,
+    out_dir=None,
+    conditions=None,
+    extra_sections=(),
+    failures=None,
+    title="Torsional stiffness and hysteresis report",
+    n_draws=400,
+    seed=0,
+):
     """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
 
     Parameters
@@ -163,9 +184,14 @@ def analyze_table(table, *, session=None, out_dir=None, conditions=None, extra_s
     analysis.settings["test_metadata"] = meta
     cond = dict(conditions) if conditions is not None else {"table": name}
     if conditions is None and config is not None:
-        cond.update({"arm radius r (m)": config.rig.arm_radius_m, "gravity g (m/s²)": config.rig.gravity_m_per_s2,
-                     "mass per weight piece (kg)": config.protocol.step_mass_kg,
-                     "maximum torque (N·m)": config.protocol.max_torque_nm})
+        cond.update(
+            {
+                "arm radius r (m)": config.rig.arm_radius_m,
+                "gravity g (m/s²)": config.rig.gravity_m_per_s2,
+                "mass per weight piece (kg)": config.protocol.step_mass_kg,
+                "maximum torque (N·m)": config.protocol.max_torque_nm,
+            }
+        )
     # the header of the report shows the test's metadata (gear, serial, operator, ...)
     metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()}
     if out_dir is None:
@@ -176,10 +202,25 @@ def analyze_table(table, *, session=None, out_dir=None, conditions=None, extra_s
 
     sections = [*analysis_sections(analysis), *extra_sections]
     with output_set():  # the report's files are replaced together or not at all
-        files = write_report(df, analysis, conditions=cond, out_dir=out_dir, failures=failures,
-                             extra_sections=sections, title=title, metadata=metadata)
+        files = write_report(
+            df,
+            analysis,
+            conditions=cond,
+            out_dir=out_dir,
+            failures=failures,
+            extra_sections=sections,
+            title=title,
+            metadata=metadata,
+        )
     f = analysis.figures
     withheld = int((~f["value"].apply(lambda v: v == v)).sum())
     flagged = int((f["flag"].astype(str) != "").sum())
-    return AnalyzeResult(files=files, analysis=analysis, n_rows=int(len(df)), n_failed=int(len(analysis.failed_images)),
-                         n_issues=len(analysis.issues), n_withheld=withheld, n_flagged=flagged)
+    return AnalyzeResult(
+        files=files,
+        analysis=analysis,
+        n_rows=int(len(df)),
+        n_failed=int(len(analysis.failed_images)),
+        n_issues=len(analysis.issues),
+        n_withheld=withheld,
+        n_flagged=flagged,
+    )

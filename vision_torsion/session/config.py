@@ -203,8 +203,7 @@ class _Problems:
             raise SessionError(f"{source}: {len(self.items)} problem(s)\n  {lines}")
 
 
-def _number(table, key, problems, prefix, *, required, default=None, positive=False,
-            nonnegative=False):
+def _number(table, key, problems, prefix, *, required, default=None, positive=False, nonnegative=False):
     name = f"{prefix}.{key}"
     if key not in table:
         if required:
@@ -240,31 +239,37 @@ def _unknown(table, known, prefix, problems):
         problems.add(f"{prefix}.{key}" if prefix else key, "unknown key")
 
 
-_RIG_KEYS = ("arm_radius_m", "gravity_m_per_s2", "mass_tolerance_kg", "mass_std_kg",
-             "friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2")
+_RIG_KEYS = (
+    "arm_radius_m",
+    "gravity_m_per_s2",
+    "mass_tolerance_kg",
+    "mass_std_kg",
+    "friction_torque_std_nm",
+    "arm_radius_std_m",
+    "gravity_std_m_per_s2",
+)
 _PROTOCOL_KEYS = ("orientations_deg", "max_torque_nm", "step_mass_kg", "cycles")
 
 
 def _rig_from(table, problems) -> RigConfig | None:
     _unknown(table, _RIG_KEYS, "rig", problems)
     kw = dict(
-        arm_radius_m=_number(table, "arm_radius_m", problems, "rig", required=True,
-                             positive=True),
-        gravity_m_per_s2=_number(table, "gravity_m_per_s2", problems, "rig",
-                                 required=False, default=9.81, positive=True),
+        arm_radius_m=_number(table, "arm_radius_m", problems, "rig", required=True, positive=True),
+        gravity_m_per_s2=_number(
+            table, "gravity_m_per_s2", problems, "rig", required=False, default=9.81, positive=True
+        ),
     )
     for key in ("friction_torque_std_nm", "arm_radius_std_m", "gravity_std_m_per_s2"):
-        kw[key] = _number(table, key, problems, "rig", required=False, default=0.0,
-                          nonnegative=True)
-    tol = _number(table, "mass_tolerance_kg", problems, "rig", required=False,
-                  nonnegative=True)
+        kw[key] = _number(table, key, problems, "rig", required=False, default=0.0, nonnegative=True)
+    tol = _number(table, "mass_tolerance_kg", problems, "rig", required=False, nonnegative=True)
     std = _number(table, "mass_std_kg", problems, "rig", required=False, nonnegative=True)
     if "mass_tolerance_kg" in table and "mass_std_kg" in table:
-        problems.add("rig.mass_std_kg", "give either mass_tolerance_kg (± bound) or "
-                     "mass_std_kg (1σ), not both")
+        problems.add("rig.mass_std_kg", "give either mass_tolerance_kg (± bound) or mass_std_kg (1σ), not both")
     elif "mass_tolerance_kg" not in table and "mass_std_kg" not in table:
-        problems.add("rig.mass_tolerance_kg", "missing; expected the ± tolerance of one "
-                     "weight piece in kg (or rig.mass_std_kg, a 1σ value)")
+        problems.add(
+            "rig.mass_tolerance_kg",
+            "missing; expected the ± tolerance of one weight piece in kg (or rig.mass_std_kg, a 1σ value)",
+        )
     if tol is not None:
         std = tol / math.sqrt(3.0)  # uniform distribution within ±tol (GUM 4.3.7)
     if None in kw.values() or std is None:
@@ -274,31 +279,30 @@ def _rig_from(table, problems) -> RigConfig | None:
 
 def _protocol_from(table, problems) -> ProtocolConfig | None:
     _unknown(table, _PROTOCOL_KEYS, "protocol", problems)
-    max_torque = _number(table, "max_torque_nm", problems, "protocol", required=True,
-                         positive=True)
-    step = _number(table, "step_mass_kg", problems, "protocol", required=True,
-                   positive=True)
+    max_torque = _number(table, "max_torque_nm", problems, "protocol", required=True, positive=True)
+    step = _number(table, "step_mass_kg", problems, "protocol", required=True, positive=True)
     cycles = table.get("cycles", 1)
     if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
         problems.add("protocol.cycles", f"expected a whole number >= 1, got {cycles!r}")
         cycles = None
     orient = table.get("orientations_deg")
     if orient is None:
-        problems.add("protocol.orientations_deg", "missing; expected a list of angles in "
-                     "degrees")
-    elif (not isinstance(orient, list) or not orient or any(
-            isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-            for v in orient)):
-        problems.add("protocol.orientations_deg",
-                     f"expected a non-empty list of numbers (degrees), got {orient!r}")
+        problems.add("protocol.orientations_deg", "missing; expected a list of angles in degrees")
+    elif (
+        not isinstance(orient, list)
+        or not orient
+        or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in orient)
+    ):
+        problems.add("protocol.orientations_deg", f"expected a non-empty list of numbers (degrees), got {orient!r}")
         orient = None
     elif len(set(orient)) != len(orient):
         problems.add("protocol.orientations_deg", f"repeated orientation in {orient!r}")
         orient = None
     if None in (max_torque, step, cycles, orient):
         return None
-    return ProtocolConfig(orientations_deg=tuple(float(v) for v in orient),
-                          max_torque_nm=max_torque, step_mass_kg=step, cycles=cycles)
+    return ProtocolConfig(
+        orientations_deg=tuple(float(v) for v in orient), max_torque_nm=max_torque, step_mass_kg=step, cycles=cycles
+    )
 
 
 _GEAR_KEYS = ("name", "serial", "ratio", "rated_torque_nm", "t1_nm", "t2_nm")
@@ -319,9 +323,13 @@ def _numbers(table, key, problems, prefix, *, length=None, check=None, what=""):
     if key not in table:
         return None
     v = table[key]
-    if (not isinstance(v, list) or not v or (length is not None and len(v) != length)
-            or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in v)
-            or (check is not None and not check([float(x) for x in v]))):
+    if (
+        not isinstance(v, list)
+        or not v
+        or (length is not None and len(v) != length)
+        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in v)
+        or (check is not None and not check([float(x) for x in v]))
+    ):
         problems.add(f"{prefix}.{key}", f"expected {what}, got {v!r}")
         return None
     return tuple(float(x) for x in v)
@@ -333,8 +341,10 @@ def _gear_from(table, problems) -> GearConfig:
     for k in ("ratio", "rated_torque_nm", "t1_nm", "t2_nm"):
         kw[k] = _number(table, k, problems, "gear", required=False, positive=True)
     if ("t1_nm" in table) != ("t2_nm" in table):
-        problems.add("gear.t2_nm" if "t1_nm" in table else "gear.t1_nm",
-                     "give both catalogue break torques t1_nm and t2_nm, or neither")
+        problems.add(
+            "gear.t2_nm" if "t1_nm" in table else "gear.t1_nm",
+            "give both catalogue break torques t1_nm and t2_nm, or neither",
+        )
     elif kw["t1_nm"] is not None and kw["t2_nm"] is not None and not kw["t1_nm"] < kw["t2_nm"]:
         problems.add("gear.t2_nm", f"expected t1_nm < t2_nm, got {kw['t1_nm']!r} and {kw['t2_nm']!r}")
     return GearConfig(**kw)
@@ -344,11 +354,23 @@ def _test_from(table, problems) -> TestConfig:
     _unknown(table, _TEST_KEYS, "test", problems)
     kw = {k: _text(table, k, problems, "test") for k in ("operator", "notes")}
     kw["temperature_c"] = _number(table, "temperature_c", problems, "test", required=False)
-    kw["lost_motion_fractions"] = _numbers(table, "lost_motion_fractions", problems, "test",
-                                           check=lambda v: all(0 < x < 1 for x in v),
-                                           what="a list of fractions in (0, 1), e.g. [0.03, 0.04]")
-    kw["secant_interval_nm"] = _numbers(table, "secant_interval_nm", problems, "test", length=2,
-                                        check=lambda v: 0 <= v[0] < v[1], what="[lower, upper] in N·m, 0 <= lower < upper")
+    kw["lost_motion_fractions"] = _numbers(
+        table,
+        "lost_motion_fractions",
+        problems,
+        "test",
+        check=lambda v: all(0 < x < 1 for x in v),
+        what="a list of fractions in (0, 1), e.g. [0.03, 0.04]",
+    )
+    kw["secant_interval_nm"] = _numbers(
+        table,
+        "secant_interval_nm",
+        problems,
+        "test",
+        length=2,
+        check=lambda v: 0 <= v[0] < v[1],
+        what="[lower, upper] in N·m, 0 <= lower < upper",
+    )
     fb = table.get("fit_breaks", True)
     if not isinstance(fb, bool):
         problems.add("test.fit_breaks", f"expected true or false, got {fb!r}")
@@ -382,8 +404,7 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
         was expected.
     """
     problems = _Problems()
-    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test"), "",
-             problems)
+    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test"), "", problems)
     version = data.get("format_version", _FORMAT_VERSION)
     if version != _FORMAT_VERSION:
         problems.add("format_version", f"expected {_FORMAT_VERSION}, got {version!r}")
