@@ -313,17 +313,7 @@ def fit_marker(
         for _ in range(max_iter):
             ep = edge_points(image, cx, cy, r, edge_width=s, radial_shape=shape, patch=patch)
             w = 1.0 / ep.std_px**2
-            if fit == "algebraic":
-                cf = fit_circle_algebraic(ep.x_px, ep.y_px)
-                nx_, ny_, nr, cov, rms, n_in = (
-                    cf.x_px,
-                    cf.y_px,
-                    cf.radius_px,
-                    cf.cov,
-                    cf.residual_rms_px,
-                    int(cf.inliers.sum()),
-                )
-            elif fit == "ellipse":
+            if fit == "ellipse":
                 ef = fit_ellipse(ep.x_px, ep.y_px, weights=w)
                 nx_, ny_ = ef.x_px, ef.y_px
                 nr = float(np.sqrt(ef.a_px * ef.b_px))
@@ -333,15 +323,10 @@ def fit_marker(
                 rms, n_in = ef.residual_rms_px, int(ef.inliers.sum())
                 shape = _ellipse_radial(ef)
             else:
-                cf = fit_circle_geometric(ep.x_px, ep.y_px, weights=w, initial=(cx, cy, r))
-                nx_, ny_, nr, cov, rms, n_in = (
-                    cf.x_px,
-                    cf.y_px,
-                    cf.radius_px,
-                    cf.cov,
-                    cf.residual_rms_px,
-                    int(cf.inliers.sum()),
-                )
+                cf = (fit_circle_algebraic(ep.x_px, ep.y_px) if fit == "algebraic"
+                      else fit_circle_geometric(ep.x_px, ep.y_px, weights=w, initial=(cx, cy, r)))
+                nx_, ny_, nr, cov = cf.x_px, cf.y_px, cf.radius_px, cf.cov
+                rms, n_in = cf.residual_rms_px, int(cf.inliers.sum())
             # the centre converges faster than radius and edge width, and is what counts
             moved = max(abs(nx_ - cx), abs(ny_ - cy))
             cx, cy, r, s = nx_, ny_, nr, ep.edge_width_px

@@ -377,16 +377,8 @@ def fit_bilinear(
     ``cov = G·diag(σθ²)·Gᵀ + (G·J_τ·L)(G·J_τ·L)ᵀ``, so correlated torque errors
     (``cov(δτ) = L·Lᵀ``) are propagated with all their correlations.
     """
-    tau, th, sa, sources = _fit_inputs(
-        torque_nm,
-        angle_rad,
-        angle_std_rad,
-        torque_std_nm,
-        torque_groups,
-        torque_sources,
-        model="bilinear",
-        min_samples=6,
-    )
+    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
+                                       torque_sources, model="bilinear", min_samples=6)
     w = least_squares_weights(sa)
     amp = float(np.max(np.abs(tau)))
 
@@ -658,16 +650,8 @@ def fit_bouc_wen(
     positive parameters, started from a small set of sharpness/exponent guesses; the
     best is kept. Uncertainties: first-order propagation as in :func:`fit_bilinear`.
     """
-    tau, th, sa, sources = _fit_inputs(
-        torque_nm,
-        angle_rad,
-        angle_std_rad,
-        torque_std_nm,
-        torque_groups,
-        torque_sources,
-        model="Bouc–Wen",
-        min_samples=8,
-    )
+    tau, th, sa, sources = _fit_inputs(torque_nm, angle_rad, angle_std_rad, torque_std_nm, torque_groups,
+                                       torque_sources, model="Bouc–Wen", min_samples=8)
     w = least_squares_weights(sa)
     sw = np.sqrt(w)
     amp = float(np.max(np.abs(tau)))
