@@ -193,3 +193,70 @@ def test_pdf_capture_sheet_where_chromium_is(tmp_path):
         pytest.skip("no Chromium on this machine")
     plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), pdf=True)
     assert (tmp_path / "capture_sheet.pdf").read_bytes().startswith(b"%PDF")
+
+
+# -- issue 15: lost-motion levels at ±3 % and ±4 % of a rated torque ------------------
+
+
+def test_rated_torque_levels_are_steps_of_every_phase(tmp_path):
+    # 20 g at r = 0.05 m: 0.01962 N·m per piece; T_R = 6 N·m: 3 % = 0.18 -> 9 pieces, 4 % = 0.24 -> 12
+    p = plan_session(tmp_path, steps=20, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                     cycles=2, rated_torque_nm=6.0)
+    assert [(lv.fraction, lv.pieces) for lv in p.lost_motion_levels] == [(0.03, 9), (0.04, 12)]
+    assert [lv.torque_nm for lv in p.lost_motion_levels] == [pytest.approx(0.17658), pytest.approx(0.23544)]
+    assert p.lost_motion_levels[0].achieved_fraction == pytest.approx(0.02943)
+    s = load_session(tmp_path, check_files=False)  # the mass checks accept the plan
+    for orientation in ("0", "60"):
+        for cycle in ("1", "2"):
+            torques = [s.torque(r).torque_nm for r in s.manifest.rows
+                       if r.orientation_deg == float(orientation) and r.cycle == int(cycle)
+                       and r.phase != "reference"]
+            for lv in p.lost_motion_levels:  # +x and -x, each on both branches of the loop
+                assert sum(t == pytest.approx(lv.torque_nm) for t in torques) == 2
+                assert sum(t == pytest.approx(-lv.torque_nm) for t in torques) == 2
+    sheet = (tmp_path / "capture_sheet.md").read_text()
+    assert ("±3 % → 9 × 20 g per pan = ±0.17658 N·m (2.94 % of T_R); "
+            "±4 % → 12 × 20 g per pan = ±0.23544 N·m (3.92 % of T_R)") in sheet
+    assert "| -0.17658 (−3 % T_R) | `images/o000_c1_03_negative_loading_s09.png` |" in sheet
+    assert "+0.23544 <b>(+4 % T_R)</b>" in (tmp_path / "capture_sheet.html").read_text()
+
+
+def test_no_rated_torque_no_levels(tmp_path):
+    p = plan(tmp_path, orientations_deg=(0,))
+    assert p.lost_motion_levels == () and "T_R" not in (tmp_path / "capture_sheet.md").read_text()
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(rated_torque_nm=0.36),  # 3 % = 0.0108 N·m is 0.55 pieces -> 1 piece = 5.45 %
+     r"level ±3 % of the rated torque 0\.36 N·m \(±0\.0108 N·m\): the nearest whole number, 1 piece\(s\) "
+     r"of 0\.02 kg per pan, gives ±0\.01962 N·m = 5\.45 % of the rated torque, 82 % off the level \(more "
+     r"than the 25 % allowed\); a step mass of 0\.00367 kg \(3\.67 g, 1 % of the rated torque per piece\)"),
+    (dict(rated_torque_nm=0.2),  # 3 % = 0.006 N·m is 0.31 pieces
+     r"level ±3 % of the rated torque 0\.2 N·m \(±0\.006 N·m\) is 0\.306 pieces .* rounds to 0 pieces; "
+     r"a step mass of 0\.002039 kg"),
+    (dict(rated_torque_nm=10.0),  # 3 % = 0.3 N·m is 15.3 pieces > 10
+     r"level ±3 % .* needs 15 pieces of 0\.02 kg per pan, more than the 10 the protocol loads"),
+    (dict(rated_torque_nm=1.4),  # 3 % = 2.14 -> 2, 4 % = 2.85 -> 3: distinct, allowed
+     None),
+    (dict(rated_torque_nm=1.2),  # 3 % = 1.83 -> 2, 4 % = 2.45 -> 2 (18 % off): the same pieces
+     r"level ±4 % .* is realised by the same 2 piece\(s\) of 0\.02 kg per pan as the level ±3 %"),
+    (dict(rated_torque_nm=-1), r"rated_torque_nm must be a number > 0 \(N·m\), got -1"),
+])
+def test_rated_torque_messages(tmp_path, kw, message):
+    args = dict(steps=10, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), **kw)
+    if message is None:
+        assert len(plan_session(tmp_path, **args).lost_motion_levels) == 2
+        return
+    with pytest.raises(SessionError, match=message):
+        plan_session(tmp_path, **args)
+    assert not (tmp_path / "session.toml").exists()
+
+
+def test_cli_rated_torque(tmp_path, capsys):
+    args = parser().parse_args(["plan", str(tmp_path / "s"), "--steps", "20", "--step-mass", "0.02",
+                                "--arm-radius", "0.05", "--orientations", "0", "--rated-torque", "6",
+                                "--no-pdf"])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "Rated torque T_R = 6 N·m (not stored in session.toml)" in out
+    assert "±4 % → 12 × 20 g per pan = ±0.23544 N·m (3.92 % of T_R)" in out

@@ -64,6 +64,10 @@ def register(subparsers) -> None:
                    help="full cycles to ±Tmax before each reference image (not photographed)")
     p.add_argument("--closing", action="store_true",
                    help="end each orientation with a zero-torque 'closing' image")
+    p.add_argument("--rated-torque", type=float, metavar="NM",
+                   help="the gear's rated torque T_R, N·m: names the lost-motion levels at ±3 %% "
+                        "and ±4 %% of it (whole numbers of step masses; refused when the pieces "
+                        "cannot realise them)")
     g = p.add_argument_group("capture sheet header (blank lines on the sheet when not given)")
     for key in ("gear", "serial", "operator", "date"):
         g.add_argument(f"--{key}", metavar="TEXT")
@@ -93,7 +97,7 @@ def run(args) -> int:
         steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
         header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date")
                 if getattr(args, k)},
-        pdf=not args.no_pdf)
+        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque)
     print(f"{plan.folder}: {len(plan.rows)} images in "
           f"{len(plan.config.protocol.orientations_deg)} orientations, "
           f"{plan.steps_per_phase} steps per phase, max torque "
@@ -103,6 +107,8 @@ def run(args) -> int:
              f"steps; the nearest achievable maxima are {plan.nearest_max_torques_nm[0]:.5f} "
              f"N·m with {plan.steps_per_phase} steps and {plan.nearest_max_torques_nm[1]:.5f} "
              f"N·m with {plan.steps_per_phase + 1}; or give --steps)"))
+    if plan.rated_torque_nm is not None:
+        print(plan.lost_motion_text())
     pdf = plan.folder / "capture_sheet.pdf"
     sheet = pdf if pdf.is_file() and not args.no_pdf else plan.folder / "capture_sheet.html"
     print(f"print {sheet} and save each image under the name it gives (or keep the "

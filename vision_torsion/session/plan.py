@@ -23,6 +23,22 @@ an orientation (+Tmax right after the pre-load). An orientation thus has
 Tmax is snapped **down** to a whole number N of step masses per pan
 (``N = floor(max_torque_nm / (2 g r step_mass_kg))``) so the requested maximum is
 never exceeded; the capture sheet and the returned plan say when it was not exact.
+
+Lost-motion levels (``rated_torque_nm``)
+----------------------------------------
+With a rated torque T_R, the plan names load levels at ±3 % (GB/T 35089) and ±4 %
+(harmonic-drive catalogues) of T_R; lost motion at level x is the loop's mid-point
+at +x minus its mid-point at −x. A level is realised by the nearest whole number k
+of step masses per pan. Because every phase steps one piece at a time through 0..N
+pieces, the state of k pieces is already photographed in every phase of every cycle
+(+x in positive_unloading and positive_loading, −x in negative_loading and
+negative_unloading): the levels are steps of the existing phases, so the manifest,
+the analysis and the mass checks are unchanged. A level that rounds to 0 pieces,
+misses by more than :data:`LOST_MOTION_TOLERANCE` of itself, needs more pieces than
+the protocol loads, or shares its pieces with the other level is refused, naming a
+step mass that realises it (a finer piece means a finer step mass for the whole
+protocol: the manifest has one piece size). session.toml has no key for T_R; it is
+stated in ``plan``'s output and on the capture sheets.
 """
 
 from __future__ import annotations
@@ -40,11 +56,111 @@ from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config
 from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from .torque import couple_torque
 
-__all__ = ["SessionPlan", "plan_session", "plan_rows", "CAPTURE_SHEET_NAME"]
+__all__ = ["SessionPlan", "LostMotionLevel", "plan_session", "plan_rows", "lost_motion_levels",
+           "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE"]
 
 logger = logging.getLogger(__name__)
 
 CAPTURE_SHEET_NAME = "capture_sheet.md"
+
+#: Lost-motion levels as fractions of the rated torque: ±3 % (GB/T 35089) and ±4 %
+#: (harmonic-drive catalogues).
+LOST_MOTION_FRACTIONS = (0.03, 0.04)
+#: A level is refused when the nearest whole number of pieces misses it by more than
+#: this fraction of the level.
+LOST_MOTION_TOLERANCE = 0.25
+
+
+@dataclass(frozen=True)
+class LostMotionLevel:
+    """One lost-motion level: ±`fraction` of the rated torque, as planned.
+
+    Attributes
+    ----------
+    fraction : float
+        The level asked for, as a fraction of the rated torque (0.03).
+    requested_torque_nm : float
+        ``fraction * rated_torque_nm`` (N·m).
+    pieces : int
+        Step masses per pan that realise it (the nearest whole number).
+    torque_nm : float
+        The torque those pieces make, ``2 pieces step g r`` (N·m).
+    achieved_fraction : float
+        ``torque_nm / rated_torque_nm``.
+    """
+
+    fraction: float
+    requested_torque_nm: float
+    pieces: int
+    torque_nm: float
+    achieved_fraction: float
+
+    @property
+    def label(self) -> str:
+        """"±3 %" for the sheet."""
+        return f"±{_num(self.fraction * 100)} %"
+
+
+def lost_motion_levels(rated_torque_nm: float, *, step_mass_kg: float, torque_per_step_nm: float,
+                       steps_per_phase: int, fractions=LOST_MOTION_FRACTIONS,
+                       tolerance: float = LOST_MOTION_TOLERANCE) -> tuple[LostMotionLevel, ...]:
+    """The lost-motion levels of a rated torque with the rig's weight pieces.
+
+    Raises
+    ------
+    SessionError
+        A rated torque that is not a number > 0; a level that rounds to 0 pieces,
+        misses by more than `tolerance` of itself, needs more pieces than
+        `steps_per_phase`, or is realised by the same pieces as another level. The
+        message names the level and a step mass that realises the levels
+        (1 % of the rated torque per piece realises ±3 % and ±4 % exactly).
+
+    >>> [(lv.pieces, round(lv.torque_nm, 5)) for lv in lost_motion_levels(
+    ...     6.0, step_mass_kg=0.02, torque_per_step_nm=0.01962, steps_per_phase=20)]
+    [(9, 0.17658), (12, 0.23544)]
+    """
+    try:
+        rated = float(rated_torque_nm)
+    except (TypeError, ValueError):
+        rated = math.nan
+    if isinstance(rated_torque_nm, bool) or not math.isfinite(rated) or rated <= 0:
+        raise SessionError(f"plan_session: rated_torque_nm must be a number > 0 (N·m), got {rated_torque_nm!r}")
+    # one piece per pan making 1 % of T_R realises 3 % and 4 % exactly
+    one_percent_kg = step_mass_kg * (0.01 * rated) / torque_per_step_nm
+    suggest = (f"a step mass of {one_percent_kg:.4g} kg ({one_percent_kg * 1000:.4g} g, 1 % of the rated "
+               "torque per piece) realises ±3 % and ±4 % exactly")
+    levels: list[LostMotionLevel] = []
+    for fraction in fractions:
+        wanted = fraction * rated
+        name = (f"plan_session: lost-motion level ±{_num(fraction * 100)} % of the rated torque "
+                f"{rated:g} N·m (±{wanted:.5g} N·m)")
+        exact_pieces = wanted / torque_per_step_nm
+        pieces = int(math.floor(exact_pieces + 0.5))
+        if pieces == 0:
+            raise SessionError(
+                f"{name} is {exact_pieces:.3g} pieces of {step_mass_kg:g} kg per pan "
+                f"({torque_per_step_nm:.5g} N·m per piece): it rounds to 0 pieces; {suggest}")
+        achieved = pieces * torque_per_step_nm
+        miss = abs(achieved - wanted) / wanted
+        if miss > tolerance:
+            raise SessionError(
+                f"{name}: the nearest whole number, {pieces} piece(s) of {step_mass_kg:g} kg per pan, "
+                f"gives ±{achieved:.5g} N·m = {100 * achieved / rated:.3g} % of the rated torque, "
+                f"{100 * miss:.0f} % off the level (more than the {100 * tolerance:g} % allowed); {suggest}")
+        if pieces > steps_per_phase:
+            raise SessionError(
+                f"{name} needs {pieces} pieces of {step_mass_kg:g} kg per pan, more than the "
+                f"{steps_per_phase} the protocol loads (max torque "
+                f"{steps_per_phase * torque_per_step_nm:.5g} N·m); raise the maximum torque or steps")
+        for other in levels:
+            if other.pieces == pieces:
+                raise SessionError(
+                    f"{name} is realised by the same {pieces} piece(s) of {step_mass_kg:g} kg per pan "
+                    f"as the level {other.label}: the two cannot be told apart; {suggest}")
+        levels.append(LostMotionLevel(fraction=fraction, requested_torque_nm=wanted, pieces=pieces,
+                                      torque_nm=float(f"{achieved:.12g}"),
+                                      achieved_fraction=achieved / rated))
+    return tuple(levels)
 
 
 @dataclass(frozen=True)
@@ -70,6 +186,11 @@ class SessionPlan:
         A ``closing`` image at zero torque ends each orientation.
     header : dict
         Test metadata for the capture sheet (gear, serial, operator, date).
+    rated_torque_nm : float or None
+        The rated torque T_R given (N·m), not stored in session.toml.
+    lost_motion_levels : tuple of LostMotionLevel
+        The ±3 % and ±4 % levels of T_R (empty without a rated torque): steps of
+        the existing phases, see the module docstring.
     """
 
     folder: Path
@@ -82,6 +203,27 @@ class SessionPlan:
     preconditioning_cycles: int = 0
     closing: bool = False
     header: dict = field(default_factory=dict)
+    rated_torque_nm: float | None = None
+    lost_motion_levels: tuple = ()
+
+    def level_label(self, pieces: int, phase: str) -> str:
+        """"+3 % T_R" when a row of `pieces` per pan in `phase` is a lost-motion level, else ""."""
+        if phase not in CYCLE_PHASES:
+            return ""
+        sign = "+" if phase.startswith("positive") else "−"
+        return " / ".join(f"{sign}{_num(lv.fraction * 100)} % T_R" for lv in self.lost_motion_levels
+                          if lv.pieces == pieces)
+
+    def lost_motion_text(self) -> str:
+        """One sentence naming T_R and the levels as planned ("" without a rated torque)."""
+        if self.rated_torque_nm is None:
+            return ""
+        step = self.config.protocol.step_mass_kg
+        parts = [f"{lv.label} → {lv.pieces} × {_num(step * 1000)} g per pan = ±{lv.torque_nm:.5f} N·m "
+                 f"({100 * lv.achieved_fraction:.3g} % of T_R)" for lv in self.lost_motion_levels]
+        return (f"Rated torque T_R = {self.rated_torque_nm:g} N·m (not stored in session.toml). "
+                "Lost-motion levels (lost motion = loop mid-point at +x minus at −x), photographed "
+                "as steps of every phase: " + "; ".join(parts) + ".")
 
     @property
     def nearest_max_torques_nm(self) -> tuple[float, float]:
@@ -186,6 +328,7 @@ def _capture_sheet(plan: SessionPlan) -> str:
             f"{plan.nearest_max_torques_nm[0]:.5f} and {plan.nearest_max_torques_nm[1]:.5f} N·m)."
         ),
         "",
+        *([plan.lost_motion_text(), ""] if plan.rated_torque_nm is not None else []),
         '"+ pans" are the two pans whose wires turn the disk in the positive direction, '
         '"− pans" the other two. Masses are per pan: both pans of a pair always carry '
         "the same mass. Wait for the disk to settle before each photograph, and save it "
@@ -224,9 +367,10 @@ def _capture_sheet(plan: SessionPlan) -> str:
         plus = _pan_text(pieces if row["phase"].startswith("positive") else 0, step)
         minus = _pan_text(pieces if row["phase"].startswith("negative") else 0, step)
         number += 1
+        level = plan.level_label(pieces, row["phase"])
         lines.append(
             f"| {number} | {row['cycle']} | {row['phase']} | {row['step']} | "
-            f"{plus} | {minus} | {torque:+.5f} | `{row['image']}` | ☐ |"
+            f"{plus} | {minus} | {torque:+.5f}{f' ({level})' if level else ''} | `{row['image']}` | ☐ |"
         )
         if row["phase"] == "reference" and plan.preconditioning_cycles:
             lines.insert(
@@ -268,6 +412,7 @@ def plan_session(
     closing: bool = False,
     header: dict | None = None,
     pdf: bool = False,
+    rated_torque_nm: float | None = None,
 ) -> SessionPlan:
     """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
 
@@ -318,6 +463,10 @@ def plan_session(
         Also print the capture sheet to ``capture_sheet.pdf`` with a headless
         Chromium, when one is installed (:mod:`.sheet`); ``capture_sheet.html`` is
         always written.
+    rated_torque_nm : float, optional
+        The gear's rated torque T_R (N·m): the plan names the lost-motion levels at
+        ±3 % and ±4 % of it, realised by whole numbers of step masses (see
+        :func:`lost_motion_levels`; refused when they cannot be).
 
     Returns
     -------
@@ -328,7 +477,8 @@ def plan_session(
     SessionError
         Invalid parameters (named as their session.toml keys), both or neither of
         `max_torque_nm` and `steps`, a maximum torque below one step, or a folder
-        that already holds a session.
+        that already holds a session; lost-motion levels the weight pieces cannot
+        realise.
 
     Examples
     --------
@@ -388,6 +538,8 @@ def plan_session(
             f"plan_session: max_torque_nm {max_torque_nm:g} is less than one "
             f"step (2·step_mass_kg·g·r = {per_step:.6g} N·m)"
         )
+    levels = () if rated_torque_nm is None else lost_motion_levels(
+        rated_torque_nm, step_mass_kg=step_mass_kg, torque_per_step_nm=per_step, steps_per_phase=n)
     existing = [name for name in (CONFIG_NAME, MANIFEST_NAME) if (folder / name).exists()]
     if existing and not overwrite:
         raise SessionError(
@@ -405,6 +557,8 @@ def plan_session(
         preconditioning_cycles=int(preconditioning_cycles),
         closing=bool(closing),
         header=dict(header or {}),
+        rated_torque_nm=None if rated_torque_nm is None else float(rated_torque_nm),
+        lost_motion_levels=levels,
     )
     if not plan.exact:
         below, above = plan.nearest_max_torques_nm

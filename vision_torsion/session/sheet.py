@@ -159,9 +159,11 @@ def capture_sheet_html(plan) -> str:
         plus = _pan(pieces if phase.startswith("positive") else 0, step)
         minus = _pan(pieces if phase.startswith("negative") else 0, step)
         number += 1
+        level = plan.level_label(pieces, phase) if hasattr(plan, "level_label") else ""
+        level = f" <b>({esc(level)})</b>" if level else ""
         body.append(
             f"<tr><td>{number}</td><td>{row['cycle']}</td><td>{esc(phase)}</td><td>{row['step']}</td>"
-            f"<td>{plus}</td><td>{minus}</td><td>{torque:+.5f}</td><td><code>{esc(row['image'])}"
+            f"<td>{plus}</td><td>{minus}</td><td>{torque:+.5f}{level}</td><td><code>{esc(row['image'])}"
             "</code></td><td>☐</td></tr>"
         )
         if phase == "reference":
@@ -200,6 +202,7 @@ section td:nth-child(5), section td:nth-child(6) {{ white-space: nowrap; }}
 {step * 1000:g} g per pan = {per_step:.5f} N·m per step (τ = 2·m·g·r). Maximum torque
 {plan.max_torque_nm:.5f} N·m = {n} steps{snapped}. {len(plan.rows)} photographs in
 {len(cfg.protocol.orientations_deg)} orientation(s), {cfg.protocol.cycles} cycle(s) each.</p>
+{f"<p>{esc(plan.lost_motion_text())}</p>" if getattr(plan, "rated_torque_nm", None) is not None else ""}
 <p class="sign">{words}</p>
 <p>Masses are per pan: both pans of a pair always carry the same mass. Wait for the disk to
 settle before each photograph. Save each under the name given, or keep the camera's own
