@@ -206,6 +206,7 @@ def test_rated_torque_levels_are_steps_of_every_phase(tmp_path):
     assert [lv.torque_nm for lv in p.lost_motion_levels] == [pytest.approx(0.17658), pytest.approx(0.23544)]
     assert p.lost_motion_levels[0].achieved_fraction == pytest.approx(0.02943)
     s = load_session(tmp_path, check_files=False)  # the mass checks accept the plan
+    assert s.config.gear.rated_torque_nm == 6.0  # recorded where the analysis reads it
     for orientation in ("0", "60"):
         for cycle in ("1", "2"):
             torques = [s.torque(r).torque_nm for r in s.manifest.rows
@@ -224,6 +225,7 @@ def test_rated_torque_levels_are_steps_of_every_phase(tmp_path):
 def test_no_rated_torque_no_levels(tmp_path):
     p = plan(tmp_path, orientations_deg=(0,))
     assert p.lost_motion_levels == () and "T_R" not in (tmp_path / "capture_sheet.md").read_text()
+    assert load_session(tmp_path, check_files=False).config.gear.rated_torque_nm is None
 
 
 @pytest.mark.parametrize("kw, message", [
@@ -258,5 +260,5 @@ def test_cli_rated_torque(tmp_path, capsys):
                                 "--no-pdf"])
     assert args.func(args) == 0
     out = capsys.readouterr().out
-    assert "Rated torque T_R = 6 N·m (not stored in session.toml)" in out
+    assert "Rated torque T_R = 6 N·m (session.toml: [gear] rated_torque_nm)" in out
     assert "±4 % → 12 × 20 g per pan = ±0.23544 N·m (3.92 % of T_R)" in out

@@ -37,8 +37,9 @@ the analysis and the mass checks are unchanged. A level that rounds to 0 pieces,
 misses by more than :data:`LOST_MOTION_TOLERANCE` of itself, needs more pieces than
 the protocol loads, or shares its pieces with the other level is refused, naming a
 step mass that realises it (a finer piece means a finer step mass for the whole
-protocol: the manifest has one piece size). session.toml has no key for T_R; it is
-stated in ``plan``'s output and on the capture sheets.
+protocol: the manifest has one piece size). T_R is recorded in session.toml as
+``[gear] rated_torque_nm`` (what the analysis reads for lost motion) and stated in
+``plan``'s output and on the capture sheets.
 """
 
 from __future__ import annotations
@@ -187,7 +188,8 @@ class SessionPlan:
     header : dict
         Test metadata for the capture sheet (gear, serial, operator, date).
     rated_torque_nm : float or None
-        The rated torque T_R given (N·m), not stored in session.toml.
+        The rated torque T_R given (N·m), also written to session.toml's
+        ``[gear] rated_torque_nm``.
     lost_motion_levels : tuple of LostMotionLevel
         The ±3 % and ±4 % levels of T_R (empty without a rated torque): steps of
         the existing phases, see the module docstring.
@@ -221,7 +223,7 @@ class SessionPlan:
         step = self.config.protocol.step_mass_kg
         parts = [f"{lv.label} → {lv.pieces} × {_num(step * 1000)} g per pan = ±{lv.torque_nm:.5f} N·m "
                  f"({100 * lv.achieved_fraction:.3g} % of T_R)" for lv in self.lost_motion_levels]
-        return (f"Rated torque T_R = {self.rated_torque_nm:g} N·m (not stored in session.toml). "
+        return (f"Rated torque T_R = {self.rated_torque_nm:g} N·m (session.toml: [gear] rated_torque_nm). "
                 "Lost-motion levels (lost motion = loop mid-point at +x minus at −x), photographed "
                 "as steps of every phase: " + "; ".join(parts) + ".")
 
@@ -466,7 +468,8 @@ def plan_session(
     rated_torque_nm : float, optional
         The gear's rated torque T_R (N·m): the plan names the lost-motion levels at
         ±3 % and ±4 % of it, realised by whole numbers of step masses (see
-        :func:`lost_motion_levels`; refused when they cannot be).
+        :func:`lost_motion_levels`; refused when they cannot be); written to
+        session.toml as ``[gear] rated_torque_nm``.
 
     Returns
     -------
@@ -545,6 +548,8 @@ def plan_session(
         raise SessionError(
             f"{folder}: already holds a session ({', '.join(existing)}); choose another folder or overwrite"
         )
+    if levels:  # the analysis reads T_R from here for lost motion
+        doc["gear"] = {"rated_torque_nm": float(rated_torque_nm)}
     planned = config_from_dict({**doc, "protocol": {**doc["protocol"], "max_torque_nm": planned_max}})
     plan = SessionPlan(
         folder=folder,
