@@ -208,6 +208,29 @@ def test_candidates_found_beforehand_give_the_same_pair(scene_file):
             measure_pair(image, settings=settings, candidates=[])
 
 
+def test_pair_candidates_give_the_pair_measure_pair_finds_alone(scene_file, small_scene):
+    """pair_candidates (what a session's reading threads find) passed back to
+    measure_pair give exactly its own answer: the coarse first look for large markers
+    (the same blobs, so bit-identical), the full detection when the coarse look
+    cannot settle the pair (small markers) or the range is given."""
+    from vision_torsion.pair import pair_candidates
+
+    large = render(load_scene(scene_file("distractors")), 0.0, seed=2).image
+    small = render(small_scene, 10.0, seed=3).image
+    tiny_scene = small_scene.replace(markers={"radius_px": 6.0, "distance_px": 60.0})
+    tiny = render(tiny_scene, 10.0, seed=4).image  # 6 px markers: the coarse look cannot settle them
+    cases = [(large, MeasureSettings(), True), (large, MeasureSettings(radius_range=(20, 60)), False),
+             (small, MeasureSettings(), True), (tiny, MeasureSettings(), True)]
+    for image, settings, coarse in cases:
+        found = pair_candidates(image, settings)
+        assert found.coarse is coarse
+        alone = measure_pair(image, settings=settings)
+        given = measure_pair(image, settings=settings, candidates=found)
+        for a, b in zip(given.markers, alone.markers):
+            assert (a.status, a.n_edge_points) == (b.status, b.n_edge_points)
+            assert (a.x_px, a.y_px, a.radius_px) == (b.x_px, b.y_px, b.radius_px)
+
+
 def test_settings_and_explicit_options_are_not_mixed(small_scene):
     """Issue 18: settings used to override explicit keyword options silently
     (fit="algebraic" with settings of fit="pixels" fitted pixels)."""

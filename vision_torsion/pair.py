@@ -23,13 +23,22 @@ from functools import lru_cache
 
 import numpy as np
 
-from .detect import default_radius_range
+from .detect import default_radius_range, detect_blobs
 from .errors import MarkerError
 from .images import as_grey_array
-from .markers import Marker, find_marker_list, is_frame
+from .markers import Marker, find_candidates, find_marker_list, is_frame
 from .settings import MeasureSettings
 
-__all__ = ["PairMeasurement", "measure_pair", "select_pair", "radius_tolerance", "DISTINCT_RATIO", "PAIR_CHOICES"]
+__all__ = [
+    "PairMeasurement",
+    "PairCandidates",
+    "measure_pair",
+    "pair_candidates",
+    "select_pair",
+    "radius_tolerance",
+    "DISTINCT_RATIO",
+    "PAIR_CHOICES",
+]
 
 #: Largest radius ratio (small/large) of a ``pair="distinct"`` target: 0.85 keeps the
 #: two radii apart by many times their uncertainty (~0.01 px) and by more than the
@@ -206,10 +215,10 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
         Polarity, radius range, fit method and pair choice; defaults otherwise.
     name : str, optional
         What to call the image in messages (the file name by default).
-    candidates : list of Blob, optional
-        The image's coarse candidates, :func:`~vision_torsion.markers.find_candidates`
-        with these settings, when already found (a session's reading threads find
-        them while the image is still in their caches).
+    candidates : PairCandidates or list of Blob, optional
+        The image's candidates when already found (a session's reading threads find
+        them while the image is still in their caches): :func:`pair_candidates`, or
+        :func:`~vision_torsion.markers.find_candidates` with these settings.
 
     Returns
     -------
@@ -226,14 +235,13 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
     if name is None:
         is_path = isinstance(image, (str, bytes)) or hasattr(image, "__fspath__")
         name = str(image) if is_path else getattr(image, "path", "image")
-    enough = (
-        {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair)
-        if isinstance(settings.pair, str)
-        else None
-    )
+    enough = _enough_rule(settings)
     img = as_grey_array(image, name=name, keep_integers=True)
+    coarse = None
+    if isinstance(candidates, PairCandidates):
+        coarse, candidates = (candidates.blobs, None) if candidates.coarse else (None, candidates.blobs)
     if candidates is None and enough is not None and settings.radius_range is None:
-        quick = _coarse_pair(img, settings, enough, name)
+        quick = _coarse_pair(img, settings, enough, name, blobs=coarse)
         if quick is not None:
             return quick
     markers = find_marker_list(img, settings, enough=enough, candidates=candidates)
@@ -245,20 +253,60 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
 _COARSE_MIN_RADIUS_PX = 10.0
 
 
-def _coarse_pair(img, settings, enough, name):
-    """The target from candidates of 10 px and more (4x reduced detection), or None
-    when they do not settle it.
+@dataclass(frozen=True)
+class PairCandidates:
+    """Marker candidates found ahead of :func:`measure_pair` (a session's reading
+    threads find them while the decoded image is still in their core's caches).
+
+    Attributes
+    ----------
+    blobs : list of Blob
+        The candidates, largest first.
+    coarse : bool
+        True: the coarse first look of :func:`measure_pair` (markers of 10 px and
+        more, 4x reduced detection), which the full detection follows only when it
+        does not settle the pair; False: the full detection of
+        :func:`~vision_torsion.markers.find_candidates`.
+    """
+
+    blobs: list
+    coarse: bool
+
+
+def pair_candidates(img, settings: MeasureSettings) -> PairCandidates:
+    """The candidates :func:`measure_pair` looks at first, for `img` (a validated 2-D
+    grey array) and `settings`: the coarse first look when the radius range is the
+    image's default and the pair rule can be settled from the largest markers, the
+    full detection otherwise. Passed back as ``measure_pair(..., candidates=)``, they
+    give the same pair as ``measure_pair`` finding them itself."""
+    if settings.radius_range is None and _enough_rule(settings) is not None:
+        r_max = default_radius_range(img.shape)[1]
+        if r_max > _COARSE_MIN_RADIUS_PX:
+            blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
+            return PairCandidates(blobs, True)
+    return PairCandidates(find_candidates(img, settings), False)
+
+
+def _enough_rule(settings: MeasureSettings):
+    """The early-stop rule of the settings' pair choice, or None (a custom choice)."""
+    if not isinstance(settings.pair, str):
+        return None
+    return {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair)
+
+
+def _coarse_pair(img, settings, enough, name, *, blobs=None):
+    """The target from candidates of 10 px and more (4x reduced detection; `blobs`
+    when already found), or None when they do not settle it.
 
     Settled means: the pair rule picks two markers from them, and both are so much
     larger than 10 px that no smaller marker, which only the full detection would
     find, could match them (and make the choice ambiguous). Then the full-resolution
     search for small markers cannot change the answer, and is skipped."""
-    from .detect import detect_blobs
-
     r_max = default_radius_range(img.shape)[1]
     if r_max <= _COARSE_MIN_RADIUS_PX:
         return None
-    blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
+    if blobs is None:
+        blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
     try:
         pair = select_pair(
             find_marker_list(img, settings, enough=enough, candidates=blobs), pair=settings.pair, name=name

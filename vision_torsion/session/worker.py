@@ -27,8 +27,7 @@ from threadpoolctl import threadpool_limits
 
 from ..batch import attempt
 from ..images import GreyImage, decode_image
-from ..markers import find_candidates
-from ..pair import measure_pair
+from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
 from .cache import CacheLog
 
@@ -94,8 +93,9 @@ class ReadImage:
         :func:`content_hash` of its bytes.
     image : GreyImage or None
         The decoded image; None when there is nothing to measure.
-    candidates : list of Blob or None
-        Its coarse marker candidates (:func:`~vision_torsion.markers.find_candidates`).
+    candidates : PairCandidates or None
+        The marker candidates :func:`~vision_torsion.pair.measure_pair` looks at first
+        (:func:`~vision_torsion.pair.pair_candidates`).
     error : Exception or None
         Why it could not be decoded.
     result : tuple or None
@@ -105,7 +105,7 @@ class ReadImage:
     key: str
     image_hash: str = ""
     image: GreyImage | None = None
-    candidates: list | None = None
+    candidates: object | None = None
     error: Exception | None = None
     result: tuple[str, str | None, str] | None = None
 
@@ -132,7 +132,7 @@ def read_task(task: tuple[str, str, str]) -> ReadImage:
         return ReadImage(key, image_hash, result=(key, None, "cached"))
     try:
         image = decode_image(data, name=path, keep_integers=True)
-        candidates = find_candidates(image.data, _settings_from(settings_json))
+        candidates = pair_candidates(image.data, _settings_from(settings_json))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
         return ReadImage(key, image_hash, error=exc)
     return ReadImage(key, image_hash, image=image, candidates=candidates)
