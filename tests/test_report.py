@@ -70,6 +70,15 @@ def test_html_self_contained_and_complete(report):
         assert text in page, text
 
 
+def test_loop_captions_name_only_the_fits_drawn(report):
+    """Bouc–Wen is fitted on request only (this report: not): the loop captions must
+    not name a fit that is not drawn."""
+    _, _, files = report
+    page = files.report_html.read_text()
+    assert "data (±1σ), bilinear fit (red).</figcaption>" in page
+    assert "Bouc–Wen fit (blue dashed)" not in page
+
+
 def test_bad_conditions_and_failures(report, tmp_path):
     df, a, _ = report
     with pytest.raises(AnalysisError, match="conditions must be a dict"):

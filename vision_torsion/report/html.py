@@ -198,9 +198,11 @@ def render_html(
         columns=["orientation", "cycle", "figure", "why"],
     )
     s = analysis.settings
+    # the caption names only the fits drawn: Bouc–Wen is fitted on request
+    fits = "bilinear fit (red), Bouc–Wen fit (blue dashed)" if s.get("fit_bouc_wen") else "bilinear fit (red)"
     loops_html = "".join(
-        f"<figure>{_img(png, f'loop {o:g} deg')}<figcaption>Orientation {o:g}°: data (±1σ), bilinear fit (red), "
-        f"Bouc–Wen fit (blue dashed).</figcaption></figure>"
+        f"<figure>{_img(png, f'loop {o:g} deg')}"
+        f"<figcaption>Orientation {o:g}°: data (±1σ), {fits}.</figcaption></figure>"
         for o, png in figures["loops"]
     )
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
