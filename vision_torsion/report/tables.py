@@ -61,31 +61,51 @@ def _median(values) -> float:
     return float(finite.median()) if len(finite) else np.nan
 
 
-#: (figure, label, unit shown, scale from the analysis unit)
-CATALOGUE_FIGURES = [
-    ("hysteresis", "Hysteresis (paper: max width)", "deg", 1.0),
-    ("hysteresis_loss", "Hysteresis loss (width at 0 N·m)", "arcmin", 60.0),
-    ("lost_motion_3pct", "Lost motion ±3 %", "arcmin", 60.0),
-    ("lost_motion_4pct", "Lost motion ±4 %", "arcmin", 60.0),
-    ("k1", "K1", "N·m/rad", 1.0),
-    ("k2", "K2", "N·m/rad", 1.0),
-    ("k3", "K3", "N·m/rad", 1.0),
-    ("t1", "T1", "N·m", 1.0),
-    ("t2", "T2", "N·m", 1.0),
-    ("secant_stiffness", "Secant stiffness", "N·m/rad", 1.0),
-    ("loop_energy", "Loop energy ∮τ dθ", "J", 1.0),
-    ("loss_factor", "Loss factor η", "–", 1.0),
-    ("bilinear_k_u", "Bilinear k_u", "N·m/rad", 1.0),
-    ("bilinear_k_l", "Bilinear k_l", "N·m/rad", 1.0),
-    ("bilinear_tau_c", "Bilinear τ_c", "N·m", 1.0),
-    ("bilinear_residual_rms", "Bilinear residual RMS", "deg", 1.0),
-    ("bouc_wen_k_e", "Bouc–Wen k_e", "N·m/rad", 1.0),
-    ("bouc_wen_z_s", "Bouc–Wen z_s", "deg", 1.0),
-    ("bouc_wen_a", "Bouc–Wen a", "1/(N·m)", 1.0),
-    ("bouc_wen_rho", "Bouc–Wen ρ", "–", 1.0),
-    ("bouc_wen_n", "Bouc–Wen n", "–", 1.0),
-    ("bouc_wen_residual_rms", "Bouc–Wen residual RMS", "deg", 1.0),
-]
+#: The report's figure vocabulary: figure -> (label, unit shown, scale from the analysis unit).
+#: The catalogue table and the uncertainty budget (report/analysis_sections.py) both take theirs from here.
+FIGURE_VOCABULARY = {
+    "hysteresis": ("Hysteresis (paper: max width)", "deg", 1.0),
+    "hysteresis_loss": ("Hysteresis loss (width at 0 N·m)", "arcmin", 60.0),
+    "lost_motion_3pct": ("Lost motion ±3 %", "arcmin", 60.0),
+    "lost_motion_4pct": ("Lost motion ±4 %", "arcmin", 60.0),
+    "k1": ("K1", "N·m/rad", 1.0),
+    "k2": ("K2", "N·m/rad", 1.0),
+    "k3": ("K3", "N·m/rad", 1.0),
+    "t1": ("T1", "N·m", 1.0),
+    "t2": ("T2", "N·m", 1.0),
+    "k_positive_unloading": ("k positive unloading", "N·m/rad", 1.0),
+    "k_negative_loading_below": ("k negative loading, below the switch", "N·m/rad", 1.0),
+    "k_negative_loading_above": ("k negative loading, above the switch", "N·m/rad", 1.0),
+    "k_negative_loading_secant": ("k negative loading, secant", "N·m/rad", 1.0),
+    "secant_stiffness": ("Secant stiffness", "N·m/rad", 1.0),
+    "loop_energy": ("Loop energy ∮τ dθ", "J", 1.0),
+    "loss_factor": ("Loss factor η", "–", 1.0),
+    "bilinear_k_u": ("Bilinear k_u", "N·m/rad", 1.0),
+    "bilinear_k_l": ("Bilinear k_l", "N·m/rad", 1.0),
+    "bilinear_tau_c": ("Bilinear τ_c", "N·m", 1.0),
+    "bilinear_residual_rms": ("Bilinear residual RMS", "deg", 1.0),
+    "bouc_wen_k_e": ("Bouc–Wen k_e", "N·m/rad", 1.0),
+    "bouc_wen_z_s": ("Bouc–Wen z_s", "deg", 1.0),
+    "bouc_wen_a": ("Bouc–Wen a", "1/(N·m)", 1.0),
+    "bouc_wen_rho": ("Bouc–Wen ρ", "–", 1.0),
+    "bouc_wen_n": ("Bouc–Wen n", "–", 1.0),
+    "bouc_wen_residual_rms": ("Bouc–Wen residual RMS", "deg", 1.0),
+}
+
+
+def figure_rows(figures, labels=None) -> list[tuple[str, str, str, float]]:
+    """``(figure, label, unit, scale)`` of `figures` from :data:`FIGURE_VOCABULARY`;
+    `labels` (figure -> label) overrides a label."""
+    labels = labels or {}
+    return [(f, labels.get(f, FIGURE_VOCABULARY[f][0]), *FIGURE_VOCABULARY[f][1:]) for f in figures]
+
+
+#: Rows of the catalogue metrics table: (figure, label, unit shown, scale from the analysis unit)
+CATALOGUE_FIGURES = figure_rows([
+    f for f in FIGURE_VOCABULARY
+    if f not in ("k_positive_unloading", "k_negative_loading_below", "k_negative_loading_above",
+                 "k_negative_loading_secant")
+])
 
 
 def metrics_table(analysis) -> pd.DataFrame:
