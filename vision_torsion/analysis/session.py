@@ -759,6 +759,20 @@ def _bilinear_jacobian(bil: BilinearFit, tau: np.ndarray) -> np.ndarray:
     return numeric_jacobian(f, p, np.array([1e-6, p[1] * 1e-6, p[2] * 1e-6, amp * 1e-7]))
 
 
+def _model_check(loop, model: np.ndarray, torque_std_nm, *, n_params: int, **options):
+    """Lack-of-fit test of a model of `loop` (its angle, rad, along the loop's torque path):
+    the residual, the model's path compliance and the loop's own torque sources."""
+    return lack_of_fit(
+        loop.angle_rad - model,
+        angle_std_rad=loop.angle_std_rad,
+        torque_std_nm=torque_std_nm,
+        compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+        n_params=n_params,
+        torque_sources=loop.local_sources(),
+        **options,
+    )
+
+
 def _model_fits(col: _Collector, settings: dict) -> dict:
     loop = col.loop
     st = loop.local_std()
@@ -776,14 +790,11 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
             col.fail(name, unit, str(exc))
     else:
         out["bilinear"] = bil
-        model = bil.predict(loop.torque_nm)
-        chk = lack_of_fit(
-            loop.angle_rad - model,
-            angle_std_rad=loop.angle_std_rad,
-            torque_std_nm=st,
-            compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+        chk = _model_check(
+            loop,
+            bil.predict(loop.torque_nm),
+            st,
             n_params=4,
-            torque_sources=loop.local_sources(),
             jacobian=_bilinear_jacobian(bil, loop.torque_nm),
             weights=least_squares_weights(loop.angle_std_rad),
         )
@@ -834,15 +845,7 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
         col.fail("bouc_wen_residual_rms", "deg", str(exc))
         return out
     out["bouc_wen"] = bw
-    model = bw.predict(loop.torque_nm)
-    chk = lack_of_fit(
-        loop.angle_rad - model,
-        angle_std_rad=loop.angle_std_rad,
-        torque_std_nm=st,
-        compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
-        n_params=6,
-        torque_sources=loop.local_sources(),
-    )
+    chk = _model_check(loop, bw.predict(loop.torque_nm), st, n_params=6)
     out["checks"]["bouc_wen"] = chk
     for name, (unit, scale) in _BW_UNITS.items():
         v = bw.params[name]
