@@ -141,6 +141,11 @@ def path_compliance(torque_nm, model_angle_rad) -> np.ndarray:
     return out
 
 
+def _not_testable(dof: int, rms: float, noise: float, reason: str) -> LackOfFit:
+    """A :class:`LackOfFit` that could not be tested: no χ², not rejected, `reason` says why."""
+    return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False, reason)
+
+
 def lack_of_fit(
     residual_rad,
     *,
@@ -203,29 +208,11 @@ def lack_of_fit(
     rms = float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
     noise = float(np.sqrt(np.mean(var))) if r.size else float("nan")
     if dof <= 0:
-        return LackOfFit(
-            float("nan"),
-            dof,
-            float("nan"),
-            float("nan"),
-            False,
-            rms,
-            noise,
-            False,
-            f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)",
-        )
+        reason = f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)"
+        return _not_testable(dof, rms, noise, reason)
     if not np.all(np.isfinite(var)) or np.any(var <= 0) or (torque_sources is not None and np.any(sa <= 0)):
-        return LackOfFit(
-            float("nan"),
-            dof,
-            float("nan"),
-            float("nan"),
-            False,
-            rms,
-            noise,
-            False,
-            "a sample has no positive angle or torque uncertainty to test the fit against",
-        )
+        reason = "a sample has no positive angle or torque uncertainty to test the fit against"
+        return _not_testable(dof, rms, noise, reason)
     if torque_sources is None:
         chi2 = float(np.sum(r**2 / var))
     else:
