@@ -33,9 +33,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 from ..errors import AnalysisError
+from ..numerics import fit_breakpoints
 from .uncertainty import least_squares_weights, linearised_covariance
 
 __all__ = [
@@ -283,8 +284,9 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
 
     ``θ = θ₀ + c₁·min(x, τ_s) + c₂·max(x − τ_s, 0)`` with ``x = |τ − τ_start|`` the
     torque taken since the phase's start; the switch ``τ_s`` is profiled over the
-    mid-points between torque levels and refined by a bounded 1-D search, the
-    compliances are then a linear least-squares fit (weights ``1/σ_eff²``).
+    mid-points between torque levels and refined between the best one's two levels
+    (:func:`vision_torsion.numerics.fit_breakpoints`, Nelder–Mead), the compliances
+    being a linear least-squares fit for each switch (weights ``1/σ_eff²``).
 
     torque_sources : array_like (n, m), optional
         Loading matrix of correlated torque errors for the uncertainty (the weight
@@ -319,30 +321,25 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     def design(ts):
         return np.column_stack([np.ones_like(x), np.minimum(x, ts), np.maximum(x - ts, 0.0)])
 
-    def solve(ts, w):
-        a = design(ts)
-        sw = np.sqrt(w)
-        coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
-        r = y - a @ coef
-        return coef, float(np.sum(w * r * r))
-
     mids = 0.5 * (levels[1:] + levels[:-1])
     cands = mids[min_per_side - 1 : mids.size - (min_per_side - 1)]
+    grid = set(cands.tolist())
     w = least_squares_weights(sa)
     best = None
     for _ in range(2):  # effective variance: the weights depend on the local compliance
-        sse = [solve(ts, w)[1] for ts in cands]
-        i = int(np.argmin(sse))
+        # the shared hinge fit (weighted least squares for each switch): first the mid-point with the
+        # least sum of squares (the grid alone: no refinement), then refined between its two torque levels
+        on_grid = fit_breakpoints(lambda t: design(t[0]), y, [[c] for c in cands], weights=w,
+                                  feasible=lambda t: float(t[0]) in grid, xatol=0.0, fatol_rel=0.0, maxiter=0)
+        if on_grid.breakpoints is None:
+            raise AnalysisError("switch fit: no finite sum of squares at any mid-point between torque levels")
+        i = int(np.searchsorted(cands, on_grid.breakpoints[0]))
         lo_b = levels[max(i + min_per_side - 1, 0)]
         hi_b = levels[min(i + min_per_side, levels.size - 1)]
-        res = optimize.minimize_scalar(
-            lambda ts: solve(ts, w)[1],
-            bounds=(lo_b, hi_b),
-            method="bounded",
-            options={"xatol": max(levels[-1], 1e-12) * 1e-9},
-        )
-        ts = float(res.x) if res.fun <= sse[i] else float(cands[i])
-        coef, _ = solve(ts, w)
+        fit = fit_breakpoints(lambda t: design(t[0]), y, [[cands[i]]], weights=w,
+                              feasible=lambda t: lo_b <= t[0] <= hi_b,
+                              xatol=max(levels[-1], 1e-12) * 1e-9, fatol_rel=1e-12)
+        ts, coef = float(fit.breakpoints[0]), fit.coef
         comp = np.where(x < ts, coef[1], coef[2])
         best = (ts, coef)
         var = sa**2 + (comp * st) ** 2
