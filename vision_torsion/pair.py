@@ -280,11 +280,19 @@ def pair_candidates(img, settings: MeasureSettings) -> PairCandidates:
     full detection otherwise. Passed back as ``measure_pair(..., candidates=)``, they
     give the same pair as ``measure_pair`` finding them itself."""
     if settings.radius_range is None and _enough_rule(settings) is not None:
-        r_max = default_radius_range(img.shape)[1]
-        if r_max > _COARSE_MIN_RADIUS_PX:
-            blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
+        blobs = _coarse_blobs(img, settings)
+        if blobs is not None:
             return PairCandidates(blobs, True)
     return PairCandidates(find_candidates(img, settings), False)
+
+
+def _coarse_blobs(img, settings: MeasureSettings):
+    """Candidates of 10 px and more (4x reduced detection), or None when the image's
+    default range does not reach 10 px (no coarse look is possible)."""
+    r_max = default_radius_range(img.shape)[1]
+    if r_max <= _COARSE_MIN_RADIUS_PX:
+        return None
+    return detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
 
 
 def _enough_rule(settings: MeasureSettings):
@@ -302,11 +310,10 @@ def _coarse_pair(img, settings, enough, name, *, blobs=None):
     larger than 10 px that no smaller marker, which only the full detection would
     find, could match them (and make the choice ambiguous). Then the full-resolution
     search for small markers cannot change the answer, and is skipped."""
-    r_max = default_radius_range(img.shape)[1]
-    if r_max <= _COARSE_MIN_RADIUS_PX:
-        return None
     if blobs is None:
-        blobs = detect_blobs(img, polarity=settings.polarity, radius_range=(_COARSE_MIN_RADIUS_PX, r_max))
+        blobs = _coarse_blobs(img, settings)
+        if blobs is None:
+            return None
     try:
         pair = select_pair(
             find_marker_list(img, settings, enough=enough, candidates=blobs), pair=settings.pair, name=name
