@@ -92,15 +92,12 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     stiff = stiffness_table(analysis)
     metrics = metrics_table(analysis)
 
-    orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     pngs = {
         "loops_overlay.png": _fig.safe_png(_fig.loops_overlay, analysis),
+        "loops_by_orientation.png": _fig.safe_png(_fig.loops_by_orientation, analysis),
         "phase_stiffness.png": _fig.safe_png(_fig.phase_stiffness_chart, analysis),
         "orientation_effect.png": _fig.safe_png(_fig.orientation_chart, analysis),
     }
-    loop_pngs = [(o, _fig.safe_png(_fig.loop_detail, analysis, o)) for o in orients]
-    for o, png in loop_pngs:
-        pngs[f"loop_{o:g}deg.png"] = png
     fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in pngs.items())
 
     summary = analysis.to_dict()
@@ -116,7 +113,7 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     page = render_html(
         title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
         figures={"overlay": pngs["loops_overlay.png"], "stiffness": pngs["phase_stiffness.png"],
-                 "orientation": pngs["orientation_effect.png"], "loops": loop_pngs},
+                 "orientation": pngs["orientation_effect.png"], "by_orientation": pngs["loops_by_orientation.png"]},
         failed=failed, extra_sections=extra_sections or (), metadata=metadata,
     )
     html_path = atomic_write_text(out / "report.html", page)

@@ -10,7 +10,6 @@ uncertainty (:func:`.html.fmt_value`, GUM 7.2.6).
 from __future__ import annotations
 
 import html
-import io
 import math
 
 import numpy as np
@@ -155,8 +154,8 @@ def checks_section(analysis):
 
 
 def preisach_section(analysis):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from ..plotting import fixed_figure
+    from .figures import png_bytes
 
     fits = [(k, f["preisach"]) for k, f in sorted(analysis.fits.items()) if f.get("preisach") is not None]
     if not fits:
@@ -165,7 +164,7 @@ def preisach_section(analysis):
             '<p class="muted">No loop could be fitted (reasons in the list of figures not computed).</p>',
         )
     (o, c), pre = fits[0]
-    fig = Figure(figsize=(6.0, 4.6), layout="constrained")
+    fig = fixed_figure(6.0, 4.6, left=0.8, bottom=0.6, top=0.4)
     ax = fig.add_subplot()
     w = pre.weight_rad
     m = w > 0
@@ -185,11 +184,10 @@ def preisach_section(analysis):
     ax.set_ylim(-lim, lim)
     ax.set_xlabel("switch-down torque β (N·m)")
     ax.set_ylabel("switch-up torque α (N·m)")
-    ax.set_title(f"Preisach elements, orientation {o:g}°, cycle {c} (area ∝ weight, rad)", fontsize=10)
+    ax.set_title(f"Preisach elements, orientation {o:g}°, cycle {c} (area ∝ weight, rad)", fontsize=10, y=1.0,
+                 pad=5.0)
     ax.legend(fontsize=8, loc="upper left")
     ax.grid(True, alpha=0.3)
-    buf = io.BytesIO()
-    FigureCanvasAgg(fig).print_png(buf)
     verdict = "fits" if not pre.check.rejected else "REJECTED (" + pre.check.describe() + ")"
     text = (
         f"<p>Relays that switch up at α and down at β, with weights ≥ 0 fitted by non-negative least squares "
@@ -197,7 +195,7 @@ def preisach_section(analysis):
         f"0 < α < τ_c, −τ_c < β < 0. This loop: {html.escape(verdict)}; "
         f"{int(np.sum(m))} elements in use.</p>"
     )
-    return "Preisach model: element distribution", text + _img(buf.getvalue(), "Preisach element distribution")
+    return "Preisach model: element distribution", text + _img(png_bytes(fig), "Preisach element distribution")
 
 
 def analysis_sections(analysis) -> list:

@@ -19,10 +19,11 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
+from ..plotting import fixed_figure
 from ..plotting import png_bytes as _png_bytes
 
-__all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "phase_stiffness_chart", "orientation_chart",
-           "value_scale"]
+__all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "loops_by_orientation", "phase_stiffness_chart",
+           "orientation_chart", "value_scale"]
 
 logger = logging.getLogger(__name__)
 
@@ -103,16 +104,23 @@ def _orientations(analysis) -> list:
     return sorted({lp.orientation_deg for lp in analysis.loop_data})
 
 
-def _axes_labels(ax):
-    ax.set_xlabel("rotation angle (deg)")
-    ax.set_ylabel("torque (N·m)")
+def _axes_labels(ax, *, x=True, y=True):
+    if x:
+        ax.set_xlabel("rotation angle (deg)")
+    if y:
+        ax.set_ylabel("torque (N·m)")
     ax.grid(True, alpha=0.3)
     ax.axhline(0.0, color="0.5", lw=0.6)
 
 
+def _title(ax, text, **kwargs):
+    """Axes title at a fixed height: matplotlib otherwise measures the tick labels to place it."""
+    ax.set_title(text, y=1.0, pad=5.0, **kwargs)
+
+
 def loops_overlay(analysis) -> Figure:
     """All loops of the session overlaid, one colour per orientation."""
-    fig = Figure(figsize=(7.5, 5.0), layout="constrained")
+    fig = fixed_figure(7.5, 5.0, left=0.8, bottom=0.6, top=0.45)
     ax = fig.add_subplot()
     orients = _orientations(analysis)
     colours = dict(zip(orients, _colours(len(orients))))
@@ -123,9 +131,9 @@ def loops_overlay(analysis) -> Figure:
         ax.plot(np.degrees(lp.angle_rad), lp.torque_nm, "-o", ms=2.5, lw=1.0, color=colours[lp.orientation_deg],
                 label=label, alpha=0.85)
     _axes_labels(ax)
-    ax.set_title("Torque (N·m) against rotation angle (deg): every loop, one colour per orientation")
+    _title(ax, "Torque (N·m) against rotation angle (deg): every loop, one colour per orientation", fontsize=11)
     if orients:
-        ax.legend(title="orientation", fontsize=8)
+        ax.legend(title="orientation", fontsize=8, loc="upper left")
     return fig
 
 
@@ -138,10 +146,8 @@ def _dense(tau: np.ndarray, per_step: int = 12) -> np.ndarray:
     return np.append(inner, tau[-1])
 
 
-def loop_detail(analysis, orientation_deg: float) -> Figure:
-    """Loops of one orientation with the bilinear and Bouc–Wen fits over the data."""
-    fig = Figure(figsize=(6.0, 4.2), layout="constrained")
-    ax = fig.add_subplot()
+def _draw_loops(ax, analysis, orientation_deg: float, *, legend: bool) -> None:
+    """The loops of one orientation (data ±1σ) with the fits that were made, on `ax`."""
     loops = [lp for lp in analysis.loop_data if lp.orientation_deg == orientation_deg]
     for k, lp in enumerate(loops):
         ax.errorbar(np.degrees(lp.angle_rad), lp.torque_nm, xerr=np.degrees(lp.angle_std_rad), yerr=lp.torque_std_nm,
@@ -153,17 +159,64 @@ def loop_detail(analysis, orientation_deg: float) -> Figure:
             if fit is not None:
                 ax.plot(np.degrees(fit.predict(dense)), dense, style, lw=1.3,
                         color="tab:red" if key == "bilinear" else "tab:blue", label=label if k == 0 else None)
+    if legend and loops:
+        ax.legend(fontsize=8, loc="upper left")
+
+
+def loop_detail(analysis, orientation_deg: float) -> Figure:
+    """Loops of one orientation with the bilinear and Bouc–Wen fits over the data."""
+    fig = fixed_figure(6.0, 4.2, left=0.75, bottom=0.55, top=0.6)
+    ax = fig.add_subplot()
+    _draw_loops(ax, analysis, orientation_deg, legend=True)
     _axes_labels(ax)
-    ax.set_title(f"Torque (N·m) against rotation angle (deg) at orientation {orientation_deg:g}°,\n"
-                 "measured and fitted", fontsize=10)
-    ax.legend(fontsize=8)
+    _title(ax, f"Torque (N·m) against rotation angle (deg) at orientation {orientation_deg:g}°,\n"
+               "measured and fitted", fontsize=10)
+    return fig
+
+
+#: Panels per row of :func:`loops_by_orientation`.
+LOOP_PANELS_PER_ROW = 3
+
+
+def loops_by_orientation(analysis) -> Figure:
+    """One panel per orientation: its loops (data ±1σ) and the fits, on common axes.
+
+    One figure with a panel per orientation rather than a figure each: the panels
+    share their scales, so the orientations compare at a glance, and the report
+    draws one figure instead of six.
+    """
+    orients = _orientations(analysis) or [None]
+    cols = min(LOOP_PANELS_PER_ROW, len(orients))
+    rows = math.ceil(len(orients) / cols)
+    width = 10.0 if cols > 1 else 6.0
+    fig = fixed_figure(width, 0.95 + 2.55 * rows, left=0.75, right=0.15, bottom=0.5, top=0.45, wspace=0.08,
+                       hspace=0.22)
+    axes = fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False).ravel()
+    for i, ax in enumerate(axes):
+        if i >= len(orients):
+            ax.set_axis_off()
+            continue
+        o = orients[i]
+        if o is not None:
+            _draw_loops(ax, analysis, o, legend=i == 0)
+            _title(ax, f"orientation {o:g}°", fontsize=9)
+        row, col = divmod(i, cols)
+        last_row = row == rows - 1 or i + cols >= len(orients)
+        _axes_labels(ax, x=last_row, y=col == 0)
+        ax.tick_params(labelsize=8)
+        if not last_row:
+            ax.tick_params(labelbottom=False)
+        if col:
+            ax.tick_params(labelleft=False)
+    fig.suptitle("Torque (N·m) against rotation angle (deg) per orientation, measured and fitted",
+                 y=1.0 - 0.12 / fig.get_figheight(), va="top", fontsize=11)
     return fig
 
 
 def phase_stiffness_chart(analysis) -> Figure:
     """Stiffness of each phase per orientation (mean over cycles, ±u95); the value
     axis is logarithmic only where that shows more than one tick label."""
-    fig = Figure(figsize=(7.5, 4.2), layout="constrained")
+    fig = fixed_figure(7.5, 4.2, left=0.8, bottom=0.6, top=0.45)
     ax = fig.add_subplot()
     po = analysis.per_orientation
     orients = _orientations(analysis)
@@ -182,10 +235,10 @@ def phase_stiffness_chart(analysis) -> Figure:
                 ha="center", va="center", transform=ax.transAxes, fontsize=9)
     ax.set_ylabel("stiffness (N·m/rad)")
     ax.set_xlabel("flexspline orientation (deg)")
-    ax.set_title("Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95 (k = 2)",
-                 fontsize=10)
+    _title(ax, "Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95 (k = 2)",
+           fontsize=10)
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower left")
     return fig
 
 
@@ -205,7 +258,7 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
     n = len(figures)
     cols = 2
     rows = math.ceil(n / cols)
-    fig = Figure(figsize=(8.0, 2.8 * rows), layout="constrained")
+    fig = fixed_figure(8.0, 2.8 * rows, left=0.85, right=0.2, bottom=0.5, top=0.55, wspace=0.35, hspace=0.75)
     po = analysis.per_orientation
     for i, name in enumerate(figures):
         ax = fig.add_subplot(rows, cols, i + 1)
@@ -226,7 +279,7 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
                    else "orientation effect not tested")
         unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
         ax.set_ylabel(unit or "(no unit)")
-        ax.set_title(f"{words}{f' ({unit})' if unit else ''}\n{verdict}", fontsize=9)
+        _title(ax, f"{words}{f' ({unit})' if unit else ''}\n{verdict}", fontsize=9)
         ax.set_xticks(sub["orientation_deg"])
         ax.set_xlabel("orientation (deg)")
         ax.grid(True, alpha=0.3)

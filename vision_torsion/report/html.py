@@ -177,7 +177,8 @@ def render_html(
         temperature, notes from session.toml's ``[test]``/``[gear]`` tables); None
         or blank values are left out. The software version and date are always shown.
     figures : dict
-        ``{"overlay": png, "stiffness": png, "orientation": png, "loops": [(orientation, png), ...]}``.
+        ``{"overlay": png, "by_orientation": png, "stiffness": png, "orientation": png}`` (PNG bytes;
+        ``by_orientation`` has a panel per orientation with the fits).
     failed : pandas.DataFrame
         ``image, orientation_deg, cycle, phase, step, message`` of failed images.
     extra_sections : sequence of (title, html)
@@ -200,10 +201,9 @@ def render_html(
     s = analysis.settings
     # the caption names only the fits drawn: Bouc–Wen is fitted on request
     fits = "bilinear fit (red), Bouc–Wen fit (blue dashed)" if s.get("fit_bouc_wen") else "bilinear fit (red)"
-    loops_html = "".join(
-        f"<figure>{_img(png, f'loop {o:g} deg')}"
-        f"<figcaption>Orientation {o:g}°: data (±1σ), {fits}.</figcaption></figure>"
-        for o, png in figures["loops"]
+    loops_html = (
+        f"<figure>{_img(figures['by_orientation'], 'loops per orientation')}"
+        f"<figcaption>One panel per orientation, common scales: data (±1σ), {fits}.</figcaption></figure>"
     )
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
     parts = [
@@ -217,7 +217,7 @@ def render_html(
         f"<figure>{_img(figures['overlay'], 'all loops')}<figcaption>All orientations and cycles overlaid."
         "</figcaption></figure>",
         "<h3>One orientation at a time, with the model fits</h3>",
-        f'<div class="grid">{loops_html}</div>',
+        loops_html,
         "<h2>Stiffness per phase and orientation (paper, Table 1)</h2>",
         _table1(stiffness),
         f"<figure>{_img(figures['stiffness'], 'phase stiffness')}</figure>",

@@ -20,12 +20,18 @@ STIFFNESS_TABLE_COLUMNS = [
 _ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
 
 
-def _lookup(po: pd.DataFrame, orient: float, figure: str) -> tuple[float, float, int]:
-    row = po[(po["orientation_deg"] == orient) & (po["figure"] == figure)]
-    if row.empty:
-        return np.nan, np.nan, 0
-    r = row.iloc[0]
-    return float(r["mean"]), float(r["std"]), int(r["n_cycles"])
+def _index(po: pd.DataFrame) -> dict:
+    """``{(orientation, figure): (mean, std, n_cycles)}`` of the per-orientation table
+    (the first row of each pair), built once: one boolean filter of the frame per
+    table cell cost more than the rest of the report's tables together."""
+    out = {}
+    for o, f, m, s, n in zip(po["orientation_deg"], po["figure"], po["mean"], po["std"], po["n_cycles"]):
+        out.setdefault((float(o), f), (float(m), float(s), int(n)))
+    return out
+
+
+def _lookup(index: dict, orient: float, figure: str) -> tuple[float, float, int]:
+    return index.get((float(orient), figure), (np.nan, np.nan, 0))
 
 
 def stiffness_table(analysis) -> pd.DataFrame:
@@ -36,17 +42,21 @@ def stiffness_table(analysis) -> pd.DataFrame:
     the four rows of its orientation. Missing figures are NaN.
     """
     ph = analysis.phases
-    po = analysis.per_orientation
+    po = _index(analysis.per_orientation)
     rows = []
+    ranges = {}  # (orientation, phase) -> median torque range over cycles
+    if len(ph):
+        for key, sub in ph.groupby(["orientation_deg", "phase"], sort=False):
+            ranges[key] = (_median(sub["torque_from_nm"]), _median(sub["torque_to_nm"]))
     for orient in sorted(ph["orientation_deg"].unique()) if len(ph) else []:
         h, h_std, _ = _lookup(po, orient, "hysteresis")
         for phase in LOOP_PHASES:
-            sub = ph[(ph["orientation_deg"] == orient) & (ph["phase"] == phase)]
+            t_from, t_to = ranges.get((orient, phase), (np.nan, np.nan))
             k, k_std, n = _lookup(po, orient, f"k_{phase}")
             rows.append({
                 "orientation_deg": orient, "phase": phase,
-                "torque_from_nm": _median(sub["torque_from_nm"]),
-                "torque_to_nm": _median(sub["torque_to_nm"]),
+                "torque_from_nm": t_from,
+                "torque_to_nm": t_to,
                 "n_cycles": n, "stiffness_nm_per_rad": k, "stiffness_std_nm_per_rad": k_std,
                 "stiffness_nm_per_arcmin": k / _ARCMIN_PER_RAD, "stiffness_std_nm_per_arcmin": k_std / _ARCMIN_PER_RAD,
                 "hysteresis_deg": h, "hysteresis_std_deg": h_std,
@@ -115,7 +125,7 @@ def metrics_table(analysis) -> pd.DataFrame:
     last columns hold the session mean, its standard uncertainty, the sd between
     loops and the orientation test p-value.
     """
-    po = analysis.per_orientation
+    po = _index(analysis.per_orientation)
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     rows = []
     for fig, label, unit, scale in CATALOGUE_FIGURES:
