@@ -19,7 +19,7 @@ def _measure(x):
 
 
 def test_each_item_gets_its_value_or_its_reason(caplog):
-    with caplog.at_level(logging.DEBUG):
+    with caplog.at_level(logging.DEBUG, logger="vision_torsion"):
         done = measure_each(_measure, ["a", "unreadable", "blank", "bug", "b"])
     assert [d.value for d in done] == ["A", None, None, None, "B"]
     assert [d.reason for d in done] == ["", "unreadable_image", "no_markers", INTERNAL_ERROR, ""]

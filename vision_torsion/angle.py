@@ -34,6 +34,7 @@ images.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -137,7 +138,9 @@ def _distinct_radii(p: PairMeasurement) -> float:
     """Signed radius difference second - first when clearly significant, else 0."""
     a, b = p.first, p.second
     dr = b.radius_px - a.radius_px
-    sd = np.hypot(np.nan_to_num(a.radius_std_px, nan=np.inf), np.nan_to_num(b.radius_std_px, nan=np.inf))
+    sd = math.hypot(a.radius_std_px, b.radius_std_px)
+    if math.isnan(sd):  # a radius without its std is never clearly distinct
+        return 0.0
     return dr if abs(dr) > max(0.5, 10 * sd) else 0.0
 
 

@@ -17,8 +17,6 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
-from tqdm.auto import tqdm
-
 from .errors import VisionTorsionError
 
 __all__ = ["Attempt", "attempt", "measure_each", "INTERNAL_ERROR"]
@@ -118,6 +116,8 @@ def measure_each(measure: Callable[[Any], Any], items: Iterable, *, names: Itera
     items = list(items)
     names = [str(i) for i in items] if names is None else list(names)
     out = []
+    from tqdm.auto import tqdm  # here: its asyncio import costs every command ~30 ms
+
     for item, name in tqdm(list(zip(items, names)), desc=desc, unit="image", disable=not progress):
         done = attempt(measure, item, name=name)
         if not done.ok and not done.unexpected:

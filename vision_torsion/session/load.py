@@ -8,6 +8,7 @@ validates the configuration (:mod:`.config`), the manifest and every image file
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -118,15 +119,20 @@ def unlisted_images(session: Session, *, exclude=()) -> list[str]:
     skip = {Path(p).resolve() for p in exclude}
     named = {row.image for row in session.manifest.rows}
     bound = {Path(p).resolve() for p in session.manifest.sources.values()}
-    out = []
-    for path in sorted(session.folder.rglob("*")):
-        rel = path.relative_to(session.folder)
-        if any(part.startswith(".") for part in rel.parts) or path.suffix.lower() not in IMAGE_SUFFIXES:
-            continue
-        if any(p == path.resolve() or p in path.resolve().parents for p in skip):
-            continue
-        if path.is_file() and rel.as_posix() not in named and path.resolve() not in bound:
-            out.append(rel.as_posix())
+    found = []
+    # os.walk, not rglob: hidden and excluded folders are not entered at all, and only
+    # the files no row names are resolved (a session holds thousands of named images)
+    for here, folders, files in os.walk(session.folder):
+        folders[:] = [f for f in folders
+                      if not f.startswith(".") and (Path(here) / f).resolve() not in skip]
+        for name in files:
+            if name.startswith(".") or Path(name).suffix.lower() not in IMAGE_SUFFIXES:
+                continue
+            path = Path(here) / name
+            rel = path.relative_to(session.folder)
+            if rel.as_posix() not in named and path.is_file() and path.resolve() not in bound:
+                found.append(rel)
+    out = [rel.as_posix() for rel in sorted(found)]
     from .binding import load_binding
 
     binding = load_binding(session.folder)

@@ -137,6 +137,7 @@ class _RowChecker:
         self.binding = binding
         self.missing = missing
         self.pending: list[int] = []
+        self._real_folders: dict[Path, Path] = {}
 
     def add(self, line: int, what: str) -> None:
         self.problems.append(f"line {line}: {what}")
@@ -160,6 +161,15 @@ class _RowChecker:
             return None
         return norm
 
+    def _real_path(self, path: Path) -> Path:
+        """``path.resolve()``, resolving each folder once: a manifest names thousands
+        of images in a few folders, and resolving each path in full cost ~0.2 ms."""
+        if path.is_symlink():
+            return path.resolve()
+        if path.parent not in self._real_folders:
+            self._real_folders[path.parent] = path.parent.resolve()
+        return self._real_folders[path.parent] / path.name
+
     def image_file(self, line: int, rel: str) -> None:
         source = self.binding.source(rel) if self.binding is not None else None
         if source is not None:
@@ -169,7 +179,7 @@ class _RowChecker:
         else:
             path, root, shown, where = self.session_dir / rel, self.root, repr(rel), "the session folder"
         try:
-            path.resolve().relative_to(root)
+            self._real_path(path).relative_to(root)
         except ValueError:
             self.add(line, f"image {shown} leaves {where} (through a symbolic link)")
             return

@@ -35,10 +35,9 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing
 import os
 from collections import defaultdict, deque
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
@@ -191,6 +190,8 @@ def _pool_context():
     fork instead of importing them again; this sets the process-wide preload list
     of :mod:`multiprocessing`'s fork server, keeping its default ``__main__`` entry.
     """
+    import multiprocessing  # here: only more than _MAX_THREAD_JOBS jobs start processes
+
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
     context = multiprocessing.get_context("forkserver")
@@ -221,6 +222,8 @@ def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, kn
                     yield result
                     bar.update()
             return
+        from concurrent.futures import ProcessPoolExecutor
+
         context = _pool_context()
         # small chunks (~60 ms of work): at the end one worker waits at most
         # that long for the other; the messages cost ~0.2 ms each
@@ -420,8 +423,9 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     columns, records = _table(session, entries, correction)
     path = write_records_csv(out / MEASUREMENTS_NAME, columns, records)
     new_logs = CacheLog(cache_dir, run).files()
-    if new_logs or len(logs) > 1:
-        # one log for the next run; the old logs' entries were read at the start
+    if len(logs) + len(new_logs) > 1:
+        # one log for the next run; the old logs' entries were read at the start (a
+        # single log, e.g. of a first run in this process, is one already)
         merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=_valid_entry)}, logs + new_logs)
     failed = [r for r in records if r["status"] in ("failed", SUSPECT)]  # a suspect angle is not good data
     waiting = [r for r in records if r["status"] == "pending"]
