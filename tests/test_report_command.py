@@ -50,3 +50,25 @@ def test_report_of_a_folder_without_session_exits_2(tmp_path, capsys):
 def test_report_session_function_reuses_the_cache(small_session):
     rep = report_session(small_session, jobs=1)
     assert rep.n_failed == 0 and rep.files.report_html.is_file()
+
+
+def test_demo_reuses_its_session_renders_on_a_new_seed_and_on_force(tmp_path, monkeypatch, small_scene):
+    from vision_torsion.report import session_report
+
+    spec = SessionSpec(step_mass_kg=0.09, orientations_deg=(0.0,), k_u_nm_per_rad=4.4, angle_sign=-1)
+    # the demo's scene made small (18 images) so the test takes seconds, not a minute
+    monkeypatch.setattr(session_report, "demo_scene", lambda: (small_scene.replace(markers={"distance_px": 90.0}), spec))
+    truth = tmp_path / "session" / "truth.csv"
+
+    def run(*args):
+        assert main(["demo", str(tmp_path), "--jobs", "1", "-q", *args]) == 0
+        return truth.stat().st_mtime_ns, truth.read_text()
+
+    first = run("--seed", "3")
+    assert json.loads((tmp_path / "demo.json").read_text()) == {"seed": 3}
+    assert run("--seed", "3") == first  # reused: not rendered again
+    forced = run("--seed", "3", "--force")
+    assert forced[0] != first[0] and forced[1] == first[1]  # rendered again, the same session
+    other = run("--seed", "4")
+    assert other[1] != first[1]  # another seed is another session, never the old one reused
+    assert (tmp_path / "session" / "results" / "report.html").is_file()

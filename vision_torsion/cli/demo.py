@@ -23,6 +23,9 @@ def register(sub) -> None:
         help="demo folder (default ./vision-torsion-demo)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic session")
+    p.add_argument("--force", action="store_true",
+                   help="render the session again even if OUT_DIR holds one rendered with the same seed "
+                        "(without it that session is reused and only what changed is measured)")
     add_jobs_option(p)
     add_common_options(p)
     p.set_defaults(func=run)
@@ -32,6 +35,6 @@ def run(args) -> int:
     from ..report.session_report import run_demo
     from .report import print_summary
 
-    rep = run_demo(args.out_dir, seed=args.seed, jobs=args.jobs, progress=progress_enabled(args))
+    rep = run_demo(args.out_dir, seed=args.seed, jobs=args.jobs, progress=progress_enabled(args), force=args.force)
     print_summary(rep)
     return 1 if rep.n_failed else 0

@@ -8,13 +8,14 @@ of ``synthetic/paper_session.toml``), then does the same.
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
-from ..fileio import write_csv
+from ..fileio import atomic_write_text, write_csv
 from . import ReportFiles
 
 __all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
@@ -257,7 +258,8 @@ def demo_scene():
 
 
 def run_demo(
-    out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False
+    out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False,
+    force: bool = False,
 ) -> SessionReport:
     """Render the paper-like synthetic session, process it and write its report.
 
@@ -265,14 +267,17 @@ def run_demo(
     ----------
     out_dir : str or os.PathLike
         Folder for the demo: the session goes to ``OUT_DIR/session``, the results
-        and report to ``OUT_DIR/session/results``. A session already there is
-        reused (and only re-measured where needed).
+        and report to ``OUT_DIR/session/results``. A session already rendered there
+        with the same seed is reused (and only re-measured where needed); one
+        rendered with another seed, or interrupted, is rendered again.
     seed : int
         Seed of the synthetic session.
     jobs : int, optional
         Images measured at once (see :func:`~vision_torsion.session.process_session`).
     progress : bool
         Show progress bars.
+    force : bool
+        Render the session again even when one with the same seed is there.
 
     Returns
     -------
@@ -281,8 +286,30 @@ def run_demo(
     from ..synthetic.session import write_session_folder
 
     session_dir = Path(out_dir) / "session"
-    if not (session_dir / "truth.csv").is_file():
-        # truth.csv is written last: without it an earlier demo was interrupted
+    stamp = Path(out_dir) / DEMO_STAMP
+    rendered = _demo_seed(stamp) if (session_dir / "truth.csv").is_file() else None
+    # truth.csv is written last: without it an earlier demo was interrupted
+    if force or rendered != seed:
+        if rendered is not None and not force:
+            logger.info("%s: rendered with seed %d; rendering it again with seed %d", session_dir, rendered, seed)
         scene, spec = demo_scene()
         write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True)
+        atomic_write_text(stamp, json.dumps({"seed": seed}) + "\n")
+    else:
+        logger.info("%s: reusing the session rendered earlier with seed %d (--force renders it again)",
+                    session_dir, seed)
     return report_session(session_dir, jobs=jobs, progress=progress)
+
+
+#: The demo folder's record of the seed its session was rendered with.
+DEMO_STAMP = "demo.json"
+
+
+def _demo_seed(stamp: Path) -> int | None:
+    """The seed recorded in a demo folder's stamp, or None (no stamp, unreadable:
+    the session is rendered again)."""
+    try:
+        seed = json.loads(stamp.read_text(encoding="utf-8"))["seed"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return seed if isinstance(seed, int) else None
