@@ -61,7 +61,9 @@ def test_files_not_in_the_manifest_are_listed(half_shot):
     folder, *_ = half_shot
     write_image(folder / "images" / "IMG_0001.png", draw_target(3.0))
     write_image(folder / "stray.png", draw_target(4.0))
-    result = process_session(folder, jobs=1)
+    # a report's figures in the default output folder are not shots, even when this run writes elsewhere
+    write_image(folder / "results" / "figures" / "loops.png", draw_target(5.0))
+    result = process_session(folder, out_dir=folder / "elsewhere", jobs=1)
     assert result.unlisted == ("images/IMG_0001.png", "stray.png")
 
 

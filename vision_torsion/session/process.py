@@ -430,7 +430,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     failed = [r for r in records if r["status"] in ("failed", SUSPECT)]  # a suspect angle is not good data
     waiting = [r for r in records if r["status"] == "pending"]
     failures = tuple((r["image"], r["message"]) for r in failed)
-    unlisted = tuple(unlisted_images(session, exclude=[out]))
+    # report figures in the default output folder are not shots, whichever -o this run has
+    unlisted = tuple(unlisted_images(session, exclude=[out, session.folder / "results"]))
     n_ok = len(records) - len(failed) - len(waiting)
     logger.info("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
                 path, len(records), n_ok, len(failed), len(waiting),
