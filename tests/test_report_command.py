@@ -57,7 +57,8 @@ def test_demo_reuses_its_session_renders_on_a_new_seed_and_on_force(tmp_path, mo
 
     spec = SessionSpec(step_mass_kg=0.09, orientations_deg=(0.0,), k_u_nm_per_rad=4.4, angle_sign=-1)
     # the demo's scene made small (18 images) so the test takes seconds, not a minute
-    monkeypatch.setattr(session_report, "demo_scene", lambda: (small_scene.replace(markers={"distance_px": 90.0}), spec))
+    scene = small_scene.replace(markers={"distance_px": 90.0})
+    monkeypatch.setattr(session_report, "demo_scene", lambda: (scene, spec))
     truth = tmp_path / "session" / "truth.csv"
 
     def run(*args):
