@@ -42,8 +42,6 @@ from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
 
-from tqdm import tqdm
-
 from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
@@ -209,10 +207,28 @@ def _start_server() -> None:
         forkserver.ensure_running()
 
 
+class _NoBar:
+    def update(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress_bar(total: int, progress: bool):
+    """tqdm's bar when asked for, else a stand-in: importing tqdm costs a quiet run
+    (``-q``, a script) 30-50 ms before its first image."""
+    if not progress:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="image", desc="measuring")
+
+
 def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
     """Yield each task's result in task order: in this process with `jobs` up to
     :data:`_MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
-    bar = tqdm(total=len(tasks), unit="image", desc="measuring", disable=not progress)
+    bar = _progress_bar(len(tasks), progress)
     try:
         if jobs <= _MAX_THREAD_JOBS or len(tasks) <= 1:
             with in_process(cache_dir, run, known, measure):
