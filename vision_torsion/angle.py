@@ -125,9 +125,12 @@ def _direction_and_var(a, b):
     n2 = vx * vx + vy * vy
     if not n2 > 0:
         raise MarkerError("the two markers coincide")
-    g = np.array([vy, -vx]) / n2
-    var = float(g @ (a.cov + b.cov) @ g)
-    return float(np.arctan2(-vy, vx)), var
+    # the direction's gradient g = (vy, -vx)/|v|² through the summed centre covariances,
+    # in floats: a session computes this for every image, and 2x2 numpy arrays cost 20x more
+    gx, gy = vy / n2, -vx / n2
+    var = (gx * gx * (a.x_std_px**2 + b.x_std_px**2) + 2 * gx * gy * (a.xy_cov_px2 + b.xy_cov_px2)
+           + gy * gy * (a.y_std_px**2 + b.y_std_px**2))
+    return math.atan2(-vy, vx), float(var)
 
 
 def _wrap(x, period):
