@@ -29,7 +29,7 @@ def test_files_written(report):
     _, _, files = report
     for p in (files.summary_json, files.stiffness_table_csv, files.report_html, *files.figures):
         assert p.exists() and p.stat().st_size > 0
-    assert {p.name for p in files.figures} >= {"loops_overlay.png", "loops_by_orientation.png"}
+    assert {p.name for p in files.figures} >= {"loops_overlay.png", "fit_residuals.png"}
     assert not list(files.out_dir.glob(".*.tmp"))  # atomic writes leave no temporaries
 
 
@@ -63,7 +63,7 @@ def test_html_self_contained_and_complete(report):
     page = files.report_html.read_text()
     assert not re.search(r"(src|href)=\"(https?:)?//", page)  # nothing fetched from the network
     assert "<script" not in page
-    assert page.count("data:image/png;base64,") == 4  # overlay, loops by orientation, stiffness, orientation
+    assert page.count("data:image/png;base64,") == 4  # overlay, fit residuals, stiffness, orientation
     for text in ("Test conditions", "Failed images", "unreadable file", "marker not found: 1 of 2 markers",
                  "Figures that could not be computed", "phase(s) positive_loading missing", "id='extra'",
                  "Stiffness per phase and orientation"):
@@ -71,12 +71,12 @@ def test_html_self_contained_and_complete(report):
 
 
 def test_loop_captions_name_only_the_fits_drawn(report):
-    """Bouc–Wen is fitted on request only (this report: not): the loop captions must
-    not name a fit that is not drawn."""
+    """The loop figures draw the bilinear fit only (Bouc–Wen, fitted on request, is judged in
+    the lack-of-fit table): the captions must not name a fit that is not drawn."""
     _, _, files = report
     page = files.report_html.read_text()
-    assert "data (±1σ), bilinear fit (red).</figcaption>" in page
-    assert "Bouc–Wen fit (blue dashed)" not in page
+    assert "each loop's bilinear fit (thin black line)" in page
+    assert "Bouc–Wen fit" not in page
 
 
 def test_bad_conditions_and_failures(report, tmp_path):

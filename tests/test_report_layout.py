@@ -67,9 +67,13 @@ def test_titles_are_words_with_units(analysed):
     overlay = fig.loops_overlay(a).axes[0].get_title()
     detail = fig.loop_detail(a, 0.0).axes[0].get_title()
     assert "(N·m)" in overlay and "(deg)" in overlay and "(N·m)" in detail
-    titles = [ax.get_title() for ax in fig.orientation_chart(a).axes if ax.get_title()]
-    assert titles and not any("_" in t for t in titles)
-    assert any("(N·m/rad)" in t for t in titles)
+    chart = fig.orientation_chart(a).axes[0]
+    assert "(%)" in chart.get_title() and "(%)" in chart.get_ylabel()
+    entries = [t.get_text() for t in chart.get_legend().get_texts()]
+    assert entries and not any("_" in t for t in entries)
+    assert any("N·m/rad" in t for t in entries)          # each figure's session mean with its unit
+    residuals = fig.fit_residuals(a).axes[0]
+    assert "(deg)" in residuals.get_title() and "(deg)" in residuals.get_ylabel()
 
 
 def test_header_has_version_date_and_present_metadata(analysed, tmp_path):

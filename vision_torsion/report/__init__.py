@@ -94,7 +94,7 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
 
     pngs = {
         "loops_overlay.png": _fig.safe_png(_fig.loops_overlay, analysis),
-        "loops_by_orientation.png": _fig.safe_png(_fig.loops_by_orientation, analysis),
+        "fit_residuals.png": _fig.safe_png(_fig.fit_residuals, analysis),
         "phase_stiffness.png": _fig.safe_png(_fig.phase_stiffness_chart, analysis),
         "orientation_effect.png": _fig.safe_png(_fig.orientation_chart, analysis),
     }
@@ -113,7 +113,7 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     page = render_html(
         title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
         figures={"overlay": pngs["loops_overlay.png"], "stiffness": pngs["phase_stiffness.png"],
-                 "orientation": pngs["orientation_effect.png"], "by_orientation": pngs["loops_by_orientation.png"]},
+                 "orientation": pngs["orientation_effect.png"], "residuals": pngs["fit_residuals.png"]},
         failed=failed, extra_sections=extra_sections or (), metadata=metadata,
     )
     html_path = atomic_write_text(out / "report.html", page)

@@ -22,7 +22,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 from ..plotting import fixed_figure
 from ..plotting import png_bytes as _png_bytes
 
-__all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "loops_by_orientation", "phase_stiffness_chart",
+__all__ = ["png_bytes", "safe_png", "loops_overlay", "loop_detail", "fit_residuals", "phase_stiffness_chart",
            "orientation_chart", "value_scale"]
 
 logger = logging.getLogger(__name__)
@@ -119,17 +119,26 @@ def _title(ax, text, **kwargs):
 
 
 def loops_overlay(analysis) -> Figure:
-    """All loops of the session overlaid, one colour per orientation."""
+    """All loops of the session overlaid, one colour per orientation, with each loop's
+    bilinear fit as a thin black line over its points."""
     fig = fixed_figure(7.5, 5.0, left=0.8, bottom=0.6, top=0.45)
     ax = fig.add_subplot()
     orients = _orientations(analysis)
     colours = dict(zip(orients, _colours(len(orients))))
     seen = set()
+    fitted = False
     for lp in analysis.loop_data:
         label = None if lp.orientation_deg in seen else f"{lp.orientation_deg:g}°"
         seen.add(lp.orientation_deg)
-        ax.plot(np.degrees(lp.angle_rad), lp.torque_nm, "-o", ms=2.5, lw=1.0, color=colours[lp.orientation_deg],
+        ax.plot(np.degrees(lp.angle_rad), lp.torque_nm, "o", ms=3.0, color=colours[lp.orientation_deg],
                 label=label, alpha=0.85)
+        fit = analysis.fits.get((lp.orientation_deg, lp.cycle), {}).get("bilinear")
+        if fit is not None:
+            dense = _dense(lp.torque_nm)
+            ax.plot(np.degrees(fit.predict(dense)), dense, "-", lw=0.7, color="k", zorder=3)
+            fitted = True
+    if fitted:  # last in the legend, after the orientations
+        ax.plot([], [], "-", lw=0.7, color="k", label="bilinear fit")
     _axes_labels(ax)
     _title(ax, "Torque (N·m) against rotation angle (deg): every loop, one colour per orientation", fontsize=11)
     if orients:
@@ -174,42 +183,45 @@ def loop_detail(analysis, orientation_deg: float) -> Figure:
     return fig
 
 
-#: Panels per row of :func:`loops_by_orientation`.
-LOOP_PANELS_PER_ROW = 3
+def fit_residuals(analysis) -> Figure:
+    """Residual of each loop's bilinear fit (deg) along the loop, one colour per
+    orientation, against the noise the lack-of-fit test expects.
 
-
-def loops_by_orientation(analysis) -> Figure:
-    """One panel per orientation: its loops (data ±1σ) and the fits, on common axes.
-
-    One figure with a panel per orientation rather than a figure each: the panels
-    share their scales, so the orientations compare at a glance, and the report
-    draws one figure instead of six.
+    The band is ±2 × the RMS noise of the test (angle noise and the torque error
+    through the local compliance, :mod:`vision_torsion.analysis.fitcheck`), the
+    median over loops: a fit that describes its loop stays inside it.
     """
-    orients = _orientations(analysis) or [None]
-    cols = min(LOOP_PANELS_PER_ROW, len(orients))
-    rows = math.ceil(len(orients) / cols)
-    width = 10.0 if cols > 1 else 6.0
-    fig = fixed_figure(width, 0.95 + 2.55 * rows, left=0.75, right=0.15, bottom=0.5, top=0.45, wspace=0.08,
-                       hspace=0.22)
-    axes = fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False).ravel()
-    for i, ax in enumerate(axes):
-        if i >= len(orients):
-            ax.set_axis_off()
+    fig = fixed_figure(7.5, 3.6, left=0.85, bottom=0.6, top=0.45)
+    ax = fig.add_subplot()
+    orients = _orientations(analysis)
+    colours = dict(zip(orients, _colours(len(orients))))
+    seen = set()
+    noise = []
+    for lp in analysis.loop_data:
+        f = analysis.fits.get((lp.orientation_deg, lp.cycle), {})
+        fit = f.get("bilinear")
+        if fit is None:
             continue
-        o = orients[i]
-        if o is not None:
-            _draw_loops(ax, analysis, o, legend=i == 0)
-            _title(ax, f"orientation {o:g}°", fontsize=9)
-        row, col = divmod(i, cols)
-        last_row = row == rows - 1 or i + cols >= len(orients)
-        _axes_labels(ax, x=last_row, y=col == 0)
-        ax.tick_params(labelsize=8)
-        if not last_row:
-            ax.tick_params(labelbottom=False)
-        if col:
-            ax.tick_params(labelleft=False)
-    fig.suptitle("Torque (N·m) against rotation angle (deg) per orientation, measured and fitted",
-                 y=1.0 - 0.12 / fig.get_figheight(), va="top", fontsize=11)
+        chk = f.get("checks", {}).get("bilinear")
+        if chk is not None and np.isfinite(chk.noise_rms_rad):
+            noise.append(chk.noise_rms_rad)
+        label = None if lp.orientation_deg in seen else f"{lp.orientation_deg:g}°"
+        seen.add(lp.orientation_deg)
+        r = np.degrees(lp.angle_rad - fit.predict(lp.torque_nm))
+        ax.plot(np.arange(r.size), r, "-o", ms=2.5, lw=0.8, color=colours[lp.orientation_deg], label=label)
+    if noise:
+        band = 2.0 * math.degrees(float(np.median(noise)))
+        ax.axhspan(-band, band, color="0.85", zorder=0, label="±2 × noise RMS")
+    if not seen:
+        ax.text(0.5, 0.5, "no loop has a bilinear fit (reasons in the table of withheld figures)",
+                ha="center", va="center", transform=ax.transAxes, fontsize=9)
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("image number along the loop")
+    ax.set_ylabel("residual (deg)")
+    _title(ax, "Residual of the bilinear fit (deg) along each loop, one colour per orientation", fontsize=10)
+    if seen:
+        ax.legend(fontsize=7, loc="upper right", ncol=4)
     return fig
 
 
@@ -254,34 +266,41 @@ _FIGURE_WORDS = {
 
 
 def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_k_u", "bilinear_k_l")) -> Figure:
-    """Chosen figures per orientation (mean ± u95) against the session mean."""
-    n = len(figures)
-    cols = 2
-    rows = math.ceil(n / cols)
-    fig = fixed_figure(8.0, 2.8 * rows, left=0.85, right=0.2, bottom=0.5, top=0.55, wspace=0.35, hspace=0.75)
+    """Chosen figures per orientation (mean ± u95) as a deviation from their session
+    mean (%), in one chart, each with the verdict of its orientation test in the legend."""
+    fig = fixed_figure(7.5, 4.9, left=0.85, bottom=1.5, top=0.45, right=0.2)
+    ax = fig.add_subplot()
     po = analysis.per_orientation
-    for i, name in enumerate(figures):
-        ax = fig.add_subplot(rows, cols, i + 1)
+    orients = _orientations(analysis)
+    step = min(np.diff(orients)) if len(orients) > 1 else 1.0
+    width = 0.5 * step / max(len(figures), 1)
+    for j, name in enumerate(figures):
         sub = po[po["figure"] == name]
         s = analysis.summary.get(name, {})
         words = _FIGURE_WORDS.get(name, name.replace("_", " "))
-        if sub.empty or not np.isfinite(sub["mean"].to_numpy(dtype=float)).any():
-            ax.text(0.5, 0.5, f"{words}: not available", ha="center", va="center", transform=ax.transAxes)
-            ax.set_axis_off()
+        unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
+        mean = s.get("mean")
+        values = sub["mean"].to_numpy(dtype=float)
+        if sub.empty or not np.isfinite(values).any() or mean is None or not mean:
+            ax.plot([], [], " ", label=f"{words}: not available")
             continue
-        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0)
-        ax.errorbar(sub["orientation_deg"], sub["mean"], yerr=yerr, fmt="o", capsize=3)
-        if s.get("mean") is not None:
-            ax.axhline(s["mean"], color="tab:red", lw=0.8, ls="--", label="session mean")
         test = s.get("orientation_test", {})
         verdict = ("orientation effect found" if test.get("significant")
                    else "no orientation effect found" if test.get("significant") is False
                    else "orientation effect not tested")
-        unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
-        ax.set_ylabel(unit or "(no unit)")
-        _title(ax, f"{words}{f' ({unit})' if unit else ''}\n{verdict}", fontsize=9)
-        ax.set_xticks(sub["orientation_deg"])
-        ax.set_xlabel("orientation (deg)")
-        ax.grid(True, alpha=0.3)
-        ax.ticklabel_format(axis="y", useOffset=False)
+        scale = 100.0 / abs(mean)
+        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0) * scale
+        x = sub["orientation_deg"].to_numpy(dtype=float) + (j - (len(figures) - 1) / 2) * width
+        ax.errorbar(x, (values - mean) * scale, yerr=yerr, fmt="o", ms=4, capsize=2,
+                    label=f"{words} (session mean {mean:.4g} {unit}): {verdict}")
+    ax.axhline(0.0, color="0.4", lw=0.8)
+    if orients:
+        ax.set_xticks(orients, [f"{o:g}°" for o in orients])
+    ax.set_xlabel("flexspline orientation (deg)")
+    ax.set_ylabel("deviation from the session mean (%)")
+    ax.grid(True, alpha=0.3)
+    _title(ax, "Orientation effect: each figure's orientation mean against its session mean (%), ± u95",
+           fontsize=10)
+    if figures:  # below the axes: four long entries would hide points inside
+        ax.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(0.0, -0.17), frameon=False)
     return fig

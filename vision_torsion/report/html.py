@@ -177,8 +177,7 @@ def render_html(
         temperature, notes from session.toml's ``[test]``/``[gear]`` tables); None
         or blank values are left out. The software version and date are always shown.
     figures : dict
-        ``{"overlay": png, "by_orientation": png, "stiffness": png, "orientation": png}`` (PNG bytes;
-        ``by_orientation`` has a panel per orientation with the fits).
+        ``{"overlay": png, "residuals": png, "stiffness": png, "orientation": png}`` (PNG bytes).
     failed : pandas.DataFrame
         ``image, orientation_deg, cycle, phase, step, message`` of failed images.
     extra_sections : sequence of (title, html)
@@ -199,11 +198,11 @@ def render_html(
         columns=["orientation", "cycle", "figure", "why"],
     )
     s = analysis.settings
-    # the caption names only the fits drawn: Bouc–Wen is fitted on request
-    fits = "bilinear fit (red), Bouc–Wen fit (blue dashed)" if s.get("fit_bouc_wen") else "bilinear fit (red)"
-    loops_html = (
-        f"<figure>{_img(figures['by_orientation'], 'loops per orientation')}"
-        f"<figcaption>One panel per orientation, common scales: data (±1σ), {fits}.</figcaption></figure>"
+    residuals_html = (
+        f"<figure>{_img(figures['residuals'], 'residuals of the bilinear fit')}"
+        "<figcaption>Measured minus fitted angle of every image, in the order the loop was photographed; "
+        "the grey band is ±2 × the noise the lack-of-fit test expects. The test of each model is in "
+        "“Do the models fit?” below.</figcaption></figure>"
     )
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
     parts = [
@@ -214,10 +213,11 @@ def render_html(
         "<h2>Test conditions</h2>",
         _conditions(conditions, analysis, len(failed)),
         "<h2>Hysteresis loops</h2>",
-        f"<figure>{_img(figures['overlay'], 'all loops')}<figcaption>All orientations and cycles overlaid."
+        f"<figure>{_img(figures['overlay'], 'all loops')}<figcaption>All orientations and cycles overlaid: "
+        "measured points, one colour per orientation, and each loop's bilinear fit (thin black line)."
         "</figcaption></figure>",
-        "<h3>One orientation at a time, with the model fits</h3>",
-        loops_html,
+        "<h3>Does the bilinear fit describe each loop?</h3>",
+        residuals_html,
         "<h2>Stiffness per phase and orientation (paper, Table 1)</h2>",
         _table1(stiffness),
         f"<figure>{_img(figures['stiffness'], 'phase stiffness')}</figure>",
