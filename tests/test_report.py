@@ -65,7 +65,7 @@ def test_html_self_contained_and_complete(report):
     assert "<script" not in page
     assert page.count("data:image/png;base64,") == 4  # overlay, fit residuals, stiffness, orientation
     for text in ("Test conditions", "Failed images", "unreadable file", "marker not found: 1 of 2 markers",
-                 "Figures that could not be computed", "phase(s) positive_loading missing", "id='extra'",
+                 "Figures withheld or flagged, and why", "phase(s) positive_loading missing", "id='extra'",
                  "Stiffness per phase and orientation"):
         assert text in page, text
 

@@ -74,7 +74,8 @@ from .uncertainty import (
     torque_sources,
 )
 
-__all__ = ["Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA", "FIGURE_COLUMNS"]
+__all__ = [
+    "ISSUE_KINDS", "Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA", "FIGURE_COLUMNS"]
 
 #: Identifies the layout of :meth:`SessionAnalysis.to_dict` (summary.json).
 SUMMARY_SCHEMA = "vision-torsion/analysis-summary/2"
@@ -107,18 +108,29 @@ def _lm_name(fraction: float) -> str:
     return f"lost_motion_{round(100 * fraction, 6):g}pct".replace(".", "p")
 
 
+#: What an :class:`Issue` tells the reader (see there).
+ISSUE_KINDS = ("rejected", "not_applicable", "not_computable", "flagged")
+
+
 @dataclass(frozen=True)
 class Issue:
-    """A figure that could not be computed (or is doubtful) for an orientation/cycle.
+    """A figure that is withheld or flagged for an orientation/cycle, and why.
 
     ``orientation_deg``/``cycle`` are None for session-wide issues; ``figure`` is a
-    figure name or ``"*"`` for all figures of that loop.
+    figure name or ``"*"`` for all figures of that loop. ``kind`` (one of
+    :data:`ISSUE_KINDS`) says what a reader is told: ``"rejected"`` — computable, but
+    withheld because it does not fit its data (and given another way, e.g. a switching
+    phase as its stiffness below and above the switch and its secant);
+    ``"not_applicable"`` — the data call for another form (K3/T2 when one break
+    describes the curve: two segments); ``"flagged"`` — shown with a flag;
+    ``"not_computable"`` — the data cannot give it (missing phase, gap, failed fit).
     """
 
     orientation_deg: float | None
     cycle: int | None
     figure: str
     reason: str
+    kind: str = "not_computable"
 
     def __str__(self) -> str:
         where = (
@@ -281,11 +293,11 @@ class _Collector:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
         self.rows.append(row)
         if flag:
-            self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, flag))
+            self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, flag, kind="flagged"))
 
-    def fail(self, figure, unit, reason):
+    def fail(self, figure, unit, reason, *, kind="not_computable"):
         self.add(figure, unit, np.nan)
-        self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, reason))
+        self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, reason, kind=kind))
 
 
 def _expected_start_end(phase, tmax, tmin):
@@ -397,6 +409,7 @@ def _phase_figures(
                     "nm_per_rad",
                     f"phase {phase}: a straight line does not fit, withheld ({chk.describe()}); "
                     "the phase is given as its stiffness below and above the switch, and its secant",
+                    kind="rejected",
                 )
                 row["note"] = "straight line rejected (lack of fit)"
             else:
@@ -456,6 +469,7 @@ def _switch_figures(col, row, phase, tau, th, sa, st, src_local, src):
                 u,
                 f"phase {phase}: two stiffnesses with one switch do not fit either, withheld "
                 f"({chk.describe()}); see the secant and the model fits",
+                kind="rejected",
             )
         return
     for n, key in zip(names[:2], ("k_below", "k_above")):
@@ -715,13 +729,14 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
         if j < len(res["k"]):
             col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk)
         else:
-            col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}")
+            col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}",
+                     kind="not_applicable")
     if breaks is None and settings["fit_breaks"]:
         for j, n in enumerate(("t1", "t2")):
             if j < len(res["breaks_nm"]):
                 col.add(n, "nm", res["breaks_nm"][j], method="fitted break (no uncertainty: profiled)")
             else:
-                col.fail(n, "nm", "one break describes the loading branches (two segments)")
+                col.fail(n, "nm", "one break describes the loading branches (two segments)", kind="not_applicable")
 
 
 def _mc_reason(name, tau, settings):

@@ -27,8 +27,10 @@ def register(sub) -> None:
 def print_summary(rep) -> None:
     """What a user needs after a report: where it is and what went wrong."""
     pending = f", {rep.n_pending} pending (not photographed yet)" if rep.n_pending else ""
+    from ..report.analyze import describe_withheld
+
     print(f"{rep.n_images - rep.n_failed - rep.n_pending} of {rep.n_images} images measured{pending}; "
-          f"{rep.n_issues} figure(s) withheld or not computable (reasons in the report)")
+          f"{describe_withheld(rep.withheld_by_kind)}")
     for name in rep.unlisted:
         print(f"not in the manifest: {name}")
     print(f"report: {rep.files.report_html}")

@@ -161,7 +161,7 @@ def preisach_section(analysis):
     if not fits:
         return (
             "Preisach model: element distribution",
-            '<p class="muted">No loop could be fitted (reasons in the list of figures not computed).</p>',
+            '<p class="muted">No loop could be fitted (reasons in the table of figures withheld).</p>',
         )
     (o, c), pre = fits[0]
     fig = fixed_figure(6.0, 4.6, left=0.8, bottom=0.6, top=0.4)

@@ -15,14 +15,15 @@ metadata (its ``[test]``) are shown in the report and written into summary.json.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
 from ..errors import AnalysisError
 
-__all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata"]
+__all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
+           "describe_withheld"]
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +40,9 @@ class AnalyzeResult:
         Rows of the table and images that could not be used.
     n_issues, n_withheld, n_flagged : int
         Issues listed, figures withheld (null with a reason) and flagged.
+    withheld_by_kind : dict
+        Withheld figures by :data:`~vision_torsion.analysis.session.ISSUE_KINDS`
+        (``rejected``, ``not_applicable``, ``not_computable``); see :func:`withheld_by_kind`.
     """
 
     files: object
@@ -48,6 +52,43 @@ class AnalyzeResult:
     n_issues: int
     n_withheld: int
     n_flagged: int
+    withheld_by_kind: dict = field(default_factory=dict)
+
+
+def withheld_by_kind(analysis) -> dict:
+    """How many figures are withheld, by what a reader is told: ``{"rejected": n,
+    "not_applicable": n, "not_computable": n}``.
+
+    A withheld figure is a figure row with no value; its kind is its issue's
+    (:class:`~vision_torsion.analysis.Issue`), "not_computable" when it has none.
+    """
+    kinds = {(i.orientation_deg, i.cycle, i.figure): i.kind for i in analysis.issues if i.kind != "flagged"}
+    out = {"rejected": 0, "not_applicable": 0, "not_computable": 0}
+    f = analysis.figures
+    for o, c, name, v in zip(f["orientation_deg"], f["cycle"], f["figure"], f["value"]):
+        if v == v:  # a value: not withheld
+            continue
+        kind = kinds.get((o, c, name), "not_computable")
+        out[kind] = out.get(kind, 0) + 1
+    return out
+
+
+def describe_withheld(counts: dict, n_flagged: int | None = None) -> str:
+    """One line for the command line: the withheld figures by kind, and the flagged ones.
+
+    Examples
+    --------
+    >>> line = describe_withheld({"rejected": 12, "not_applicable": 12, "not_computable": 0}, 0)
+    >>> line.split(": ")[0], line.split("; ")[1]
+    ('24 figure(s) withheld', '0 flagged')
+    """
+    n = sum(counts.values())
+    text = (f"{n} figure(s) withheld: {counts.get('rejected', 0)} do not fit their data (given another way), "
+            f"{counts.get('not_applicable', 0)} not applicable to these data, "
+            f"{counts.get('not_computable', 0)} not computable")
+    if n_flagged is not None:
+        text += f"; {n_flagged} flagged"
+    return text + "; each with its reason in the report"
 
 
 def analysis_options(config) -> dict:
@@ -213,7 +254,7 @@ def analyze_table(
             metadata=metadata,
         )
     f = analysis.figures
-    withheld = int((~f["value"].apply(lambda v: v == v)).sum())
+    by_kind = withheld_by_kind(analysis)
     flagged = int((f["flag"].astype(str) != "").sum())
     return AnalyzeResult(
         files=files,
@@ -221,6 +262,7 @@ def analyze_table(
         n_rows=int(len(df)),
         n_failed=int(len(analysis.failed_images)),
         n_issues=len(analysis.issues),
-        n_withheld=withheld,
+        n_withheld=sum(by_kind.values()),
         n_flagged=flagged,
+        withheld_by_kind=by_kind,
     )

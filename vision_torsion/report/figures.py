@@ -213,7 +213,7 @@ def fit_residuals(analysis) -> Figure:
         band = 2.0 * math.degrees(float(np.median(noise)))
         ax.axhspan(-band, band, color="0.85", zorder=0, label="±2 × noise RMS")
     if not seen:
-        ax.text(0.5, 0.5, "no loop has a bilinear fit (reasons in the table of withheld figures)",
+        ax.text(0.5, 0.5, "no loop has a bilinear fit (reasons in the table of figures withheld)",
                 ha="center", va="center", transform=ax.transAxes, fontsize=9)
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.grid(True, alpha=0.3)
@@ -228,29 +228,42 @@ def fit_residuals(analysis) -> Figure:
 def phase_stiffness_chart(analysis) -> Figure:
     """Stiffness of each phase per orientation (mean over cycles, ±u95); the value
     axis is logarithmic only where that shows more than one tick label."""
-    fig = fixed_figure(7.5, 4.2, left=0.8, bottom=0.6, top=0.45)
+    fig = fixed_figure(7.5, 4.7, left=0.8, bottom=1.1, top=0.45)
     ax = fig.add_subplot()
     po = analysis.per_orientation
     orients = _orientations(analysis)
     width = 0.8 / 4
     values = []
+    colours = iter(("tab:blue", "tab:orange", "tab:green", "tab:red"))
     for j, (phase, label) in enumerate(_PHASE_LABELS.items()):
         sub = po[po["figure"] == f"k_{phase}"].set_index("orientation_deg").reindex(orients)
+        sec = po[po["figure"] == f"k_{phase}_secant"].set_index("orientation_deg").reindex(orients)
         x = np.arange(len(orients)) + (j - 1.5) * width
+        k = sub["mean"].to_numpy(dtype=float)
+        colour = next(colours)
         yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0)
-        ax.bar(x, sub["mean"].to_numpy(dtype=float), width, yerr=yerr, label=label, capsize=2)
-        values.extend(sub["mean"].to_numpy(dtype=float))
+        if np.isfinite(k).any():
+            ax.bar(x, k, width, yerr=yerr, label=label, capsize=2, color=colour)
+        # where the straight line does not fit (withheld), the phase's secant, hatched
+        use = ~np.isfinite(k) & np.isfinite(sec["mean"].to_numpy(dtype=float))
+        if use.any():
+            ks = np.where(use, sec["mean"].to_numpy(dtype=float), np.nan)
+            ax.bar(x, ks, width, label=f"{label}: secant (straight line does not fit)", color="white",
+                   edgecolor=colour, hatch="///")
+            values.extend(ks)
+        values.extend(k)
     ax.set_xticks(np.arange(len(orients)), [f"{o:g}°" for o in orients])
     _set_value_axis(ax, values)
     if not np.isfinite(np.asarray(values, dtype=float)).any():
-        ax.text(0.5, 0.5, "no phase stiffness could be computed (reasons in the table of figures not computed)",
+        ax.text(0.5, 0.5, "no phase stiffness to show (reasons in the table of figures withheld)",
                 ha="center", va="center", transform=ax.transAxes, fontsize=9)
     ax.set_ylabel("stiffness (N·m/rad)")
     ax.set_xlabel("flexspline orientation (deg)")
     _title(ax, "Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95 (k = 2)",
            fontsize=10)
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    if ax.get_legend_handles_labels()[0]:  # nothing drawn (e.g. an inverted angle sign): no legend
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.15), ncol=2, frameon=False)
     return fig
 
 

@@ -99,6 +99,19 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
     return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
 
 
+def _stiffness_cell(r) -> str:
+    """The phase's straight-line stiffness, or, where that line does not fit, its two
+    stiffnesses and the switch torque."""
+    if np.isfinite(r.stiffness_nm_per_rad):
+        return fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)
+    if np.isfinite(r.stiffness_below_nm_per_rad) and np.isfinite(r.stiffness_above_nm_per_rad):
+        below = fmt_value(r.stiffness_below_nm_per_rad, r.stiffness_below_std_nm_per_rad)
+        above = fmt_value(r.stiffness_above_nm_per_rad, r.stiffness_above_std_nm_per_rad)
+        switch = abs(r.switch_torque_nm)
+        return f"straight line does not fit: {below} below, {above} above the switch at {switch:.3g} N·m"
+    return "—"
+
+
 def _table1(stiff: pd.DataFrame) -> str:
     if stiff.empty:
         return '<p class="muted">No stiffness could be computed.</p>'
@@ -110,15 +123,16 @@ def _table1(stiff: pd.DataFrame) -> str:
                 f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
                 for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])
             ],
-            "stiffness k (N·m/rad)": [
-                fmt_value(v, s) for v, s in zip(stiff["stiffness_nm_per_rad"], stiff["stiffness_std_nm_per_rad"])
-            ],
+            "stiffness k (N·m/rad)": [_stiffness_cell(r) for r in stiff.itertuples(index=False)],
             "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
+            "secant (N·m/rad)": [
+                fmt_value(v, s) for v, s in zip(stiff["secant_nm_per_rad"], stiff["secant_std_nm_per_rad"])
+            ],
             "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
             "cycles": stiff["n_cycles"].astype(str),
         }
     )
-    return _table(out, left=("orientation", "phase"))
+    return _table(out, left=("orientation", "phase", "stiffness k (N·m/rad)"))
 
 
 def _metrics(mt: pd.DataFrame, orients) -> str:
@@ -165,6 +179,35 @@ def _header(metadata) -> str:
     )
 
 
+#: How the report names each kind of issue (:data:`vision_torsion.analysis.session.ISSUE_KINDS`).
+_ISSUE_WORDS = {
+    "rejected": "does not fit its data",
+    "not_applicable": "not applicable to these data",
+    "not_computable": "not computable",
+    "flagged": "shown, flagged",
+}
+
+
+def _withheld_intro(issues: pd.DataFrame) -> str:
+    """What the table below says, in numbers: withheld by kind, and flagged."""
+    if not len(issues):
+        return ""
+    n = issues["withheld because"].value_counts()
+    parts = []
+    if n.get(_ISSUE_WORDS["rejected"], 0):
+        parts.append(f"{n[_ISSUE_WORDS['rejected']]} computed but withheld because they do not fit their data "
+                     "(each given another way: a loading phase whose stiffness switches as its stiffness below and "
+                     "above the switch and its secant, in the budget and catalogue tables)")
+    if n.get(_ISSUE_WORDS["not_applicable"], 0):
+        parts.append(f"{n[_ISSUE_WORDS['not_applicable']]} not applicable to these data (one break describes the "
+                     "loading branches: two segments K1, K2, so there is no K3 or T2)")
+    if n.get(_ISSUE_WORDS["not_computable"], 0):
+        parts.append(f"{n[_ISSUE_WORDS['not_computable']]} not computable from these data")
+    if n.get(_ISSUE_WORDS["flagged"], 0):
+        parts.append(f"{n[_ISSUE_WORDS['flagged']]} shown with a flag")
+    return f'<p class="muted">{html.escape("; ".join(parts))}.</p>' if parts else ""
+
+
 def render_html(
     *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None
 ) -> str:
@@ -190,12 +233,13 @@ def render_html(
                 "session" if i.orientation_deg is None else f"{i.orientation_deg:g}°",
                 "" if i.cycle is None else str(i.cycle),
                 i.figure,
+                _ISSUE_WORDS.get(getattr(i, "kind", ""), "not computable"),
                 i.reason,
             )
             for i in analysis.issues
             if i.figure != "*"
         ],
-        columns=["orientation", "cycle", "figure", "why"],
+        columns=["orientation", "cycle", "figure", "withheld because", "why"],
     )
     s = analysis.settings
     residuals_html = (
@@ -208,6 +252,12 @@ def render_html(
     parts = [
         f"<h1>{html.escape(title)}</h1>",
         _header(metadata),
+        (
+            '<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml (or 1, if it is -1 now) '
+            "and process the images again. Every figure is withheld until then.</p>"
+            if (getattr(analysis, "checks", None) or {}).get("angle_sign_inverted")
+            else ""
+        ),
         '<p class="muted">Torsional stiffness and hysteresis report generated by vision-torsion. '
         "Uncertainties are 1σ standard uncertainties (±) unless marked u95 (expanded, k = 2).</p>",
         "<h2>Test conditions</h2>",
@@ -242,11 +292,13 @@ def render_html(
         _table(failed_view, left=("image", "phase", "message"))
         if len(failed)
         else '<p class="ok">None: every image was measured.</p>',
-        "<h2>Figures that could not be computed</h2>",
+        "<h2>Figures withheld or flagged, and why</h2>",
+        _withheld_intro(issues),
         (
-            f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "why"))}</div>'
+            f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "withheld because", "why"))}'
+            "</div>"
             if len(issues)
-            else '<p class="ok">None: every figure was computed.</p>'
+            else '<p class="ok">None: every figure was computed and fits its data.</p>'
         ),
     ]
     for sec_title, sec_html in extra_sections or ():

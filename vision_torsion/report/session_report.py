@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
@@ -42,6 +42,8 @@ class SessionReport:
         report and left out of the analysis.
     unlisted : tuple of str
         Image files no manifest row names.
+    withheld_by_kind : dict
+        Withheld figures by kind (:func:`~vision_torsion.report.analyze.withheld_by_kind`).
     """
 
     files: ReportFiles
@@ -51,6 +53,7 @@ class SessionReport:
     n_issues: int
     n_pending: int = 0
     unlisted: tuple = ()
+    withheld_by_kind: dict = field(default_factory=dict)
 
 
 def _g6(x: float) -> float:
@@ -236,6 +239,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         n_issues=len(analysis.issues),
         n_pending=len(waiting),
         unlisted=result.unlisted,
+        withheld_by_kind=res.withheld_by_kind,
     )
 
 

@@ -16,6 +16,11 @@ STIFFNESS_TABLE_COLUMNS = [
     "orientation_deg", "phase", "torque_from_nm", "torque_to_nm", "n_cycles",
     "stiffness_nm_per_rad", "stiffness_std_nm_per_rad", "stiffness_nm_per_arcmin", "stiffness_std_nm_per_arcmin",
     "hysteresis_deg", "hysteresis_std_deg",
+    # a phase whose straight line does not fit (stiffness withheld): its two stiffnesses and the switch
+    "switch_torque_nm", "stiffness_below_nm_per_rad", "stiffness_below_std_nm_per_rad",
+    "stiffness_above_nm_per_rad", "stiffness_above_std_nm_per_rad",
+    # every phase: the secant from its first to its last image
+    "secant_nm_per_rad", "secant_std_nm_per_rad",
 ]
 _ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
 
@@ -39,7 +44,9 @@ def stiffness_table(analysis) -> pd.DataFrame:
 
     Stiffness is the mean over cycles of the phase slope, with the standard
     uncertainty of that mean; the hysteresis (per loop, not per phase) is repeated on
-    the four rows of its orientation. Missing figures are NaN.
+    the four rows of its orientation. A phase whose straight line does not fit its
+    data (its stiffness withheld, NaN) carries its stiffness below and above the
+    switch and the switch torque; every phase its secant. Missing figures are NaN.
     """
     ph = analysis.phases
     po = _index(analysis.per_orientation)
@@ -53,6 +60,11 @@ def stiffness_table(analysis) -> pd.DataFrame:
         for phase in LOOP_PHASES:
             t_from, t_to = ranges.get((orient, phase), (np.nan, np.nan))
             k, k_std, n = _lookup(po, orient, f"k_{phase}")
+            below, below_std, n_below = _lookup(po, orient, f"k_{phase}_below")
+            above, above_std, _ = _lookup(po, orient, f"k_{phase}_above")
+            switch, _, _ = _lookup(po, orient, f"switch_{phase}")
+            sec, sec_std, n_sec = _lookup(po, orient, f"k_{phase}_secant")
+            n = max(n, n_below, n_sec)
             rows.append({
                 "orientation_deg": orient, "phase": phase,
                 "torque_from_nm": t_from,
@@ -60,6 +72,9 @@ def stiffness_table(analysis) -> pd.DataFrame:
                 "n_cycles": n, "stiffness_nm_per_rad": k, "stiffness_std_nm_per_rad": k_std,
                 "stiffness_nm_per_arcmin": k / _ARCMIN_PER_RAD, "stiffness_std_nm_per_arcmin": k_std / _ARCMIN_PER_RAD,
                 "hysteresis_deg": h, "hysteresis_std_deg": h_std,
+                "switch_torque_nm": switch, "stiffness_below_nm_per_rad": below,
+                "stiffness_below_std_nm_per_rad": below_std, "stiffness_above_nm_per_rad": above,
+                "stiffness_above_std_nm_per_rad": above_std, "secant_nm_per_rad": sec, "secant_std_nm_per_rad": sec_std,
             })
     return pd.DataFrame(rows, columns=STIFFNESS_TABLE_COLUMNS)
 
