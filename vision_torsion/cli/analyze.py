@@ -31,29 +31,11 @@ def run(args) -> int:
     from ..report.analyze import analyze_table, describe_withheld
 
     res = analyze_table(args.table, session=args.session, out_dir=args.out_dir)
-    inverted = res.analysis.checks.get("angle_sign_inverted")
-    withheld = ("every figure withheld until the angle sign is right" if inverted
+    withheld = ("every figure withheld until the angle sign is right" if res.angle_sign_advice
                 else describe_withheld(res.withheld_by_kind, res.n_flagged))
     print(f"{res.n_rows} rows, {res.n_failed} image(s) not usable; {withheld}")
-    if inverted:
-        print(angle_sign_advice(args.session))
+    if res.angle_sign_advice:
+        print(res.angle_sign_advice)
     print(f"report: {res.files.report_html}")
     return 1 if res.n_failed else 0
 
-
-def angle_sign_advice(session) -> str:
-    """What to do when the angle falls as the torque rises: the sign to set, the opposite of
-    the session's (``angle_sign`` is +1 unless the session.toml says otherwise)."""
-    sign = 1
-    if session is not None:
-        from ..errors import VisionTorsionError
-        from ..session.config import load_config
-
-        try:
-            sign = int(load_config(session).angle_sign)
-        except VisionTorsionError:  # already reported by the analysis; the advice keeps the default
-            sign = 1
-    if sign < 0:
-        return ("angle_sign looks inverted; set angle_sign = 1 in session.toml (it is -1 now) and process the "
-                "images again, or negate the table's angle_deg")
-    return "angle_sign looks inverted; set angle_sign = -1 in session.toml and process the images again"

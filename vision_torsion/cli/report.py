@@ -29,8 +29,11 @@ def print_summary(rep) -> None:
     pending = f", {rep.n_pending} pending (not photographed yet)" if rep.n_pending else ""
     from ..report.analyze import describe_withheld
 
-    print(f"{rep.n_images - rep.n_failed - rep.n_pending} of {rep.n_images} images measured{pending}; "
-          f"{describe_withheld(rep.withheld_by_kind)}")
+    withheld = ("every figure withheld until the angle sign is right" if rep.angle_sign_advice
+                else describe_withheld(rep.withheld_by_kind))
+    print(f"{rep.n_images - rep.n_failed - rep.n_pending} of {rep.n_images} images measured{pending}; {withheld}")
+    if rep.angle_sign_advice:
+        print(rep.angle_sign_advice)
     for name in rep.unlisted:
         print(f"not in the manifest: {name}")
     print(f"report: {rep.files.report_html}")

@@ -23,7 +23,7 @@ import pandas as pd
 from ..errors import AnalysisError
 
 __all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
-           "describe_withheld"]
+           "describe_withheld", "angle_sign_advice"]
 
 logger = logging.getLogger(__name__)
 
@@ -43,6 +43,9 @@ class AnalyzeResult:
     withheld_by_kind : dict
         Withheld figures by :data:`~vision_torsion.analysis.session.ISSUE_KINDS`
         (``rejected``, ``not_applicable``, ``not_computable``); see :func:`withheld_by_kind`.
+    angle_sign_advice : str
+        What to set when the angle falls as the torque rises (:func:`angle_sign_advice`),
+        empty otherwise.
     """
 
     files: object
@@ -53,6 +56,22 @@ class AnalyzeResult:
     n_withheld: int
     n_flagged: int
     withheld_by_kind: dict = field(default_factory=dict)
+    angle_sign_advice: str = ""
+
+
+def angle_sign_advice(angle_sign: int = 1) -> str:
+    """What to do when the angle falls as the torque rises: set the opposite of the
+    session's ``angle_sign`` (+1 unless session.toml says otherwise).
+
+    Examples
+    --------
+    >>> angle_sign_advice()
+    'angle_sign looks inverted; set angle_sign = -1 in session.toml and process the images again'
+    """
+    if angle_sign < 0:
+        return ("angle_sign looks inverted; set angle_sign = 1 in session.toml (it is -1 now) and process the "
+                "images again, or negate the table's angle_deg")
+    return "angle_sign looks inverted; set angle_sign = -1 in session.toml and process the images again"
 
 
 def withheld_by_kind(analysis) -> dict:
@@ -265,4 +284,6 @@ def analyze_table(
         n_withheld=sum(by_kind.values()),
         n_flagged=flagged,
         withheld_by_kind=by_kind,
+        angle_sign_advice=angle_sign_advice(config.angle_sign if config is not None else 1)
+        if analysis.checks.get("angle_sign_inverted") else "",
     )

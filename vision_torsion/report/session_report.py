@@ -44,6 +44,8 @@ class SessionReport:
         Image files no manifest row names.
     withheld_by_kind : dict
         Withheld figures by kind (:func:`~vision_torsion.report.analyze.withheld_by_kind`).
+    angle_sign_advice : str
+        Non-empty when the angle sign looks inverted: what to set.
     """
 
     files: ReportFiles
@@ -54,6 +56,7 @@ class SessionReport:
     n_pending: int = 0
     unlisted: tuple = ()
     withheld_by_kind: dict = field(default_factory=dict)
+    angle_sign_advice: str = ""
 
 
 def _g6(x: float) -> float:
@@ -240,6 +243,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         n_pending=len(waiting),
         unlisted=result.unlisted,
         withheld_by_kind=res.withheld_by_kind,
+        angle_sign_advice=res.angle_sign_advice,
     )
 
 
