@@ -256,7 +256,10 @@ def write_session_folder(
     disk_angles = spec.angle_sign * truth["true_angle_deg"].to_numpy()
     for a in (disk_angles.min(), disk_angles.max()):
         check_markers_in_frame(scene, float(a), where=scene.name)
-    plan = plan_session(out, image_suffix=suffix, overwrite=overwrite, **plan_args)
+    # planned by its whole number of steps (the spec's maximum snapped down, as documented):
+    # planning by max_torque_nm would warn a demo user that 0.36 N·m is not whole steps
+    plan_args.pop("max_torque_nm")
+    plan = plan_session(out, image_suffix=suffix, overwrite=overwrite, steps=max(n, 1), **plan_args)
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
     rows = []
