@@ -138,3 +138,46 @@ def test_robust_sigma_is_unbiased_for_quantised_noise_and_ignores_an_occluder():
     occluded = noise.copy()
     occluded[:400] += rng.uniform(0.0, 100.0, 400)  # 10 % of the ring under a wire
     assert abs(robust_sigma(occluded) / 2.0 - 1) < 0.05
+
+
+def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene):
+    """fit_discs (vectorised across markers) gives what fit_disc gives each marker,
+    to rounding: on twelve markers of a ring, one of them crossed by a wire (the
+    occluder cut, which fit_discs hands to fit_disc), plus a flat patch (a failure
+    with fit_disc's reason)."""
+    from vision_torsion.pixelfit import fit_discs, patch_extent
+
+    positions = tuple(np.arange(0.0, 360.0, 30.0))
+    scene = small_scene.replace(markers={"positions_deg": positions, "radius_px": 9.0, "distance_px": 70.0})
+    plain = render(scene, 11.0, seed=8)
+    x, y = plain.centres[0]
+    cx = scene.disk.center_x
+    r = render(scene.replace(distractors={"wire": True, "wire_angle_deg": 90.0, "wire_offset_px": x + 3.0 - cx}),
+               11.0, seed=8)
+    rng = np.random.default_rng(21)
+    B, F = float(np.median(r.image)), float(r.image.min())
+    patches, starts = [], []
+    for x, y in r.centres:
+        sx, sy = x + rng.uniform(-0.4, 0.4), y + rng.uniform(-0.4, 0.4)
+        patches.append(marker_patch(r.image, sx, sy, patch_extent(9.0, 1.2) + 1.0))
+        starts.append((sx, sy, 9.0 + rng.uniform(-0.5, 0.5), B, F))
+    flat = np.full_like(r.image, 100.0)
+    patches.append(marker_patch(flat, 60.0, 60.0, patch_extent(9.0, 1.2) + 1.0))
+    starts.append((60.0, 60.0, 9.0, 100.0, 40.0))
+    together = fit_discs(patches, starts, edge_width=1.2)
+    assert len(together) == len(patches)
+    for patch, (sx, sy, sr, b, f), many in zip(patches, starts, together):
+        try:
+            one = fit_disc(None, sx, sy, sr, edge_width=1.2, levels=(b, f), patch=patch)
+        except FitError as exc:
+            assert isinstance(many, FitError) and str(many) == str(exc)
+            continue
+        assert not isinstance(many, FitError), many
+        assert (many.x_px, many.y_px, many.radius_px) == pytest.approx((one.x_px, one.y_px, one.radius_px), abs=1e-9)
+        np.testing.assert_allclose(many.cov, one.cov, rtol=1e-7)
+        assert many.n_pixels == one.n_pixels and many.circularity == pytest.approx(one.circularity, abs=1e-9)
+    assert isinstance(together[-1], FitError)
+    # the wired marker went through the occluder cut: fewer pixels than without the wire
+    sx, sy, sr, b, f = starts[0]
+    clean = fit_disc(plain.image, sx, sy, sr, edge_width=1.2, levels=(b, f))
+    assert together[0].n_pixels < clean.n_pixels

@@ -28,7 +28,6 @@ import sys
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
@@ -37,7 +36,7 @@ from .detect import Blob, default_radius_range, detect_blobs
 from .edges import edge_points
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
-from .pixelfit import DiscFit, fit_disc, patch_extent
+from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
 from .settings import MeasureSettings
 
 if TYPE_CHECKING:
@@ -202,7 +201,7 @@ def _patch_extent(r0, edge_width):
     """Half-size (px) of the square around a blob (coarse radius `r0`) holding the
     start's outer ring (to 1.15·r0 + 7 px) and the fit's ring, with 1 px more for
     the coarse centre's error."""
-    return max(1.15 * r0 + 8.0, patch_extent(r0, edge_width) + 1.0)
+    return np.maximum(1.15 * r0 + 8.0, patch_extent(r0, edge_width) + 1.0)
 
 
 def _start(patch: MarkerPatch, blob: Blob):
@@ -247,20 +246,33 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width) -> MarkerPat
     if neighbours is None or len(neighbours) == 0:
         return patch
     rows, cols = patch.shape
-    mask = np.zeros((rows, cols), np.uint8)
-    reach = 3.0 * max(float(edge_width), 1.0) + 1.0
-    for x, y, r in neighbours:
-        # filled circles drawn in 1/16 px (OpenCV's shift): one C call per neighbour
-        cv2.circle(
-            mask,
-            (int(round((x - patch.x0) * 16)), int(round((y - patch.y0) * 16))),
-            int(round((1.15 * r + reach) * 16)),
-            1,
-            thickness=-1,
-            shift=4,
-        )
-    excluded = mask.ravel().astype(bool)
+    nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
+    reach = 1.15 * nb[:, 2] + 3.0 * max(float(edge_width), 1.0) + 1.0
+    # pixel centres within each neighbour's reach: (k, rows, cols) by broadcasting
+    # one row and one column per neighbour (a few neighbours, a small patch)
+    dx = np.arange(cols) + (patch.x0 - nb[:, :1])
+    dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
+    inside = dy[:, :, None] ** 2 + dx[:, None, :] ** 2 < (reach**2)[:, None, None]
+    excluded = inside.any(axis=0).ravel()
     return replace(patch, excluded=excluded) if excluded.any() else patch
+
+
+def _prepared(image, blob: Blob, edge_width, neighbours):
+    """The patch of pixels a marker's fit uses (neighbours' pixels flagged) and the
+    fit's start from it (:func:`_start`).
+
+    One patch for the start and every iteration: wide enough for the start's outer
+    ring and for the edge ring at the widest edge, cut to the image near its border
+    (the fits model the pixels there are).
+
+    Raises
+    ------
+    FitError
+        Too few pixels or no contrast to start from.
+    """
+    patch = marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width), clip=True)
+    patch = _exclude_neighbours(patch, neighbours, edge_width)
+    return patch, _start(patch, blob)
 
 
 def fit_marker(
@@ -296,13 +308,7 @@ def fit_marker(
         ``low_contrast`` with the reason.
     """
     try:
-        # one patch for the start and every iteration: wide enough for the start's
-        # outer ring and for the edge ring at the widest edge
-        # cut to the image near its border: the fits model the pixels there are
-        patch = marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width), clip=True)
-        if fit == "pixels":
-            patch = _exclude_neighbours(patch, neighbours, edge_width)
-        cx, cy, r, levels = _start(patch, blob)
+        patch, (cx, cy, r, levels) = _prepared(image, blob, edge_width, neighbours if fit == "pixels" else None)
         if fit == "pixels":
             return _whole(
                 _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
@@ -490,13 +496,16 @@ def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, fl
 def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
     """The coarse circles (rows of (x, y, r), px) other than row `i` whose blurred
     disc reaches into the square of pixels marker `i`'s fit uses."""
-    if len(circles) < 2:
-        return circles[:0]
-    x, y, r = circles[i]
+    return circles[_near(circles, np.array([i]), edge_width)[0]]
+
+
+def _near(circles: np.ndarray, rows: np.ndarray, edge_width: float) -> np.ndarray:
+    """Flags (len(rows) x len(circles)) of :func:`_neighbours` for each of `rows`."""
+    x, y, r = circles[rows].T[:, :, None]
     reach = _patch_extent(r, edge_width) + 1.15 * circles[:, 2] + 3.0 * max(edge_width, 1.0) + 1.0
     near = (np.abs(circles[:, 0] - x) < reach) & (np.abs(circles[:, 1] - y) < reach)
-    near[i] = False
-    return circles[near]
+    near[np.arange(rows.size), rows] = False
+    return near
 
 
 def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
@@ -530,6 +539,8 @@ def find_marker_list(
     width = 1.2  # the optics are the same for every marker: pass the fitted width on
     blobs = find_candidates(img, settings) if candidates is None else candidates
     circles = np.array([(b.x, b.y, b.radius) for b in blobs], dtype=np.float64).reshape(-1, 3)
+    if enough is None and fit == "pixels" and len(blobs) > _BATCH_FROM:
+        return _fit_all(img, blobs, circles, (r_min, r_max))
     for i, blob in enumerate(blobs):
         if enough is not None and enough(markers, blob):
             break
@@ -539,4 +550,42 @@ def find_marker_list(
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)
+    return markers
+
+
+#: Candidates from which :func:`find_marker_list` fits the markers together
+#: (:func:`~vision_torsion.pixelfit.fit_discs`) rather than one by one.
+_BATCH_FROM = 2
+
+
+def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[Marker]:
+    """Every candidate judged and fitted with the pixel model, the fits vectorised
+    across markers (:func:`~vision_torsion.pixelfit.fit_discs`).
+
+    The first (largest) candidate fitted alone gives every other fit its starting
+    edge width, as one marker passes its width on to the next in the one-by-one
+    loop of :func:`find_marker_list` (the optics are the same for all).
+    """
+    markers: list[Marker | None] = [_judge(b, img.shape, *radius_range, "pixels") for b in blobs]
+    width = 1.2
+    todo = [i for i, m in enumerate(markers) if m is None]
+    if todo:
+        i = todo.pop(0)
+        markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=_neighbours(circles, i, width))
+        if markers[i].ok:
+            width = markers[i].edge_width_px
+    patches, starts, fitted = [], [], []
+    for k, i in enumerate(todo):
+        if k % 256 == 0:  # neighbours of 256 markers at a time: a few MB at most
+            near = _near(circles, np.array(todo[k : k + 256]), width)
+        try:
+            patch, (cx, cy, r, (B, F)) = _prepared(img, blobs[i], width, circles[near[k % 256]])
+        except FitError as exc:
+            markers[i] = _failed(blobs[i], exc)
+            continue
+        patches.append(patch)
+        starts.append((cx, cy, r, B, F))
+        fitted.append(i)
+    for i, fit in zip(fitted, fit_discs(patches, starts, edge_width=width)):
+        markers[i] = _failed(blobs[i], fit) if isinstance(fit, FitError) else _whole(_pixels_marker(fit), img.shape)
     return markers

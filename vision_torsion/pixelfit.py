@@ -61,7 +61,7 @@ from ._ring import (
 )
 from .errors import FitError
 
-__all__ = ["DiscFit", "fit_disc"]
+__all__ = ["DiscFit", "fit_disc", "fit_discs"]
 
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
@@ -152,19 +152,22 @@ class _Pixels:
         return out
 
 
-def _evaluate(p, px: _Pixels):
+def _evaluate(p, px, J=None):
     """Residuals, Jacobian (8 x N) and the edge coordinate u = (R - d)/s at `p`.
 
     Written with few array passes and in place: a marker's ring has a few thousand
     pixels, where each numpy call costs about as much as its arithmetic.
+
+    `px` holds one marker's pixels (flat arrays of N) or many markers' (rows of N,
+    padded; then `p` holds (M, 1) columns, and the Jacobian is 8 x M x N, written
+    into `J` when given).
     """
     cx, cy, R, s, B, F, gx, gy = p
-    n = px.xs.size
-    J = np.empty((8, n))
+    J = np.empty((8,) + px.xs.shape) if J is None else J
     dx, dy = J[0], J[1]  # filled with the centre derivatives at the end
     np.subtract(px.xs, cx, out=dx)
     np.subtract(px.ys, cy, out=dy)
-    d = cv2.magnitude(dx, dy).ravel()
+    d = cv2.magnitude(dx, dy).reshape(dx.shape)
     u = d * (-1.0 / s)
     u += R / s
     gauss = np.square(u, out=J[3])
@@ -424,3 +427,193 @@ def fit_disc(
         residual_rms_px=rms,
         circularity=circularity,
     )
+
+
+class _Batch:
+    """The rings of many markers as rows of padded arrays (M x N), for the
+    vectorised fit: pixel coordinates, values and the lighting frame as in
+    :class:`_Pixels`; `mask` is 1 on a ring's pixels and 0 on the padding (whose
+    coordinates lie far outside every marker, so the model there is flat)."""
+
+    def __init__(self, rings: list[_Pixels], starts: np.ndarray):
+        self.n = np.array([r.xs.size for r in rings])
+        m, width = len(rings), int(self.n.max())
+        self.mask = np.arange(width) < self.n[:, None]
+        self.xs = np.repeat(starts[:, :1] + 1e4, width, axis=1)
+        self.ys = np.repeat(starts[:, 1:2], width, axis=1)
+        self.vals, self.nx, self.ny = (np.zeros((m, width)) for _ in range(3))
+        for k, ring in enumerate(rings):
+            for name in ("xs", "ys", "vals", "nx", "ny"):
+                getattr(self, name)[k, : self.n[k]] = getattr(ring, name)
+
+    def rows(self, index):
+        out = object.__new__(_Batch)
+        for name in ("xs", "ys", "vals", "nx", "ny", "mask"):
+            setattr(out, name, getattr(self, name)[index])
+        return out
+
+
+def _evaluate_rows(P, px: _Batch):
+    """:func:`_evaluate` for rows of markers (parameters `P`, M x 8): residuals (M x N),
+    Jacobian (M x 8 x N) and u (M x N), zero on the padding."""
+    Jm = np.empty((P.shape[0], 8, px.xs.shape[1]))
+    resid, _, u = _evaluate(P.T[:, :, None], px, J=Jm.transpose(1, 0, 2))
+    resid *= px.mask
+    Jm *= px.mask[:, None, :]
+    return resid, Jm, u
+
+
+def _normal_equations(Jm, resid):
+    """JᵀJ (M x 8 x 8) and Jᵀr (M x 8) of each row."""
+    return Jm @ Jm.transpose(0, 2, 1), (Jm @ resid[:, :, None])[:, :, 0]
+
+
+def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
+    """:func:`fit_disc` of many markers at once, vectorised across them.
+
+    The same model, ring, Levenberg-Marquardt steps, outlier examination and
+    convergence rule as :func:`fit_disc`, with every marker's step taken in one set
+    of array operations (a photograph of a dot grid has hundreds of small markers,
+    where per-marker calls cost more than their arithmetic). A marker whose ring
+    holds an occluder to cut is fitted by :func:`fit_disc` itself.
+
+    Parameters
+    ----------
+    patches : list of MarkerPatch
+        Pixels around each marker (neighbours' pixels flagged in ``excluded``).
+    starts : array_like
+        (M, 5) rows of the starting centre (x, y), radius (px) and the (outside,
+        inside) grey levels (DN).
+    edge_width : float
+        Starting edge width s (px), the same for all.
+    max_iter : int
+        Levenberg-Marquardt iterations at most.
+
+    Returns
+    -------
+    list
+        Per marker, a :class:`DiscFit`, or the :class:`~vision_torsion.errors.FitError`
+        saying why it failed.
+    """
+    starts = np.asarray(starts, dtype=np.float64).reshape(-1, 5)
+    out: list = [None] * len(patches)
+    s = float(edge_width)
+    rings, live = [], []
+    for k, (patch, (cx, cy, r, _, _)) in enumerate(zip(patches, starts)):
+        try:
+            rings.append(_Pixels(patch, _ring(patch, cx, cy, r, s, margin=_START_MARGIN_PX), cx, cy, r))
+            live.append(k)
+        except FitError as exc:
+            out[k] = exc
+    if not live:
+        return out
+    live = np.array(live)
+    px = _Batch(rings, starts[live])
+    m = live.size
+    P = np.zeros((m, 8))
+    P[:, :3], P[:, 3], P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
+    resid, Jm, u = _evaluate_rows(P, px)
+    ssr = np.einsum("ij,ij->i", resid, resid)
+    A, b = _normal_equations(Jm, resid)
+    lam = np.full(m, 1e-3)
+    final = np.zeros(m, bool)
+    active = np.ones(m, bool)
+    single = np.zeros(m, bool)  # an occluder to cut: fitted by fit_disc
+    failed: dict[int, FitError] = {}
+    diag = np.arange(8)
+    for _ in range(max_iter):
+        act = np.flatnonzero(active)
+        if not act.size:
+            break
+        Aa = A[act]
+        Aa[:, diag, diag] += lam[act, None] * Aa[:, diag, diag]
+        try:
+            step = np.linalg.solve(Aa, b[act][:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            step = np.zeros((act.size, 8))
+            for j, k in enumerate(act):
+                try:
+                    step[j] = np.linalg.solve(Aa[j], b[k])
+                except np.linalg.LinAlgError:
+                    failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
+                    active[k] = False
+            keep = active[act]
+            act, step = act[keep], step[keep]
+        trial = P[act] + step
+        old_s = P[act, 3]
+        trial[:, 3] = np.minimum(np.maximum(np.maximum(trial[:, 3], 0.3), 0.5 * old_s), 2.0 * old_s)
+        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
+        last = final[act] & small
+        # converged: the last step taken without evaluating the model (as fit_disc)
+        P[act[last]] = trial[last]
+        active[act[last]] = False
+        act, trial = act[~last], trial[~last]
+        if not act.size:
+            continue
+        r_t, J_t, u_t = _evaluate_rows(trial, px.rows(act))
+        ssr_t = np.einsum("ij,ij->i", r_t, r_t)
+        better = ssr_t <= ssr[act]
+        worse = act[~better]
+        lam[worse] *= 10.0
+        for k in worse[lam[worse] > 1e8]:
+            failed[k] = FitError("the marker's edge model does not converge")
+            active[k] = False
+        acc, trial = act[better], trial[better]
+        if not acc.size:
+            continue
+        moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
+        P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
+        A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
+        lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
+        for k in acc[~final[acc] & (moved < _SETTLED_PX)]:
+            # the first examination for an occluder (fit_disc's): nothing to cut
+            # makes the fit final; anything to cut goes to fit_disc
+            n = px.n[k]
+            if _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n]) is None:
+                final[k] = True
+            else:
+                single[k] = True
+                active[k] = False
+        done = acc[final[acc] & (moved < _CONVERGED_PX)]
+        active[done] = False
+    for k in np.flatnonzero(active):
+        failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
+    good = np.flatnonzero(~single & ~np.isin(np.arange(m), list(failed)))
+    sigma2 = ssr / np.maximum(px.n - 8, 1)
+    for k in good:
+        n = px.n[k]
+        try:
+            check_contrast(P[k, 5] - P[k, 4], sigma2[k])
+            cov = sigma2[k] * np.linalg.inv(A[k])
+            ex, ey, rms, circularity = _edge_diagnostics(P[k], resid[k, :n], Jm[k, :, :n], u[k, :n])
+        except np.linalg.LinAlgError:
+            failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
+            continue
+        except FitError as exc:
+            failed[k] = exc
+            continue
+        out[live[k]] = DiscFit(
+            x_px=float(P[k, 0]),
+            y_px=float(P[k, 1]),
+            radius_px=float(P[k, 2]),
+            edge_width_px=float(P[k, 3]),
+            cov=cov[:3, :3].copy(),
+            noise_dn=float(np.sqrt(sigma2[k])),
+            background_dn=float(P[k, 4]),
+            foreground_dn=float(P[k, 5]),
+            n_pixels=int(n),
+            edge_x_px=ex,
+            edge_y_px=ey,
+            residual_rms_px=rms,
+            circularity=circularity,
+        )
+    for k, exc in failed.items():
+        out[live[k]] = exc
+    for k in np.flatnonzero(single):
+        cx, cy, r, B, F = starts[live[k]]
+        patch = patches[live[k]]
+        try:
+            out[live[k]] = fit_disc(None, cx, cy, r, edge_width=s, levels=(B, F), max_iter=max_iter, patch=patch)
+        except FitError as exc:
+            out[live[k]] = exc
+    return out
