@@ -1,6 +1,6 @@
 """Markers on real photographs: recall, row straightness and time, without ground truth.
 
-Run (one command; about a minute on 2 cores)::
+Run (one command; about a minute on one core)::
 
     python benchmarks/bench_photos.py                  # the photos of tests/data/photos
     python benchmarks/bench_photos.py --extra DIR      # also every image in DIR (full-size
@@ -30,11 +30,28 @@ so two properties that need none are measured:
   one spacing, far below these numbers on a sharp lens), the same for every method.
   Every method is scored on the same triples: those whose three dots every method
   measured.
+- **scatter about each line's curve** (px): the same lines' dots, each line with
+  at least four of them, fitted by a quadratic across the line in the position
+  along it (``photo_grid.off_curve``); the pooled residual RMS with the fitted
+  parameters' degrees of freedom taken out (``dof`` in the table). A quadratic takes
+  out the smooth bending of a line by lens distortion, which on these photos
+  (discorpy 02, the UCL laparoscope) is most of the row straightness above and is the
+  same for every method; what remains is centre error and the target's own dot
+  placement. Scored on the same dots for every method. Both figures are given:
+  neither is ours alone.
 - **time**: CPU time per photo on one core (OpenCV and BLAS single-threaded; CPU, not
-  wall, time because the machine is shared) of the whole job: ours is ``find_markers``
-  on the image (detection and every fit); a peer
-  is the reference detection plus its fit of every reference dot, started from the
-  reference blob (so the peers are handed the dots; we find them ourselves).
+  wall, time because the machine is shared), two ways:
+
+  - *fit only*: every method handed the same reference dots (centre and radius as
+    the start, the neighbours' discs to leave out): ours is
+    :func:`vision_torsion.markers.find_marker_list` with the reference dots as its
+    candidates (every dot judged and fitted); a peer its fit of every dot;
+  - *whole*: ours is ``find_markers`` on the image (detection, judging and fitting
+    every candidate, grid dots or not); a peer is the reference detection plus its
+    fit of every reference dot (so the peers are still handed the dots).
+
+  The issue's speed target (>= 5x the ML blurred-disc fit) is judged on *fit only*,
+  where both do the same work; *whole* is given as well.
 
 Peers (:mod:`peers`, the same code as the rendered-scene benchmark, given each dot's
 start and its neighbours' discs to leave out of its window, as a careful user would
@@ -62,17 +79,21 @@ one_core()
 
 import numpy as np  # noqa: E402
 import peers  # noqa: E402
-from photo_grid import grid_triples, off_line, reference_dots  # noqa: E402
+from photo_grid import grid_lines, grid_triples, off_curve, off_line, reference_dots  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
 
+from vision_torsion.detect import Blob  # noqa: E402
 from vision_torsion.images import load_image  # noqa: E402
-from vision_torsion.markers import find_markers  # noqa: E402
+from vision_torsion.markers import find_marker_list, find_markers  # noqa: E402
+from vision_torsion.settings import MeasureSettings  # noqa: E402
 
 PHOTO_DIR = HERE.parent / "tests" / "data" / "photos"
 RESULTS = HERE / "results"
 
 
 def _ours(img, dots):
+    """Our ok centres matched to the reference dots (NaN: not found), the table, and
+    the CPU time (s) of ``find_markers``."""
     t = time.process_time()
     table = find_markers(img)
     dt = time.process_time() - t
@@ -83,10 +104,20 @@ def _ours(img, dots):
         d, j = tree.query(dots[:, :2])
         hit = d < 0.5 * dots[:, 2]
         c[hit] = ok[["x_px", "y_px"]].to_numpy()[j[hit]]
-    return c, dt, table
+    return (c, table), dt
 
 
-def _peer(fn, img, dots, t_ref):
+def _ours_fit_only(img, dots):
+    """CPU time (s) of our judging and fitting of the reference dots, handed to
+    :func:`find_marker_list` as its candidates (as the peers are handed them)."""
+    blobs = [Blob(x=x, y=y, radius=r, elongation=1.0, fill=1.0, touches_border=False) for x, y, r in dots]
+    settings = MeasureSettings()
+    t = time.process_time()
+    find_marker_list(img, settings, candidates=blobs)
+    return time.process_time() - t
+
+
+def _peer(fn, img, dots):
     f = img.astype(np.float64)
     tree = cKDTree(dots[:, :2])
     c = np.full((len(dots), 2), np.nan)
@@ -97,7 +128,7 @@ def _peer(fn, img, dots, t_ref):
             c[k] = fn(f, x, y, r, others=dots[near])[:2]
         except peers.PeerFailure:
             pass
-    return c, t_ref + time.process_time() - t
+    return c, time.process_time() - t
 
 
 METHODS = (
@@ -107,21 +138,34 @@ METHODS = (
 )
 
 
-def measure_photo(path: Path) -> dict:
+def _fastest(job, repeats):
+    """The result of `job()` and the least of its CPU times (s) over `repeats` runs:
+    the machine is shared, and other work only ever adds time."""
+    runs = [job() for _ in range(repeats)]
+    return runs[0][0], min(r[1] for r in runs)
+
+
+def measure_photo(path: Path, repeats: int = 1) -> dict:
     grey = load_image(path, keep_integers=True)
     img = grey.data
-    t = time.process_time()
-    dots = reference_dots(img)
-    t_ref = time.process_time() - t
-    centres, times = {}, {}
-    centres["ours"], times["ours"], table = _ours(img, dots)
+
+    def reference():
+        t = time.process_time()
+        return reference_dots(img), time.process_time() - t
+
+    dots, t_ref = _fastest(reference, repeats)
+    centres, times, fit_times = {}, {}, {}
+    (centres["ours"], table), times["ours"] = _fastest(lambda: _ours(img, dots), repeats)
+    fit_times["ours"] = min(_ours_fit_only(img, dots) for _ in range(repeats))
     for name, _, fn in METHODS:
-        centres[name], times[name] = _peer(fn, img, dots, t_ref)
+        centres[name], fit_times[name] = _fastest(lambda fn=fn: _peer(fn, img, dots), repeats)
+        times[name] = t_ref + fit_times[name]
     triples = grid_triples(dots[:, :2])
     every = np.ones(len(triples), bool)
     for c in centres.values():
         every &= np.isfinite(c[triples]).all(axis=(1, 2))
     used = triples[every]
+    lines = grid_lines(used)
     row = {
         "photo": path.name,
         "size": f"{img.shape[1]}x{img.shape[0]}",
@@ -131,6 +175,7 @@ def measure_photo(path: Path) -> dict:
         "median_radius_px": float(np.median(dots[:, 2])) if len(dots) else float("nan"),
         "our_rows": {s: int(n) for s, n in table["status"].value_counts().items()},
         "triples": int(len(used)),
+        "curve_dof": int(off_curve(dots[:, :2], lines)[1]),
         "methods": {},
     }
     for name in ("ours",) + tuple(m[0] for m in METHODS):
@@ -140,6 +185,8 @@ def measure_photo(path: Path) -> dict:
             "found": int(found.sum()),
             "recall": float(found.mean()) if len(dots) else float("nan"),
             "row_straightness_rms_px": float(np.sqrt(np.mean(off_line(c, used) ** 2))) if len(used) else float("nan"),
+            "line_curve_scatter_px": off_curve(c, lines)[0],
+            "fit_time_s": float(fit_times[name]),
             "time_s": float(times[name]),
         }
     return row
@@ -151,24 +198,32 @@ def markdown(rows, command, info) -> str:
         f"Photos benchmark, `{command}`, {info['date']}, {info['cpu_model']} "
         f"(load {info['load_average_1_5_15min']}; CPU seconds on one core).",
         "",
-        "| photo | px, bits | ref. dots (r px) | triples | method | found ok | recall "
-        "| row straightness RMS (px) | CPU s/photo |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| photo | px, bits | ref. dots (r px) | triples, dof | method | found ok | recall "
+        "| row straightness RMS (px) | scatter about line curve (px) | CPU s fit only | CPU s whole |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         for k, (name, m) in enumerate(r["methods"].items()):
             head = (
                 (
                     f"{r['photo']} | {r['size']}, {r['bits']}{' colour' if r['colour'] else ''} | "
-                    f"{r['reference_dots']} ({r['median_radius_px']:.1f}) | {r['triples']}"
+                    f"{r['reference_dots']} ({r['median_radius_px']:.1f}) | {r['triples']}, {r['curve_dof']}"
                 )
                 if k == 0
                 else " | | |"
             )
             lines.append(
                 f"| {head} | {labels[name]} | {m['found']} | {m['recall']:.1%} | "
-                f"{m['row_straightness_rms_px']:.4f} | {m['time_s']:.3f} |"
+                f"{m['row_straightness_rms_px']:.4f} | {m['line_curve_scatter_px']:.4f} | "
+                f"{m['fit_time_s']:.3f} | {m['time_s']:.3f} |"
             )
+    lines += ["", "ML blurred-disc fit's CPU time over ours (the issue's target: >= 5x):", ""]
+    for r in rows:
+        ours, ml = r["methods"]["ours"], r["methods"]["ml_disc"]
+        lines.append(
+            f"- {r['photo']}: fit only {ml['fit_time_s'] / ours['fit_time_s']:.1f}x, "
+            f"whole {ml['time_s'] / ours['time_s']:.1f}x"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -176,6 +231,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--extra", metavar="DIR", help="also measure every image in DIR")
     ap.add_argument("--no-write", action="store_true", help="print only")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="timed runs per method; the least CPU time is kept (default 3)")
     args = ap.parse_args(argv)
     from vision_torsion.images import IMAGE_SUFFIXES
 
@@ -188,9 +245,10 @@ def main(argv=None) -> int:
             print(f"--extra {extra}: no such folder, skipped")
     if paths:  # warm-up, untimed: imports and first-call costs of every method
         measure_photo(paths[0])
-    rows = [measure_photo(p) for p in paths]
+    rows = [measure_photo(p, max(args.repeats, 1)) for p in paths]
     info = machine_info()
     command = "python benchmarks/bench_photos.py" + (f" --extra {args.extra}" if args.extra else "")
+    command += f" --repeats {args.repeats}" if args.repeats != 3 else ""
     md = markdown(rows, command, info)
     print(md)
     if not args.no_write:

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["reference_dots", "grid_triples", "off_line", "SYMMETRY"]
+__all__ = ["reference_dots", "grid_triples", "off_line", "grid_lines", "off_curve", "SYMMETRY", "CURVE_ORDER"]
 
 #: A triple's outer dots must be symmetric about the middle one within this fraction
 #: of their spacing to count as grid neighbours on one row.
@@ -70,3 +70,59 @@ def off_line(c: np.ndarray, triples: np.ndarray) -> np.ndarray:
     return np.abs(cross) / np.linalg.norm(ab, axis=1)
 
 
+
+
+#: Order of the curve fitted to each grid line's centres by :func:`off_curve`.
+CURVE_ORDER = 2
+
+
+def grid_lines(triples: np.ndarray) -> list[np.ndarray]:
+    """The grid's lines (rows, columns, diagonals) as arrays of dot indices: triples
+    that share a pair of neighbouring dots lie on one line, so lines are the
+    connected groups of neighbour pairs linked by triples."""
+    parent: dict = {}
+
+    def root(e):
+        parent.setdefault(e, e)
+        while parent[e] != e:
+            parent[e] = parent[parent[e]]
+            e = parent[e]
+        return e
+
+    for a, p, b in triples:
+        e1, e2 = (min(a, p), max(a, p)), (min(p, b), max(p, b))
+        parent[root(e1)] = root(e2)
+    groups: dict = {}
+    for e in parent:
+        groups.setdefault(root(e), set()).update(e)
+    return [np.array(sorted(g), int) for g in groups.values()]
+
+
+def off_curve(c: np.ndarray, lines: list[np.ndarray], order: int = CURVE_ORDER) -> tuple[float, int]:
+    """Centre scatter about a smooth curve per grid line (px) and its degrees of freedom.
+
+    Each line with more than ``order + 1`` dots: the dots' offsets across the line
+    (from the straight line through its end dots) fitted by a polynomial of `order`
+    in their position along it; returns the pooled RMS residual, sqrt(Σ res² / Σ (n -
+    order - 1)), which estimates the per-coordinate centre error σ with the lens's
+    smooth bending of the line (to that order) taken out, and Σ (n - order - 1).
+    """
+    ss, dof = 0.0, 0
+    for line in lines:
+        if line.size <= order + 1:
+            continue
+        pts = c[line]
+        d = pts[-1] - pts[0]
+        # ordered along the line by projection (the indices are not in line order)
+        u = d / np.linalg.norm(d)
+        t = (pts - pts[0]) @ u
+        pts, t = pts[np.argsort(t)], np.sort(t)
+        u = (pts[-1] - pts[0]) / np.linalg.norm(pts[-1] - pts[0])
+        v = (pts - pts[0]) @ np.array([-u[1], u[0]])
+        t = (pts - pts[0]) @ u
+        tn = (t - t.mean()) / (np.ptp(t) or 1.0)
+        design = np.vander(tn, order + 1)
+        coef, *_ = np.linalg.lstsq(design, v, rcond=None)
+        ss += float(np.sum((v - design @ coef) ** 2))
+        dof += line.size - order - 1
+    return (float(np.sqrt(ss / dof)) if dof else float("nan")), dof
