@@ -176,8 +176,27 @@ def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene):
         assert (many.x_px, many.y_px, many.radius_px) == pytest.approx((one.x_px, one.y_px, one.radius_px), abs=1e-9)
         np.testing.assert_allclose(many.cov, one.cov, rtol=1e-7)
         assert many.n_pixels == one.n_pixels and many.circularity == pytest.approx(one.circularity, abs=1e-9)
+        np.testing.assert_allclose(many.edge_x_px, one.edge_x_px, atol=1e-9)
+        np.testing.assert_allclose(many.edge_y_px, one.edge_y_px, atol=1e-9)
+        assert many.residual_rms_px == pytest.approx(one.residual_rms_px, abs=1e-12)
     assert isinstance(together[-1], FitError)
     # the wired marker went through the occluder cut: fewer pixels than without the wire
     sx, sy, sr, b, f = starts[0]
     clean = fit_disc(plain.image, sx, sy, sr, edge_width=1.2, levels=(b, f))
     assert together[0].n_pixels < clean.n_pixels
+
+
+def test_robust_sigma_of_rows_is_robust_sigma_of_each():
+    """Rows of different lengths (under and over 400 values, where the MAD is taken
+    of every fourth), one with an occluder's values: each row's σ is robust_sigma's."""
+    from vision_torsion._ring import robust_sigma_rows
+
+    rng = np.random.default_rng(17)
+    n = np.array([30, 399, 400, 1234, 900])
+    rows = np.zeros((n.size, n.max()))
+    for k, m in enumerate(n):
+        rows[k, :m] = np.round(rng.normal(0.0, 1.0 + k, m))
+    rows[3, 100:180] += 60.0  # a wire
+    expected = [robust_sigma(rows[k, :m]) for k, m in enumerate(n)]
+    np.testing.assert_allclose(robust_sigma_rows(rows, n), expected, rtol=1e-12)
+

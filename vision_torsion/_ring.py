@@ -209,6 +209,34 @@ def robust_sigma(resid) -> float:
     return sig or 1e-6
 
 
+def robust_sigma_rows(resid, n):
+    """:func:`robust_sigma` of each row of `resid` (M x N, padded), over its first
+    `n` (M) values, in one set of array operations (the same sample, start and
+    clipping; the order of summation may differ in the last bits)."""
+    a2 = np.square(resid)
+    col = np.arange(a2.shape[1])
+    valid = col < n[:, None]
+    sample = valid & (col % np.where(n >= 400, 4, 1)[:, None] == 0)
+    size = sample.sum(axis=1)
+    ordered = np.sort(np.where(sample, a2, np.inf), axis=1)
+    sig = 1.4826 * np.sqrt(ordered[np.arange(len(n)), size // 2])
+    a2 = np.where(valid, a2, np.inf)  # the padding is never inside a limit
+    going = np.ones(len(n), bool)
+    for _ in range(12):
+        inside = a2 < 9.0 * (sig * sig)[:, None]
+        inner_n = inside.sum(axis=1)
+        going &= inner_n >= 8
+        if not going.any():
+            break
+        new = np.sqrt(np.where(inside, a2, 0.0).sum(axis=1) / np.maximum(inner_n, 1)) / 0.98658
+        done = np.abs(new - sig) < 0.01 * sig
+        sig = np.where(going, new, sig)
+        going &= ~done
+        if not going.any():
+            break
+    return np.where(sig > 0, sig, 1e-6)
+
+
 def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
     """Flags of the ring pixels to keep, or None when nothing is to be cut.
 

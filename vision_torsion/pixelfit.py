@@ -56,6 +56,7 @@ from ._ring import (
     lost_sectors,
     marker_patch,
     normal_cdf,
+    robust_sigma_rows,
     sector_edge_offsets,
     sector_index,
 )
@@ -246,9 +247,10 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     if keep is None:
         return None
     sector, n_sec = _sectors(px.xs, px.ys, p[0], p[1], p[2])
+    cut_edge = ~keep & edge_zone
     # the cut was made against a settled fit, so even a wire lying along the edge
     # for 90° of arc (~40 % of the sectors with their neighbours) is occlusion
-    lost = lost_sectors(sector[~keep & edge_zone], n_sec, most=0.5)
+    lost = lost_sectors(sector[cut_edge], n_sec, most=0.5)
     keep = keep & ~(lost[sector] & edge_zone)
     # distinct sectors counted with bincount: np.unique imports numpy.ma (0.1-0.2 s) on first use
     if np.count_nonzero(np.bincount(sector[keep & edge_zone], minlength=n_sec)) < max(16, n_sec // 2):
@@ -468,6 +470,60 @@ def _normal_equations(Jm, resid):
     return Jm @ Jm.transpose(0, 2, 1), (Jm @ resid[:, :, None])[:, :, 0]
 
 
+def _edge_diagnostics_rows(P, resid, Jm, u, n) -> list:
+    """:func:`_edge_diagnostics` of rows of markers (parameters `P`, M x 8; the
+    model's residuals, Jacobian and u of their padded rings, of `n` pixels each) in
+    one set of array operations: per row the edge points (x, y), their RMS and
+    circularity, or the FitError of too few sectors (:func:`sector_edge_offsets`'s)."""
+    m = len(P)
+    if not m:
+        return []
+    band = (np.abs(u) < 3.0) & (np.arange(u.shape[1]) < n[:, None])
+    g_cos, g_sin, g = Jm[:, 0], Jm[:, 1], Jm[:, 2]
+    psi = np.arctan2(g_sin, g_cos)
+    psi[P[:, 5] < P[:, 4]] += np.pi  # a dark marker: g < 0 turns the direction round
+    n_sec = np.maximum(16, np.round(2 * np.pi * P[:, 2]).astype(np.int64))
+    sector = ((psi + np.pi) * (n_sec / (2 * np.pi))[:, None]).astype(np.int64) % n_sec[:, None]
+    first = np.concatenate([[0], np.cumsum(n_sec)[:-1]])
+    where = (first[:, None] + sector)[band]
+    total = int(n_sec.sum())
+    gb = g[band]
+    den, num, cs, sn = (
+        np.bincount(where, w, minlength=total) for w in (gb * gb, gb * resid[band], gb * g_cos[band], gb * g_sin[band])
+    )
+    # per row: its sectors as a padded row (M x the most sectors)
+    col = np.arange(int(n_sec.max()))
+    valid = col < n_sec[:, None]
+    at = np.where(valid, first[:, None] + col, 0)
+    den, num, cs, sn = (np.where(valid, a[at], 0.0) for a in (den, num, cs, sn))
+    positive = den > 0
+    count = positive.sum(axis=1)
+    ordered = np.sort(np.where(positive, den, np.inf), axis=1)
+    rows = np.arange(m)
+    lo, hi = ordered[rows, np.maximum(count - 1, 0) // 2], ordered[rows, np.minimum(count // 2, ordered.shape[1] - 1)]
+    median = np.where(count % 2 == 1, hi, 0.5 * (lo + hi))  # fast_median of the positive ones
+    good = np.where(count[:, None] > 0, den > 0.1 * median[:, None], positive) & valid
+    kept = good.sum(axis=1)
+    need = np.minimum(12, np.maximum(8, n_sec // 2))
+    delta = np.where(good, num / np.where(good, den, 1.0), 0.0)
+    ang = np.arctan2(sn, cs)
+    c, s = np.cos(ang), np.sin(ang)
+    r = P[:, 2:3] + delta
+    ex, ey = P[:, :1] + r * c, P[:, 1:2] + r * s
+    per = np.maximum(kept, 1)
+    rms = np.sqrt((delta * delta).sum(axis=1) / per)
+    a2 = (2.0 / per) * (delta * (c * c - s * s)).sum(axis=1)
+    b2 = (2.0 / per) * (delta * (2.0 * c * s)).sum(axis=1)
+    circularity = 1.0 - 2.0 * np.hypot(a2, b2) / P[:, 2]
+    out = []
+    for k in rows:
+        if kept[k] < need[k]:
+            out.append(FitError(f"only {int(kept[k])} edge sectors carry information (need {int(need[k])})"))
+        else:
+            out.append((ex[k, good[k]], ey[k, good[k]], float(rms[k]), float(circularity[k])))
+    return out
+
+
 def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     """:func:`fit_disc` of many markers at once, vectorised across them.
 
@@ -565,27 +621,39 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
         A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
         lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
-        for k in acc[~final[acc] & (moved < _SETTLED_PX)]:
+        settled = acc[~final[acc] & (moved < _SETTLED_PX)]
+        if settled.size:
             # the first examination for an occluder (fit_disc's): nothing to cut
-            # makes the fit final; anything to cut goes to fit_disc
-            n = px.n[k]
-            if _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n]) is None:
-                final[k] = True
-            else:
-                single[k] = True
-                active[k] = False
+            # makes the fit final, anything to cut goes to fit_disc. Most rings
+            # have no pixel beyond 4.5 robust σ: that is settled for all at once.
+            sig = robust_sigma_rows(resid[settled], px.n[settled])
+            clean = (np.abs(resid[settled]) < 4.5 * sig[:, None]).all(axis=1)
+            final[settled[clean]] = True
+            for k in settled[~clean]:
+                n = px.n[k]
+                if _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n]) is None:
+                    final[k] = True
+                else:
+                    single[k] = True
+                    active[k] = False
         done = acc[final[acc] & (moved < _CONVERGED_PX)]
         active[done] = False
     for k in np.flatnonzero(active):
         failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
     good = np.flatnonzero(~single & ~np.isin(np.arange(m), list(failed)))
     sigma2 = ssr / np.maximum(px.n - 8, 1)
-    for k in good:
-        n = px.n[k]
+    diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good] if good.size else u[:0], px.n[good])
+    try:
+        covs = sigma2[good, None, None] * np.linalg.inv(A[good])
+    except np.linalg.LinAlgError:
+        covs = None  # one of them singular: inverted one by one below
+    for j, k in enumerate(good):
         try:
             check_contrast(P[k, 5] - P[k, 4], sigma2[k])
-            cov = sigma2[k] * np.linalg.inv(A[k])
-            ex, ey, rms, circularity = _edge_diagnostics(P[k], resid[k, :n], Jm[k, :, :n], u[k, :n])
+            cov = sigma2[k] * np.linalg.inv(A[k]) if covs is None else covs[j]
+            if isinstance(diagnostics[j], FitError):
+                raise diagnostics[j]
+            ex, ey, rms, circularity = diagnostics[j]
         except np.linalg.LinAlgError:
             failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
             continue
@@ -601,7 +669,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             noise_dn=float(np.sqrt(sigma2[k])),
             background_dn=float(P[k, 4]),
             foreground_dn=float(P[k, 5]),
-            n_pixels=int(n),
+            n_pixels=int(px.n[k]),
             edge_x_px=ex,
             edge_y_px=ey,
             residual_rms_px=rms,
