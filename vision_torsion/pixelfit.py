@@ -657,7 +657,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         active[done] = False
     for k in np.flatnonzero(active):
         failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
-    good = np.flatnonzero(~single & ~np.isin(np.arange(m), list(failed)))
+    unfit = single.copy()
+    unfit[list(failed)] = True
+    good = np.flatnonzero(~unfit)
     sigma2 = ssr / np.maximum(px.n - 8, 1)
     diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good] if good.size else u[:0], px.n[good])
     try:
