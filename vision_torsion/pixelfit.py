@@ -363,13 +363,21 @@ def fit_disc(
     px = ring
     start = _start_levels(px, cx, cy, radius, s) if levels is None else (*levels, 0.0, 0.0)
     p = np.array([cx, cy, radius, s, *start], dtype=np.float64)
-    resid, J, u = _evaluate(p, px)
+    return _fit_from(p, ring, patch, *_evaluate(p, px), max_iter=max_iter)
+
+
+def _fit_from(
+    p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, lam=1e-3, keep=None, cuts=0, done=0
+) -> DiscFit:
+    """:func:`fit_disc`'s Levenberg-Marquardt loop and result from a state: the
+    parameters `p`; the model's residuals, Jacobian and u there on the ring's
+    pixels in use (`keep`: flags of those of `ring`, None: all); the damping `lam`;
+    the outlier examinations made (`cuts`) and the iterations used (`done`).
+    (:func:`fit_discs` hands a marker on here after its first examination.)"""
+    px = ring if keep is None else ring.subset(keep)
     ssr = float(resid @ resid)
-    lam = 1e-3
-    keep = None  # flags of the ring pixels in use; None: all of them
-    cuts = 0  # outlier examinations so far
     final = False  # the last examination changed nothing
-    for _ in range(max_iter):
+    for _ in range(max_iter - done):
         A = J @ J.T
         b = J @ resid
         try:
@@ -591,10 +599,11 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     lam = np.full(m, 1e-3)
     final = np.zeros(m, bool)
     active = np.ones(m, bool)
-    single = np.zeros(m, bool)  # an occluder to cut: fitted by fit_disc
+    single = np.zeros(m, bool)  # an occluder to cut: finished by fit_disc's loop
     failed: dict[int, FitError] = {}
     diag = np.arange(8)
-    for _ in range(max_iter):
+    resume: dict[int, tuple] = {}  # occluders to cut: fit_disc's loop from the examination
+    for it in range(max_iter):
         act = np.flatnonzero(active)
         if not act.size:
             break
@@ -648,11 +657,13 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             final[settled[clean]] = True
             for k in settled[~clean]:
                 n = px.n[k]
-                if _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n]) is None:
+                keep = _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n])
+                if keep is None:
                     final[k] = True
                 else:
                     single[k] = True
                     active[k] = False
+                    resume[k] = (keep, it + 1)
         done = acc[final[acc] & (moved < _CONVERGED_PX)]
         active[done] = False
     for k in np.flatnonzero(active):
@@ -696,11 +707,13 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         )
     for k, exc in failed.items():
         out[live[k]] = exc
-    for k in np.flatnonzero(single):
-        cx, cy, r, B, F = starts[live[k]]
-        patch = patches[live[k]]
+    for k, (keep, done) in resume.items():
+        n = px.n[k]
         try:
-            out[live[k]] = fit_disc(None, cx, cy, r, edge_width=s, levels=(B, F), max_iter=max_iter, patch=patch)
+            out[live[k]] = _fit_from(
+                P[k].copy(), rings[k], patches[live[k]], resid[k, :n][keep], Jm[k, :, :n][:, keep], u[k, :n][keep],
+                max_iter=max_iter, lam=float(lam[k]), keep=keep, cuts=1, done=done,
+            )
         except FitError as exc:
             out[live[k]] = exc
     return out
