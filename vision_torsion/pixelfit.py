@@ -482,11 +482,15 @@ class _Batch:
 
 def _evaluate_rows(P, px: _Batch):
     """:func:`_evaluate` for rows of markers (parameters `P`, M x 8): residuals (M x N),
-    Jacobian (M x 8 x N) and u (M x N), zero on the padding."""
+    Jacobian (M x 8 x N) and u (M x N), zero on the padding.
+
+    The padding lies 1e4 px from every marker with no lighting offset, where the
+    edge terms (exp(-u²/2), Φ) are exactly 0 and L is 1: only the residual and
+    ∂I/∂B (= L) are not 0 there and need the mask."""
     Jm = np.empty((P.shape[0], 8, px.xs.shape[1]))
     resid, _, u = _evaluate(P.T[:, :, None], px, J=Jm.transpose(1, 0, 2))
     resid *= px.mask
-    Jm *= px.mask[:, None, :]
+    Jm[:, 4] *= px.mask
     return resid, Jm, u
 
 
@@ -632,7 +636,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         act, trial = act[~last], trial[~last]
         if not act.size:
             continue
-        r_t, J_t, u_t = _evaluate_rows(trial, px.rows(act))
+        r_t, J_t, u_t = _evaluate_rows(trial, px if act.size == m else px.rows(act))
         ssr_t = np.einsum("ij,ij->i", r_t, r_t)
         better = ssr_t <= ssr[act]
         worse = act[~better]
@@ -644,8 +648,12 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         if not acc.size:
             continue
         moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
-        P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
-        A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
+        if acc.size == m:  # every marker stepped: the new arrays as they are
+            P, resid, Jm, u, ssr = trial, r_t, J_t, u_t, ssr_t
+            A, b = _normal_equations(Jm, resid)
+        else:
+            P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
+            A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
         lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
         settled = acc[~final[acc] & (moved < _SETTLED_PX)]
         if settled.size:
