@@ -43,7 +43,9 @@ so two properties that need none are measured:
   resampled triples for both methods: the target's and the lens's share cancels).
 - **time**: CPU time per photo on one core (OpenCV and BLAS single-threaded; CPU, not
   wall, time because the machine is shared; the least of ``--repeats`` runs, 5 by
-  default, as other work only ever adds time), two ways:
+  default, as other work only ever adds time; every method runs once per round, so
+  the ML fit's time over ours is also given per round, both timed under the same
+  load: the median and range of those ratios), two ways:
 
   - *fit only*: every method handed the same reference dots (centre and radius as
     the start, the neighbours' discs to leave out): ours is
@@ -141,28 +143,36 @@ METHODS = (
 )
 
 
-def _fastest(job, repeats):
-    """The result of `job()` and the least of its CPU times (s) over `repeats` runs:
-    the machine is shared, and other work only ever adds time."""
-    runs = [job() for _ in range(repeats)]
-    return runs[0][0], min(r[1] for r in runs)
-
-
 def measure_photo(path: Path, repeats: int = 1) -> dict:
     grey = load_image(path, keep_integers=True)
     img = grey.data
-
-    def reference():
+    dots = reference_dots(img)
+    # every method once per round, rounds repeated: each method's least CPU time
+    # (other work only ever adds time), and the ML fit's time over ours per round
+    # (both timed within moments of each other, under the same load)
+    runs: dict = {}
+    for _ in range(repeats):
         t = time.process_time()
-        return reference_dots(img), time.process_time() - t
-
-    dots, t_ref = _fastest(reference, repeats)
-    centres, times, fit_times = {}, {}, {}
-    (centres["ours"], table), times["ours"] = _fastest(lambda: _ours(img, dots), repeats)
-    fit_times["ours"] = min(_ours_fit_only(img, dots) for _ in range(repeats))
-    for name, _, fn in METHODS:
-        centres[name], fit_times[name] = _fastest(lambda fn=fn: _peer(fn, img, dots), repeats)
+        reference_dots(img)
+        runs.setdefault("reference", []).append(time.process_time() - t)
+        (c_ours, table), t_ours = _ours(img, dots)
+        runs.setdefault("ours", []).append(t_ours)
+        runs.setdefault("ours_fit", []).append(_ours_fit_only(img, dots))
+        peer_centres = {}
+        for name, _, fn in METHODS:
+            peer_centres[name], t = _peer(fn, img, dots)
+            runs.setdefault(name, []).append(t)
+    t_ref = min(runs["reference"])
+    centres = {"ours": c_ours, **peer_centres}
+    times = {"ours": min(runs["ours"])}
+    fit_times = {"ours": min(runs["ours_fit"])}
+    for name, _, _ in METHODS:
+        fit_times[name] = min(runs[name])
         times[name] = t_ref + fit_times[name]
+    paired = {
+        "fit_only": [ml / ours for ml, ours in zip(runs["ml_disc"], runs["ours_fit"])],
+        "whole": [(ref + ml) / ours for ref, ml, ours in zip(runs["reference"], runs["ml_disc"], runs["ours"])],
+    }
     triples = grid_triples(dots[:, :2])
     every = np.ones(len(triples), bool)
     for c in centres.values():
@@ -179,6 +189,8 @@ def measure_photo(path: Path, repeats: int = 1) -> dict:
         "our_rows": {s: int(n) for s, n in table["status"].value_counts().items()},
         "triples": int(len(used)),
         "curve_dof": int(off_curve(dots[:, :2], lines)[1]),
+        # the ML fit's CPU time over ours in each round (fit only; whole)
+        "ml_over_ours_per_round": paired,
         "methods": {},
     }
     offs = {name: off_line(c, used) for name, c in centres.items()}
@@ -254,12 +266,18 @@ def markdown(rows, command, info) -> str:
         best = min(peers_, key=lambda k: peers_[k]["row_straightness_rms_px"])
         d, lo, hi = peers_[best]["straightness_difference_px"]
         lines.append(f"- {r['photo']}: {d:+.4f} px ({lo:+.4f} to {hi:+.4f}) against {labels[best]}")
-    lines += ["", "ML blurred-disc fit's CPU time over ours (the issue's target: >= 5x):", ""]
+    lines += [
+        "",
+        "ML blurred-disc fit's CPU time over ours (the issue's target: >= 5x, judged on fit only): "
+        "the median over the rounds of the two timed side by side, [lowest, highest round]:",
+        "",
+    ]
     for r in rows:
-        ours, ml = r["methods"]["ours"], r["methods"]["ml_disc"]
+        p = r["ml_over_ours_per_round"]
         lines.append(
-            f"- {r['photo']}: fit only {ml['fit_time_s'] / ours['fit_time_s']:.1f}x, "
-            f"whole {ml['time_s'] / ours['time_s']:.1f}x"
+            f"- {r['photo']}: fit only {np.median(p['fit_only']):.1f}x "
+            f"[{min(p['fit_only']):.1f}, {max(p['fit_only']):.1f}], "
+            f"whole {np.median(p['whole']):.1f}x [{min(p['whole']):.1f}, {max(p['whole']):.1f}]"
         )
     return "\n".join(lines) + "\n"
 
