@@ -532,6 +532,14 @@ def find_marker_list(
         when only the target pair is wanted (bolt holes need no sub-pixel fit).
     candidates : list of Blob, optional
         :func:`find_candidates` of this image and these settings, when already found.
+
+    Notes
+    -----
+    Without `enough`, the default pixel fits of all candidates are made together,
+    vectorised across markers (:func:`~vision_torsion.pixelfit.fit_discs`, the same
+    fit as :func:`~vision_torsion.pixelfit.fit_disc` to rounding): a photograph of a
+    dot grid has hundreds of small markers. With `enough`, one by one, as each
+    answer may end the search.
     """
     r_min, r_max = _radius_range(img, settings)
     fit = settings.fit
