@@ -19,6 +19,12 @@ them by :mod:`.session`); none of them changes the data.
   image against the end of cycle 1's positive unloading (both reached by unloading
   from +Tmax, no weights on the pans). ``|Δθ| > CLOSURE_K·σ_Δ`` is creep (or a
   disturbed rig), with ``σ_Δ`` from the two images' angle uncertainties.
+- **Flat top** (:func:`flat_top`): the paper's hysteresis is the *largest* loop width.
+  When several torque levels share that width within the noise (a flat-topped loop,
+  e.g. a play that stays open over most of the cycle), the largest of several noisy
+  widths is biased upward by the noise (by about σ_w·E[max of m normals]) and its
+  Monte Carlo spread does not show it; the figure is then flagged with the expected
+  bias, and the width at zero (``hysteresis_loss``) is the unbiased one.
 - **Outliers** (:func:`outliers`): standardised residuals of a loop model
   (``r/σ_eff``) beyond :data:`OUTLIER_K` list the image: a forgotten weight, an
   extra or a missed shot.
@@ -31,12 +37,26 @@ import math
 import numpy as np
 import pandas as pd
 
-__all__ = ["CLOSURE_K", "OUTLIER_K", "angle_sign_inverted", "gap_between", "closure_checks", "outliers"]
+__all__ = [
+    "CLOSURE_K",
+    "OUTLIER_K",
+    "FLAT_TOP_K",
+    "FLAT_TOP_LEVELS",
+    "angle_sign_inverted",
+    "gap_between",
+    "closure_checks",
+    "flat_top",
+    "outliers",
+]
 
 #: Closure differences beyond this many σ are reported as creep.
 CLOSURE_K = 4.0
 #: Standardised residuals beyond this are listed as outliers.
 OUTLIER_K = 4.0
+#: A level's loop width within this many σ of the largest one shares the maximum (:func:`flat_top`).
+FLAT_TOP_K = 2.0
+#: This many levels sharing the largest width make it a maximum of noise (:func:`flat_top`).
+FLAT_TOP_LEVELS = 3
 
 
 def angle_sign_inverted(torque_nm, angle_deg) -> bool:
@@ -165,6 +185,50 @@ def closure_checks(usable: pd.DataFrame, closing: pd.DataFrame) -> list:
                     }
                 )
     return out
+
+
+def flat_top(tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc, *, resolution_nm=1e-9):
+    """Whether the largest loop width is a maximum of noise over a flat top.
+
+    Parameters
+    ----------
+    tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc : array_like
+        The descending and ascending runs: torques (N·m), angles and their 1σ (rad).
+
+    Returns
+    -------
+    dict or None
+        None when fewer than :data:`FLAT_TOP_LEVELS` levels (measured in both runs)
+        have a width within :data:`FLAT_TOP_K`·σ_w of the largest; else ``levels``
+        (their count), ``sigma_rad`` (median σ_w of them) and ``bias_rad``: the
+        expected excess of the largest of ``levels`` noisy widths over the true
+        one, ``σ_w·Φ⁻¹((m − 0.375)/(m + 0.25))`` (Blom's approximation of the
+        expected maximum of m standard normal values).
+
+    Examples
+    --------
+    >>> t = [1.0, 0.5, 0.0, -0.5, -1.0]
+    >>> r = flat_top(t, [0.1] * 5, [1e-3] * 5, t[::-1], [0.0] * 5, [1e-3] * 5)
+    >>> r["levels"], round(r["bias_rad"] / r["sigma_rad"], 2)
+    (5, 1.18)
+    >>> flat_top(t, [0.1, 0.2, 0.3, 0.2, 0.1], [1e-3] * 5, t[::-1], [0.0] * 5, [1e-3] * 5) is None
+    True
+    """
+    from scipy import stats
+
+    key = lambda t: np.round(np.asarray(t, float) / resolution_nm).astype(np.int64)  # noqa: E731
+    kd, ka = key(tau_desc), key(tau_asc)
+    common, i_d, i_a = np.intersect1d(kd, ka, return_indices=True)
+    if common.size < FLAT_TOP_LEVELS:
+        return None
+    w = np.abs(np.asarray(th_desc, float)[i_d] - np.asarray(th_asc, float)[i_a])
+    s = np.hypot(np.asarray(std_desc, float)[i_d], np.asarray(std_asc, float)[i_a])
+    near = w >= w.max() - FLAT_TOP_K * s
+    m = int(near.sum())
+    if m < FLAT_TOP_LEVELS:
+        return None
+    sigma = float(np.median(s[near]))
+    return {"levels": m, "sigma_rad": sigma, "bias_rad": sigma * float(stats.norm.ppf((m - 0.375) / (m + 0.25)))}
 
 
 def outliers(images, residual_rad, sigma_rad, *, k=OUTLIER_K) -> list:

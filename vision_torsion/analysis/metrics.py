@@ -53,6 +53,7 @@ __all__ = [
     "loop_width",
     "lost_motion",
     "secant_stiffness",
+    "phase_secants",
     "loop_energy",
     "loss_factor",
     "phase_stiffness",
@@ -152,6 +153,30 @@ def secant_stiffness(tau_desc, th_desc, tau_asc, th_asc, *, lower_nm, upper_nm, 
     with np.errstate(divide="ignore", invalid="ignore"):
         k = (upper_nm - lower_nm) / dtheta
     return _out(np.where(dtheta > 0, k, np.nan), one_d)
+
+
+def phase_secants(tau_desc, th_desc, tau_asc, th_asc, *, top_nm, bottom_nm, tol=0.0):
+    """The secant of each of the four phases, N·m/rad, from the runs: ``{k_<phase>_secant: value}``.
+
+    Over each phase's ends (+Tmax → 0, 0 → −Tmax, −Tmax → 0, 0 → +Tmax): the phase
+    secant of :mod:`.session`, evaluated on the runs so that a Monte Carlo of the
+    loop carries the torque errors of the ends with their correlations and the loop's
+    amplitude. The bottom tip is the descending run's last image, which also starts
+    the ascending branch; ``top_nm``/``bottom_nm`` are the nominal tips.
+    """
+    td, yd, ta, ya = _rows(tau_desc, th_desc, tau_asc, th_asc)
+    td, yd = _sorted(td, yd)
+    ta, ya = _sorted(ta, ya)
+    hi, lo = float(top_nm), float(bottom_nm)
+    d = interp_rows(np.array([[lo, 0.0, hi]]), td, yd, tol=tol)
+    a = interp_rows(np.array([[0.0, hi]]), ta, ya, tol=tol)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return {
+            "k_positive_unloading_secant": hi / (d[:, 2] - d[:, 1]),
+            "k_negative_loading_secant": -lo / (d[:, 1] - d[:, 0]),
+            "k_negative_unloading_secant": -lo / (a[:, 0] - d[:, 0]),
+            "k_positive_loading_secant": hi / (a[:, 1] - a[:, 0]),
+        }
 
 
 def loop_energy(torque_nm, angle_rad):

@@ -12,6 +12,7 @@ k_<phase> (straight line)              nm_per_rad    first order    lack of fit:
 k_<phase>_below / _above, switch_nm    nm_per_rad/nm first order    lack of fit: **withheld**
 k_<phase>_secant (phase ends)          nm_per_rad    first order    phase start/end missing: withheld
 hysteresis, hysteresis_loss            deg           Monte Carlo    gap in the levels: **withheld**
+                                                                    hysteresis over a flat top: flagged
 lost_motion_<x>pct                     deg           Monte Carlo    ±x·T not bracketed: withheld
 secant_stiffness                       nm_per_rad    Monte Carlo    ends not bracketed: withheld
 loop_energy, loss_factor               j, 1          Monte Carlo    gap in the levels: withheld
@@ -42,6 +43,15 @@ Torque errors follow the weight pieces when the rig is known (``rig=...``,
 (``"level"``); pulley friction is a torque opposing the motion; see
 :mod:`.uncertainty`.
 
+Expanded uncertainties are ``u95 = k·std`` with ``k = 2``, or Student's ``t_0.975``
+at the Welch–Satterthwaite degrees of freedom when a Monte Carlo part rests on few
+draws (ν = draws − 1; the figures' ``coverage_factor`` column). The Monte Carlo of
+the loop figures carries each torque error as the data would show it: the torque
+axis of the image and, at the loop's tips, the loop's amplitude
+(:func:`.uncertainty.tip_amplitude_response`); the phase secants take their torque
+part from it. A largest loop width that is a maximum over a flat top is flagged
+(:func:`.checks.flat_top`).
+
 A figure that cannot be computed is NaN in the tables and None in JSON, and an
 :class:`Issue` says which orientation/cycle and why; it is never replaced by 0.
 """
@@ -53,6 +63,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
@@ -70,7 +81,7 @@ from .uncertainty import (
     least_squares_weights,
     monte_carlo_std,
     std_by_kind,
-    stds_of_draws,
+    tip_amplitude_response,
     torque_sources,
 )
 
@@ -101,7 +112,20 @@ FIGURE_COLUMNS = [
     *[f"std_{k}" for k in SOURCE_KINDS],
     "std_lack_of_fit",
     "reduced_chi2",
+    "coverage_factor",
 ]
+
+
+def _coverage_factor(std: float, parts_dof) -> float:
+    """``k`` of ``u95 = k·std``: 2, or Student's ``t_0.975`` at the Welch–Satterthwaite ν when larger.
+
+    ``parts_dof`` lists ``(std_i, ν_i)`` of the independently estimated parts (a Monte
+    Carlo std from D draws has ν = D − 1); ``ν_eff = std⁴ / Σ std_i⁴/ν_i``.
+    """
+    den = sum(u**4 / nu for u, nu in parts_dof if np.isfinite(u) and u > 0 and nu and np.isfinite(nu))
+    if not (np.isfinite(std) and std > 0 and den > 0):
+        return COVERAGE_FACTOR
+    return max(COVERAGE_FACTOR, float(stats.t.ppf(0.975, std**4 / den)))
 
 
 def _lm_name(fraction: float) -> str:
@@ -210,7 +234,8 @@ class SessionAnalysis:
             "uncertainty": {
                 "coverage_factor": COVERAGE_FACTOR,
                 "std": "1-sigma standard uncertainty (angle and torque parts in quadrature)",
-                "u95": "expanded uncertainty = coverage_factor * std",
+                "u95": "expanded uncertainty = coverage_factor * std (per figure: 2, or Student's t at the "
+                "Welch-Satterthwaite degrees of freedom when its Monte Carlo had few draws)",
                 "torque_correlation": self.settings.get("torque_correlation"),
                 "rig": self.settings.get("rig"),
                 "monte_carlo_draws": self.settings.get("n_draws"),
@@ -261,9 +286,24 @@ class _Collector:
         self.loop, self.issues, self.rows = loop, issues, []
 
     def add(
-        self, figure, unit, value, std_angle=np.nan, std_torque=np.nan, method="", *, parts=None, check=None, flag=""
+        self,
+        figure,
+        unit,
+        value,
+        std_angle=np.nan,
+        std_torque=np.nan,
+        method="",
+        *,
+        parts=None,
+        check=None,
+        flag="",
+        draws=None,
     ):
-        """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u."""
+        """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u.
+
+        ``draws``: the angle part and each torque part were estimated from this many
+        Monte Carlo draws (their ν = draws − 1 sets the coverage factor).
+        """
         infl, red = 1.0, np.nan
         if check is not None and check.testable:
             red = check.reduced_chi2
@@ -288,12 +328,32 @@ class _Collector:
             "flag": flag,
             "std_lack_of_fit": std0 * math.sqrt(max(infl**2 - 1.0, 0.0)) if np.isfinite(std0) else np.nan,
             "reduced_chi2": red,
+            "coverage_factor": COVERAGE_FACTOR,
         }
+        if draws:
+            k = _coverage_factor(std0, [(std_angle, draws - 1)] + [(u, draws - 1) for u in (parts or {}).values()])
+            row.update(coverage_factor=k, u95=k * std)
         for k in SOURCE_KINDS:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
         self.rows.append(row)
         if flag:
             self.issues.append(Issue(self.loop.orientation_deg, self.loop.cycle, figure, flag, kind="flagged"))
+
+    def set_torque_part(self, figure, std_torque, parts, method, draws):
+        """Replace the torque part of an unflagged figure already added (a better propagation of it).
+
+        The torque parts come from ``draws`` Monte Carlo draws (ν = draws − 1 each).
+        """
+        for row in self.rows:
+            if row["figure"] == figure and np.isfinite(row["value"]) and not row["flag"]:
+                row["std_torque"] = float(std_torque)
+                row["std"] = float(np.hypot(row["std_angle"], std_torque))
+                k = _coverage_factor(row["std"], [(u, draws - 1) for u in parts.values()])
+                row["coverage_factor"] = k
+                row["u95"] = k * row["std"]
+                row["method"] = method
+                for kind in SOURCE_KINDS:
+                    row[f"std_{kind}"] = float(parts.get(kind, 0.0))
 
     def fail(self, figure, unit, reason, *, kind="not_computable"):
         self.add(figure, unit, np.nan)
@@ -553,9 +613,22 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
         }
         for f in settings["lost_motion_fractions"]:
             out[_lm_name(f)] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * lm_ref, tol=tol))
+        out.update(
+            metrics.phase_secants(td, yd, ta, ya, top_nm=tau[0, top].mean(), bottom_nm=tau[0, bottom].mean(), tol=tol)
+        )
         return out
 
     return evaluate
+
+
+#: Figures of the phases whose torque part the loop's Monte Carlo carries (their value and angle part stay
+#: the phase's own, :func:`_phase_secant`).
+_PHASE_SECANTS = (
+    "k_positive_unloading_secant",
+    "k_negative_loading_secant",
+    "k_negative_unloading_secant",
+    "k_positive_loading_secant",
+)
 
 
 def _mc_units(settings):
@@ -615,36 +688,7 @@ def _gap_reasons(settings, tau, is_desc, levels) -> dict:
     return out
 
 
-def _torque_through_model(evaluate, loop: Loop, pre, th_run, kinds, n_draws: int, seed: int):
-    """Torque part of the model-free figures carried through the loop's fitted physics.
-
-    The angles of a loop responded to the **true** torques; the table gives nominal
-    ones. A torque error at a reversal changes the loop's amplitude and so every
-    angle after it (a Masing or Preisach loop's width at zero depends on how far it
-    was driven), which shifting the torque axis alone cannot show. Each draw
-    ``δτ = L·ξ`` (per kind of source) is run through the accepted Preisach fit ``P``:
-    the angles move by ``P(τ + δτ) − P(τ)`` and the figures are re-evaluated at the
-    nominal torques. Returns ``(std_torque, {figure: {kind: std}})``.
-    """
-    rng = np.random.default_rng(seed + 104729)
-    a = loop.run_matrix()
-    tau_l = loop.torque_nm
-    src = loop.sources()
-    base = pre.predict_many(tau_l[None, :])[0]
-    tau_run = np.repeat((a @ tau_l)[None, :], n_draws, axis=0)
-    parts = {}
-    for kind in dict.fromkeys(np.asarray(kinds).tolist()):
-        lk = src[:, np.asarray(kinds) == kind]
-        dtau = rng.standard_normal((n_draws, lk.shape[1])) @ lk.T
-        dth = pre.predict_many(tau_l[None, :] + dtau) - base[None, :]
-        parts[str(kind)] = stds_of_draws(evaluate(tau_run, th_run[None, :] + dth @ a.T))
-    names = next(iter(parts.values())).keys() if parts else []
-    by_kind = {n: {k: parts[k][n] for k in parts} for n in names}
-    std_t = {n: float(np.sqrt(np.sum(np.square(list(v.values()))))) for n, v in by_kind.items()}
-    return std_t, by_kind
-
-
-def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.ndarray, pre=None):
+def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.ndarray):
     loop = col.loop
     tau, th, th_std, tau_std, groups, is_desc, sources = loop.runs()
     top = groups == groups[np.argmax(tau)]
@@ -665,18 +709,31 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
         n_draws=settings["n_draws"],
         seed=seed,
         kinds=kinds,
+        torque_response=tip_amplitude_response(tau, th, is_desc),
     )
-    method = "monte-carlo"
-    if pre is not None and not pre.check.rejected and sources.shape[1]:
-        std_t, by_kind = _torque_through_model(evaluate, loop, pre, th, kinds, settings["n_draws"], seed)
-        method = "monte-carlo (torque errors through the Preisach fit)"
+    method = "monte-carlo (torque errors with the loop's amplitude)"
     gaps = _gap_reasons(settings, tau, is_desc, levels)
+    for name in _PHASE_SECANTS:
+        if np.isfinite(std_t.get(name, np.nan)):
+            col.set_torque_part(
+                name, std_t[name], by_kind[name], f"first-order (two ends); torque part {method}", settings["n_draws"]
+            )
+    flat = checks.flat_top(tau[is_desc], th[is_desc], th_std[is_desc], tau[~is_desc], th[~is_desc], th_std[~is_desc])
     for name, unit in _mc_units(settings).items():
         v = float(nominal[name][0])
         if name in gaps:
             col.fail(name, unit, gaps[name])
         elif np.isfinite(v):
-            col.add(name, unit, v, std_a[name], std_t[name], method, parts=by_kind[name])
+            flag = ""
+            if name == "hysteresis" and flat:
+                flag = (
+                    f"flagged: the largest loop width is the maximum over {flat['levels']} torque levels whose widths "
+                    f"agree within the noise (a flat-topped loop), so noise biases it upward by about "
+                    f"{math.degrees(flat['bias_rad']):.2g}° (σ of one width {math.degrees(flat['sigma_rad']):.2g}°); "
+                    "the width at zero torque (hysteresis_loss) is not biased"
+                )
+            col.add(name, unit, v, std_a[name], std_t[name], method, parts=by_kind[name], flag=flag,
+                    draws=settings["n_draws"])
         else:
             col.fail(name, unit, _mc_reason(name, tau, settings))
     return tau, th, th_std, is_desc, sources, kinds
@@ -1174,9 +1231,7 @@ def analyze_session(
             problem = _loop_problem(lp)
             if problem is None:
                 fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
-                runs = _model_free_figures(
-                    col, settings, seed + i, levels, pre=fits[(lp.orientation_deg, lp.cycle)]["preisach"]
-                )
+                runs = _model_free_figures(col, settings, seed + i, levels)
                 _catalogue_figures(col, settings, runs)
                 for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
                     outlier_rows.append(

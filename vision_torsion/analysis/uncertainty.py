@@ -94,6 +94,7 @@ __all__ = [
     "std_by_kind",
     "PHASE_DIRECTION",
     "stds_of_draws",
+    "tip_amplitude_response",
 ]
 
 #: Coverage factor of every ``*_u95`` (normal distribution, ≈95 %).
@@ -348,6 +349,7 @@ def monte_carlo_std(
     n_draws=400,
     seed=0,
     kinds=None,
+    torque_response=None,
 ):
     """Standard deviation of each figure of a loop from angle and from torque errors.
 
@@ -374,6 +376,14 @@ def monte_carlo_std(
         Kind of each torque source; then each kind is drawn on its own and a third
         dict ``{name: {kind: std}}`` is returned, ``std_torque`` being their
         quadrature sum (the kinds are independent).
+    torque_response : callable, optional
+        ``torque_response(d_tau) -> d_theta`` (both ``(D, n)``, N·m → rad): how the
+        measured angles themselves move when the true torques are ``τ + δτ`` beyond
+        what the torque axis shows (a loop's amplitude: a torque error at a reversal
+        moves the branch that follows it). Given it, a torque draw is evaluated as the
+        data would be measured, at the nominal torques ``τ`` with angles
+        ``θ + ∂θ/∂τ·δτ + torque_response(δτ)``, the first term by shifting the torque
+        axis the other way (``τ − δτ``).
 
     Returns
     -------
@@ -394,20 +404,129 @@ def monte_carlo_std(
     L = np.asarray(torque_sources, float)
     d_theta = rng.standard_normal((n_draws, th.shape[1])) * np.asarray(angle_std_rad, float)[None, :]
     by_angle = evaluate(np.repeat(tau, n_draws, axis=0), th + d_theta)
+
+    def torque_draw(d_tau):
+        if torque_response is None:
+            return evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
+        return evaluate(tau - d_tau, th + torque_response(d_tau))
+
     if kinds is None:
         d_tau = rng.standard_normal((n_draws, L.shape[1])) @ L.T
-        by_torque = evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
-        return _stds(by_angle), _stds(by_torque)
+        return _stds(by_angle), _stds(torque_draw(d_tau))
     kinds = np.asarray(kinds, dtype=object)
     parts = {}
     for kind in dict.fromkeys(kinds.tolist()):
         Lk = L[:, kinds == kind]
         d_tau = rng.standard_normal((n_draws, Lk.shape[1])) @ Lk.T
-        parts[str(kind)] = _stds(evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0)))
+        parts[str(kind)] = _stds(torque_draw(d_tau))
     sa = _stds(by_angle)
     by_kind = {name: {k: parts[k][name] for k in parts} for name in sa}
     st = {name: float(np.sqrt(np.sum(np.square(list(v.values()))))) if v else 0.0 for name, v in by_kind.items()}
     return sa, st, by_kind
+
+
+def _branch_slopes(tau: np.ndarray, th: np.ndarray) -> np.ndarray:
+    """dθ/dτ along one branch (samples in path order): central secants, one-sided at the ends."""
+    if tau.size < 2:
+        return np.full(tau.size, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        step = np.diff(th) / np.diff(tau)
+    out = np.empty(tau.size)
+    out[0], out[-1] = step[0], step[-1]
+    if tau.size > 2:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[1:-1] = (th[2:] - th[:-2]) / (tau[2:] - tau[:-2])
+    return out
+
+
+def tip_amplitude_response(torque_nm, angle_rad, is_desc):
+    """How a loop's angles move when its **tips** (reversal torques) are wrong: the amplitude effect.
+
+    The angles of a loop responded to the true torques; a torque error at a reversal
+    (a loop tip) changes how far the loop was driven, and with it the branch that
+    follows. Shifting the torque axis (:func:`monte_carlo_std`) carries only the
+    torque of each image itself; this is the rest.
+
+    Parameters
+    ----------
+    torque_nm, angle_rad : ndarray (n,)
+        The loop's runs (:meth:`.loops.Loop.runs`): the descending run from +Tmax to
+        −Tmax, then the ascending run up to +Tmax (N·m, rad).
+    is_desc : ndarray of bool (n,)
+        Which samples are in the descending run.
+
+    Returns
+    -------
+    callable
+        ``response(d_tau) -> d_theta``, ``(D, n)`` → ``(D, n)`` (N·m → rad), for
+        ``torque_response`` of :func:`monte_carlo_std`.
+
+    Notes
+    -----
+    A branch after a reversal at ``(τ_r, θ_r)`` follows the **Masing** rule: its shape
+    relative to the reversal point is fixed, so a reversal torque wrong by ``δ_r``
+    translates the branch by ``(δ_r, s_arr·δ_r)`` (``s_arr`` the slope arriving at the
+    tip). At a fixed torque the branch then moves by ``S(τ)·δ_r`` with
+    ``S(τ) = s_arr − s(τ)`` (``s(τ)`` the branch's own slope). A Preisach loop (μ ≥ 0)
+    bounds the effect: ``0 ≤ S ≤ h = s_arr − s_dep`` (``s_dep`` the slope just after
+    the reversal: what arrives at a tip beyond what leaves it is the hysteretic part
+    that remembers the tip). So ``S(τ) = clip(s_arr − s(τ), 0, max(h, 0))``: the
+    Masing value on smooth loops, and zero where nothing hysteretic switches at the
+    tip (the bilinear loop: ``s_arr = s_dep = 1/k_u``; a stop-type play that is
+    saturated at the tips). A single major loop cannot tell a Masing loop from other
+    Preisach densities of the same shape; this rule is the assumption, and it is
+    exact for both the Masing and the bilinear loop. Slopes are central secants of
+    the data along each branch; the top tip's arriving slope is the ascending run's
+    last step (the loop came up to +Tmax the same way before it), the bottom tip's
+    the descending run's last step. The bottom reversal point itself moves by
+    ``S_desc(−Tmax)·δ_top`` and carries that to the whole ascending branch. The +Tmax
+    image itself gets ``s_arr − s_dep`` unclipped: the torque axis's shift reads it
+    along the descending run's first step, and its angle answers along the arriving
+    one. Where a stop-type play is open (within its width after a reversal) ``S`` is
+    negative and the clip leaves it at zero: no figure is evaluated there.
+    """
+    tau = np.asarray(torque_nm, float)
+    th = np.asarray(angle_rad, float)
+    desc = np.flatnonzero(is_desc)
+    asc = np.flatnonzero(~np.asarray(is_desc, bool))
+    zero = lambda d_tau: np.zeros_like(d_tau)  # noqa: E731
+    if desc.size < 2 or asc.size < 1:
+        return zero
+    sd = _branch_slopes(tau[desc], th[desc])
+    # the ascending branch starts at the bottom tip (the descending run's last image)
+    a_path = np.concatenate([[desc[-1]], asc])
+    sa = _branch_slopes(tau[a_path], th[a_path])[1:]
+    s_arr_top = (th[asc[-1]] - th[asc[-2]]) / (tau[asc[-1]] - tau[asc[-2]]) if asc.size >= 2 else np.nan
+    if asc.size < 2 or abs(tau[asc[-1]] - tau[desc[0]]) > 1e-9:
+        s_arr_top = np.nan  # the top tip was not reached again: no slope arriving at it
+    h_top = s_arr_top - sd[0]
+    s_arr_bot = sd[-1]
+    h_bot = s_arr_bot - sa[0]
+
+    def sens(s_arr, h, s):
+        if not (np.isfinite(s_arr) and np.isfinite(h)) or h <= 0:
+            return np.zeros_like(s)
+        return np.clip(np.nan_to_num(s_arr - s, nan=0.0), 0.0, h)
+
+    S_d = sens(s_arr_top, h_top, sd)
+    S_a = sens(s_arr_bot, h_bot, sa)
+    if np.isfinite(h_top):
+        # the +Tmax image itself responds to its torque along the branch that arrived there; the torque axis's
+        # shift reads the descending run's first step instead (a stop-type play: open after the tip, closed before)
+        S_d[0] = h_top
+    if not (np.any(S_d) or np.any(S_a)):
+        return zero
+
+    def response(d_tau):
+        d_tau = np.asarray(d_tau, float)
+        out = np.zeros_like(d_tau)
+        d_top = d_tau[:, desc[0] : desc[0] + 1]
+        d_bot = d_tau[:, desc[-1] : desc[-1] + 1]
+        out[:, desc] = S_d[None, :] * d_top
+        out[:, asc] = S_d[-1] * d_top + S_a[None, :] * d_bot
+        return out
+
+    return response
 
 
 def stds_of_draws(values: dict) -> dict:
