@@ -214,7 +214,7 @@ def flat_top(tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc, *, resolutio
     >>> flat_top(t, [0.1, 0.2, 0.3, 0.2, 0.1], [1e-3] * 5, t[::-1], [0.0] * 5, [1e-3] * 5) is None
     True
     """
-    from scipy import stats
+    from scipy import special  # ndtri is scipy.stats.norm.ppf
 
     key = lambda t: np.round(np.asarray(t, float) / resolution_nm).astype(np.int64)  # noqa: E731
     kd, ka = key(tau_desc), key(tau_asc)
@@ -228,7 +228,7 @@ def flat_top(tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc, *, resolutio
     if m < FLAT_TOP_LEVELS:
         return None
     sigma = float(np.median(s[near]))
-    return {"levels": m, "sigma_rad": sigma, "bias_rad": sigma * float(stats.norm.ppf((m - 0.375) / (m + 0.25)))}
+    return {"levels": m, "sigma_rad": sigma, "bias_rad": sigma * float(special.ndtri((m - 0.375) / (m + 0.25)))}
 
 
 def outliers(images, residual_rad, sigma_rad, *, k=OUTLIER_K) -> list:

@@ -63,7 +63,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import special  # stdtrit is scipy.stats.t.ppf, without importing scipy.stats
 
 from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
@@ -125,7 +125,7 @@ def _coverage_factor(std: float, parts_dof) -> float:
     den = sum(u**4 / nu for u, nu in parts_dof if np.isfinite(u) and u > 0 and nu and np.isfinite(nu))
     if not (np.isfinite(std) and std > 0 and den > 0):
         return COVERAGE_FACTOR
-    return max(COVERAGE_FACTOR, float(stats.t.ppf(0.975, std**4 / den)))
+    return max(COVERAGE_FACTOR, float(special.stdtrit(std**4 / den, 0.975)))
 
 
 def _lm_name(fraction: float) -> str:
