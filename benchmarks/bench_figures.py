@@ -1,6 +1,6 @@
 """Are the figures right, or do they say why not? (issue 14)
 
-    python benchmarks/bench_figures.py [--reps 50] [--jobs 2]
+    python benchmarks/bench_figures.py [--reps 50] [--jobs 2] [--cases ...] [--first-rep 0] [--out FILE]
 
 Sessions from the benchmark's own generator (``truth_tables.py``: exact truth,
 no code shared with the analysis), analysed by ``analyze_session`` with the rig's
@@ -148,20 +148,24 @@ def main(argv=None):
     p.add_argument("--reps", type=int, default=50, help="sessions per case and noise level (default 50)")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cases", nargs="*", default=list(CASES))
+    p.add_argument(
+        "--first-rep", type=int, default=0, help="seed of the first session (default 0; another value: fresh sessions)"
+    )
+    p.add_argument("--out", type=Path, default=None, help="results file (default benchmarks/results/figures.json)")
     args = p.parse_args(argv)
     t0 = time.time()
     agg = {}
-    res_dir = Path(__file__).resolve().parent / "results"
-    res_dir.mkdir(exist_ok=True)
+    out = args.out or Path(__file__).resolve().parent / "results" / "figures.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
     from multiprocessing import Pool
 
     pool = Pool(args.jobs) if args.jobs > 1 else None
     for case in args.cases:
-        tasks = [(case, n, r) for n in NOISES for r in range(args.reps)]
+        tasks = [(case, n, r) for n in NOISES for r in range(args.first_rep, args.first_rep + args.reps)]
         results = pool.map(run_one, tasks, chunksize=2) if pool else [run_one(t) for t in tasks]
         _aggregate(agg, results)
         print(f"{case}: done at {time.time() - t0:.0f} s", flush=True)
-        _write(agg, args, time.time() - t0, res_dir / "figures.json", None, None)
+        _write(agg, args, time.time() - t0, out, None, None)
     if pool:
         pool.close()
     wall = time.time() - t0
@@ -169,7 +173,7 @@ def main(argv=None):
 
     with tempfile.TemporaryDirectory() as tmp:
         cpu, rows = time_analyze(Path(tmp))
-    _write(agg, args, wall, res_dir / "figures.json", cpu, rows, show=True)
+    _write(agg, args, wall, out, cpu, rows, show=True)
 
 
 def _aggregate(agg, results):
@@ -207,7 +211,8 @@ def _aggregate(agg, results):
 def _write(agg, args, wall, path, cpu, rows, show=False):
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
-        f"bench_figures: {args.reps} sessions per case and noise, {when}, wall {wall:.0f} s, "
+        f"bench_figures: {args.reps} sessions per case and noise (seeds {args.first_rep}–"
+        f"{args.first_rep + args.reps - 1}), {when}, wall {wall:.0f} s, "
         f"load {os.getloadavg()[0]:.1f}",
         "",
         "| case | noise (°) | sessions | figures ok (covered/withheld/flagged of all) | sessions with no miss "
