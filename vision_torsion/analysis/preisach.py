@@ -152,14 +152,6 @@ class PreisachFit:
         """Mask of the relays with ``α > β`` (the reversible ``α = β`` ones excluded)."""
         return self.alpha_nm > self.beta_nm + 1e-12
 
-    def predict_many(self, torque_nm) -> np.ndarray:
-        """Model angles (rad) along D torque paths at once: ``(D, n)`` in, ``(D, n)`` out.
-
-        Used to carry torque errors through the loop's physics: a wrong torque at a
-        reversal changes the loop's amplitude, and with it every angle after it.
-        """
-        return _predict_many(self, torque_nm)
-
     def predict(self, torque_nm) -> np.ndarray:
         """Model angles (rad) along a torque path that starts as the fitted one did."""
         tau = np.asarray(torque_nm, float).reshape(-1)
@@ -173,66 +165,6 @@ class PreisachFit:
             ]
         )
         return x @ coef
-
-
-def _bands(t: np.ndarray, levels: np.ndarray):
-    """The measured levels around each threshold: a relay switches linearly across them."""
-    lo = np.empty_like(t)
-    hi = np.empty_like(t)
-    for i, v in enumerate(t):
-        below, above = levels[levels < v - 1e-12], levels[levels > v + 1e-12]
-        if below.size and above.size:
-            lo[i], hi[i] = below[-1], above[0]
-        elif above.size:  # the lowest level itself
-            lo[i], hi[i] = v, above[0]
-        else:  # the highest level itself
-            lo[i], hi[i] = (below[-1] if below.size else v - 1.0), v
-    return lo, hi
-
-
-def _predict_many(fit: "PreisachFit", tau2d: np.ndarray) -> np.ndarray:
-    """Model angles (rad) along many torque paths at once, shape ``(D, n)``.
-
-    Relays switch **linearly across the measured levels around their threshold**
-    (a soft relay: at the levels it is the hard relay of the fit, between them the
-    loop is interpolated linearly as the data are), so a small torque change moves
-    the angle by the local compliance instead of not at all.
-    """
-    tau2d = np.atleast_2d(np.asarray(tau2d, float))
-    a, b = fit.alpha_nm, fit.beta_nm
-    self_mirror = np.isclose(a, -b)
-    # each relay and its mirror carry half the pair's weight (the whole, for a self-mirrored relay)
-    aa = np.concatenate([a, -b[~self_mirror]])
-    bb = np.concatenate([b, -a[~self_mirror]])
-    ww = np.concatenate(
-        [np.where(self_mirror, fit.weight_rad, 0.5 * fit.weight_rad), 0.5 * fit.weight_rad[~self_mirror]]
-    )
-    keep = ww > 0
-    aa, bb, ww = aa[keep], bb[keep], ww[keep]
-    levels = fit.levels_nm if fit.levels_nm is not None else np.unique(np.concatenate([aa, bb]))
-    a_lo, a_hi = _bands(aa, levels)
-    b_lo, b_hi = _bands(bb, levels)
-
-    # beyond the extreme levels the relays of the last interval keep going (linear extrapolation, as the
-    # loop's last segment), so a torque error at a tip moves the tip's angle by the local compliance
-    up_open = a_hi >= levels[-1] - 1e-12
-    down_open = b_lo <= levels[0] + 1e-12
-
-    def ramp(t, lo, hi, open_hi, open_lo):
-        r = 2.0 * (t - lo) / np.maximum(hi - lo, 1e-300) - 1.0
-        r = np.where(open_hi, r, np.minimum(r, 1.0))
-        return np.where(open_lo, r, np.maximum(r, -1.0))
-
-    top = tau2d.max(axis=1)[:, None]
-    state = ramp(top, a_lo, a_hi, up_open, down_open)
-    out = np.empty_like(tau2d)
-    for i in range(tau2d.shape[1]):
-        t = tau2d[:, i : i + 1]
-        lower = ramp(t, a_lo, a_hi, up_open, down_open)
-        upper = ramp(t, b_lo, b_hi, up_open, down_open)
-        state = np.minimum(np.maximum(state, lower), np.maximum(upper, lower))
-        out[:, i] = state @ ww
-    return fit.theta0_rad + fit.elastic_compliance_rad_per_nm * tau2d + out
 
 
 def preisach_response(
