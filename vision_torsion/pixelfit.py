@@ -560,7 +560,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     convergence rule as :func:`fit_disc`, with every marker's step taken in one set
     of array operations (a photograph of a dot grid has hundreds of small markers,
     where per-marker calls cost more than their arithmetic). A marker whose ring
-    holds an occluder to cut is fitted by :func:`fit_disc` itself.
+    holds an occluder to cut goes on from that first examination in fit_disc's own
+    loop (:func:`_fit_from`), one marker at a time: the result is fit_disc's to
+    rounding either way.
 
     Parameters
     ----------
