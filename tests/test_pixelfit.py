@@ -140,7 +140,7 @@ def test_robust_sigma_is_unbiased_for_quantised_noise_and_ignores_an_occluder():
     assert abs(robust_sigma(occluded) / 2.0 - 1) < 0.05
 
 
-def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene):
+def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypatch):
     """fit_discs (vectorised across markers) gives what fit_disc gives each marker,
     to rounding: on twelve markers of a ring, one of them crossed by a wire (the
     occluder cut, which fit_discs hands to fit_disc), plus a flat patch (a failure
@@ -180,6 +180,13 @@ def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene):
         np.testing.assert_allclose(many.edge_y_px, one.edge_y_px, atol=1e-9)
         assert many.residual_rms_px == pytest.approx(one.residual_rms_px, abs=1e-12)
     assert isinstance(together[-1], FitError)
+    # in groups of 5 (as hundreds are, in groups of 64): the same results
+    import vision_torsion.pixelfit as pixelfit
+
+    monkeypatch.setattr(pixelfit, "_BATCH", 5)
+    grouped = fit_discs(patches, starts, edge_width=1.2)
+    for a, b in zip(together, grouped):
+        assert str(a) == str(b) if isinstance(a, FitError) else (a.x_px, a.y_px) == (b.x_px, b.y_px)
     # the wired marker went through the occluder cut: fewer pixels than without the wire
     sx, sy, sr, b, f = starts[0]
     clean = fit_disc(plain.image, sx, sy, sr, edge_width=1.2, levels=(b, f))

@@ -89,6 +89,8 @@ _START_MARGIN_PX = 0.5
 #: rendered distractor scene).
 _MISFIT_EDGE_SHARE = 0.9
 _MISFIT_ARC = 0.25
+#: Markers fitted together by :func:`fit_discs` at most (more are fitted in groups).
+_BATCH = 64
 #: Centre step (px) that ends the fit. Levenberg-Marquardt converges about
 #: quadratically here, so what remains after such a step is far below it.
 _CONVERGED_PX = 1e-3
@@ -583,6 +585,15 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         saying why it failed.
     """
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 5)
+    if len(patches) > _BATCH:
+        # markers are independent rows: in groups whose arrays stay in the cache
+        # (315 dots of discorpy 05 at once: 0.26 s; 64 at a time: 0.16 s)
+        return [
+            fit
+            for k in range(0, len(patches), _BATCH)
+            for fit in fit_discs(patches[k : k + _BATCH], starts[k : k + _BATCH], edge_width=edge_width,
+                                 max_iter=max_iter)
+        ]
     out: list = [None] * len(patches)
     s = float(edge_width)
     rings, live = [], []
