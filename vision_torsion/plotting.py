@@ -24,6 +24,11 @@ from .fileio import atomic_write_bytes
 __all__ = ["png_bytes", "save_figure", "fixed_figure"]
 
 
+#: zlib level of the PNG files: 3 encodes a report figure in about two thirds of the default
+#: level 6's time for ~6 % more bytes (measured on the demo report's figures).
+PNG_COMPRESS_LEVEL = 3
+
+
 def png_bytes(fig: Figure, *, dpi: float | None = None) -> bytes:
     """Render `fig` to PNG bytes at `dpi` (dots per inch; the figure's own by default).
 
@@ -35,7 +40,8 @@ def png_bytes(fig: Figure, *, dpi: float | None = None) -> bytes:
     """
     FigureCanvasAgg(fig)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=dpi if dpi is not None else "figure")
+    fig.savefig(buffer, format="png", dpi=dpi if dpi is not None else "figure",
+                pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     return buffer.getvalue()
 
 

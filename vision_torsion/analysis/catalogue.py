@@ -208,14 +208,16 @@ class _BreakChi2:
         if any(b <= 0 for b in brk) or any(b2 <= b1 for b1, b2 in zip(brk, brk[1:])):
             return np.inf, None
         edges = np.array([0.0, *brk, np.inf])
+        lo, hi = edges[:-1], edges[1:]
         lv = self.levels
-        for lo, hi in zip(edges[:-1], edges[1:]):
-            # measured levels in [lo, hi] (as np.unique of the samples there)
-            if np.searchsorted(lv, hi + 1e-12, side="right") - np.searchsorted(lv, lo - 1e-12, side="left") < 2:
-                return np.inf, None
-        a = np.column_stack([self.offsets, _columns(self.x, brk) * self.sign[:, None]])
+        # measured levels in each [lo, hi] (as np.unique of the samples there), all segments at once
+        if np.any(np.searchsorted(lv, hi + 1e-12, side="right") - np.searchsorted(lv, lo - 1e-12, side="left") < 2):
+            return np.inf, None
+        # the columns of _columns(), all at once: the same elementwise clip
+        cols = np.clip(self.x[:, None] - lo[None, :], 0.0, (hi - lo)[None, :]) * self.sign[:, None]
+        a = np.concatenate([self.offsets, cols], axis=1)
         th, w = self.th, self.w0
-        seg = np.searchsorted(np.asarray(brk), self.x, side="right")
+        seg = np.searchsorted(edges[1:-1], self.x, side="right")
         for _ in range(2):
             sw = np.sqrt(w)
             coef = np.linalg.lstsq(a * sw[:, None], th * sw, rcond=None)[0]
