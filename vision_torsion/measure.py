@@ -28,6 +28,7 @@ from .correction import load_correction
 from .errors import ImageReadError, OutputError, VisionTorsionError
 from .fileio import check_output_dir, write_csv
 from .images import IMAGE_SUFFIXES
+from .measurements import output_folder
 from .pair import measure_pair
 from .quality import SUSPECT, residual_flags
 from .settings import MeasureSettings
@@ -199,7 +200,7 @@ def measure_folder(
     settings = settings or MeasureSettings()
     correction = load_correction(settings.correction)
     files = list_images(image_dir)
-    out = Path(out_dir) if out_dir is not None else Path(image_dir) / "results"
+    out = output_folder(image_dir, out_dir)
     if out.resolve() == Path(image_dir).resolve():
         raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
                           "subfolder such as results/")

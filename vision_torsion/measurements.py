@@ -44,6 +44,8 @@ __all__ = [
     "MEASUREMENT_COLUMNS",
     "NUMERIC_COLUMNS",
     "MEASUREMENTS_NAME",
+    "RESULTS_DIRNAME",
+    "output_folder",
     "TorqueRig",
     "pieces_per_pan",
     "read_measurements",
@@ -86,6 +88,13 @@ _NON_NEGATIVE = ("mass_kg", "torque_std_nm", "torque_common_std_nm", "angle_std_
 _TEXT_COLUMNS = ("image", "phase", "status", "message", "torque_source")
 #: File name of the table ``process`` writes.
 MEASUREMENTS_NAME = "measurements.csv"
+#: The folder a command writes into, inside the folder it reads, when not given -o.
+RESULTS_DIRNAME = "results"
+
+
+def output_folder(folder, out_dir=None) -> Path:
+    """`out_dir`, or the default output folder ``folder/results`` when it is None."""
+    return Path(out_dir) if out_dir is not None else Path(folder) / RESULTS_DIRNAME
 #: Name of the index of a table :func:`read_measurements` returns (CSV line numbers).
 _LINE = "line"
 #: At most this many problems are listed in one error (then "and N more").

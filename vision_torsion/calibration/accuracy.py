@@ -61,6 +61,7 @@ from ..correction import load_correction
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
 from ..fileio import check_output_dir, output_set, write_csv, write_json
 from ..measure import measure_sequence
+from ..measurements import output_folder
 from ..pair import measure_pair
 from ..settings import MeasureSettings
 from ..textfiles import csv_delimiter, decode_utf8, read_toml
@@ -358,7 +359,7 @@ def check_accuracy(
     settings = settings or spec.settings or MeasureSettings()
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)
-    out = Path(out_dir) if out_dir is not None else folder / "results"
+    out = output_folder(folder, out_dir)
     if out.resolve() == folder.resolve():
         raise OutputError(
             f"{out}: the output folder cannot be the image folder itself (results "

@@ -16,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 
 from ..fileio import atomic_write_text, write_csv
+from ..measurements import output_folder
 from . import ReportFiles
 
 __all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
@@ -215,7 +216,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
     from .analyze import analyze_table
 
     session = load_session(session_dir, missing="pending")
-    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    out = output_folder(session.folder, out_dir)
     result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
     measurements = read_measurements(result.measurements_path)  # indexed by CSV line
     waiting = measurements[measurements["status"] == "pending"]

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SessionError
+from ..measurements import output_folder
 from .binding import Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
@@ -218,7 +219,7 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     for line in missing:
         if line not in lines:
             raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
-    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    out = output_folder(session.folder, out_dir)
     pairs = {}
     with ShotMeasurer(session, out) as measurer:
         for f in files:

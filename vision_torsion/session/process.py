@@ -46,7 +46,7 @@ from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_records_csv
-from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS
+from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
@@ -410,7 +410,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
-    out = Path(out_dir) if out_dir is not None else session.folder / "results"
+    out = output_folder(session.folder, out_dir)
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
@@ -447,7 +447,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     waiting = [r for r in records if r["status"] == "pending"]
     failures = tuple((r["image"], r["message"]) for r in failed)
     # report figures in the default output folder are not shots, whichever -o this run has
-    unlisted = tuple(unlisted_images(session, exclude=[out, session.folder / "results"]))
+    unlisted = tuple(unlisted_images(session, exclude=[out, output_folder(session.folder)]))
     n_ok = len(records) - len(failed) - len(waiting)
     logger.info("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
                 path, len(records), n_ok, len(failed), len(waiting),

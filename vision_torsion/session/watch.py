@@ -52,6 +52,7 @@ from ..errors import SessionError
 from ..fileio import atomic_write_text
 from ..images import IMAGE_SUFFIXES
 from ..measure import natural_key
+from ..measurements import output_folder
 from .bind import row_text
 from .binding import Binding, load_binding, write_binding
 from .live import LIVE_PAGE_NAME, LivePoint, live_page
@@ -147,7 +148,7 @@ class Watcher:
         folder = self.session.folder
         self.camera_mode = camera_dir is not None
         self.camera = Path(camera_dir).absolute() if camera_dir is not None else folder / "images"
-        self.out = Path(out_dir) if out_dir is not None else folder / "results"
+        self.out = output_folder(folder, out_dir)
         if self.camera.resolve() == self.out.resolve():
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
         self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
