@@ -222,17 +222,6 @@ def write_session_folder(
 
     out = Path(out_dir)
     suffix = ".jpg" if scene.noise.jpeg_quality else ".png"
-    plan_args = dict(
-        max_torque_nm=spec.max_torque_nm,
-        step_mass_kg=spec.step_mass_kg,
-        arm_radius_m=spec.arm_radius_m,
-        orientations_deg=spec.orientations_deg,
-        cycles=spec.cycles,
-        gravity_m_per_s2=spec.gravity_m_per_s2,
-        mass_tolerance_kg=spec.mass_tolerance_kg,
-        polarity=scene.markers.polarity,
-        angle_sign=spec.angle_sign,
-    )
     # the rows the plan will hold, so the rotations are checked against the frame
     # before anything is written
     config = config_from_dict(
@@ -258,8 +247,17 @@ def write_session_folder(
         check_markers_in_frame(scene, float(a), where=scene.name)
     # planned by its whole number of steps (the spec's maximum snapped down, as documented):
     # planning by max_torque_nm would warn a demo user that 0.36 N·m is not whole steps
-    plan_args.pop("max_torque_nm")
-    plan = plan_session(out, image_suffix=suffix, overwrite=overwrite, steps=max(n, 1), **plan_args)
+    plan = plan_session(
+        out, image_suffix=suffix, overwrite=overwrite, steps=max(n, 1),
+        step_mass_kg=spec.step_mass_kg,
+        arm_radius_m=spec.arm_radius_m,
+        orientations_deg=spec.orientations_deg,
+        cycles=spec.cycles,
+        gravity_m_per_s2=spec.gravity_m_per_s2,
+        mass_tolerance_kg=spec.mass_tolerance_kg,
+        polarity=scene.markers.polarity,
+        angle_sign=spec.angle_sign,
+    )
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
     rows = []
