@@ -749,29 +749,13 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
     st_local = np.sqrt(np.sum(src_local**2, axis=1))
     names = (("k1", "nm_per_rad"), ("k2", "nm_per_rad"), ("k3", "nm_per_rad"))
     breaks = settings.get("catalogue_breaks_nm")
+    data = dict(branch=branch, angle_std_rad=sa, torque_std_nm=st_local, torque_sources=src, gate_sources=src_local)
     try:
         if breaks is not None:
-            res = fit_fixed_breaks(
-                t,
-                y,
-                branch=branch,
-                breaks_nm=breaks,
-                angle_std_rad=sa,
-                torque_std_nm=st_local,
-                torque_sources=src,
-                gate_sources=src_local,
-            )
+            res = fit_fixed_breaks(t, y, breaks_nm=breaks, **data)
             method = "linear least squares, catalogue T1/T2 fixed"
         elif settings["fit_breaks"]:
-            res = fit_catalogue_breaks(
-                t,
-                y,
-                branch=branch,
-                angle_std_rad=sa,
-                torque_std_nm=st_local,
-                torque_sources=src,
-                gate_sources=src_local,
-            )
+            res = fit_catalogue_breaks(t, y, **data)
             method = "breaks fitted (uncertainty with the breaks held)"
         else:
             for n, u in names:
