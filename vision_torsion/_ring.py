@@ -170,9 +170,9 @@ def grow_cut(keep, ring_idx, shape):
     `keep` flags the ring pixels ``patch.values[ring_idx]`` of a patch of `shape`
     (rows, columns) that survived the cut; returns the flags with the cut grown."""
     cut = np.zeros(shape, np.uint8)
-    cut.flat[ring_idx[~keep]] = 1
+    cut.reshape(-1)[ring_idx[~keep]] = 1  # a view: .flat indexing is several times slower
     cut = cv2.dilate(cut, np.ones((5, 5), np.uint8))
-    return keep & (cut.flat[ring_idx] == 0)
+    return keep & (cut.reshape(-1)[ring_idx] == 0)
 
 
 def robust_sigma(resid) -> float:
@@ -351,8 +351,10 @@ def lost_sectors(cut_sectors, n_sec, *, most=0.25):
     outlier handling still applies.
     """
     lost = np.bincount(cut_sectors, minlength=n_sec) > 0
-    if lost.mean() > most:
+    n_lost = np.count_nonzero(lost)
+    if n_lost / n_sec > most:
         lost[:] = False
-    elif lost.any():
-        lost = np.convolve(np.concatenate([lost[-2:], lost, lost[:2]]).astype(int), np.ones(5, int), "valid") > 0
+    elif n_lost:
+        # each lost sector and two neighbours each side, round the circle
+        lost[(np.flatnonzero(lost)[:, None] + np.arange(-2, 3)) % n_sec] = True
     return lost
