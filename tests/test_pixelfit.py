@@ -143,7 +143,7 @@ def test_robust_sigma_is_unbiased_for_quantised_noise_and_ignores_an_occluder():
 def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypatch):
     """fit_discs (vectorised across markers) gives what fit_disc gives each marker,
     to rounding: on twelve markers of a ring, one of them crossed by a wire (the
-    occluder cut, which fit_discs hands to fit_disc), plus a flat patch (a failure
+    occluder cut, examined again in its row as fit_disc examines it), plus a flat patch (a failure
     with fit_disc's reason)."""
     from vision_torsion.pixelfit import fit_discs, patch_extent
 

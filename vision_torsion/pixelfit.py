@@ -259,20 +259,22 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
         return None
     if keep is None:
         return None
-    sector, n_sec = _sectors(px.xs, px.ys, p[0], p[1], p[2])
-    cut_edge = ~keep & edge_zone
+    # sectors of the edge zone's pixels only: the rest of the ring has none
+    zone = np.flatnonzero(edge_zone)
+    sector, n_sec = _sectors(px.xs[zone], px.ys[zone], p[0], p[1], p[2])
+    cut_edge = ~keep[zone]
+    # distinct sectors counted with bincount: np.unique imports numpy.ma (0.1-0.2 s) on first use
     if (
         np.count_nonzero(cut_edge) >= _MISFIT_EDGE_SHARE * np.count_nonzero(~keep)
-        and np.unique(sector[cut_edge]).size > _MISFIT_ARC * n_sec
+        and np.count_nonzero(np.bincount(sector[cut_edge], minlength=n_sec)) > _MISFIT_ARC * n_sec
     ):
         # the edge's own misfit along much of its length, not an occluder: keep all
         return None
     # the cut was made against a settled fit, so even a wire lying along the edge
     # for 90° of arc (~40 % of the sectors with their neighbours) is occlusion
     lost = lost_sectors(sector[cut_edge], n_sec, most=0.5)
-    keep = keep & ~(lost[sector] & edge_zone)
-    # distinct sectors counted with bincount: np.unique imports numpy.ma (0.1-0.2 s) on first use
-    if np.count_nonzero(np.bincount(sector[keep & edge_zone], minlength=n_sec)) < max(16, n_sec // 2):
+    keep[zone[lost[sector]]] = False  # keep is cut_occluders' own array
+    if np.count_nonzero(np.bincount(sector[keep[zone]], minlength=n_sec)) < max(16, n_sec // 2):
         # a cut grown by 2 px each side takes much of a small marker's edge: on a
         # 3-5 px disc (16-31 sectors) that is JPEG ringing or pixelation, not an
         # occluder to cut (the diagnostics need 12 sectors with edge pixels)
@@ -375,7 +377,7 @@ def _fit_from(
     parameters `p`; the model's residuals, Jacobian and u there on the ring's
     pixels in use (`keep`: flags of those of `ring`, None: all); the damping `lam`;
     the outlier examinations made (`cuts`) and the iterations used (`done`).
-    (:func:`fit_discs` hands a marker on here after its first examination.)"""
+    (:func:`fit_disc` starts it from its first evaluation.)"""
     px = ring if keep is None else ring.subset(keep)
     ssr = float(resid @ resid)
     final = False  # the last examination changed nothing
@@ -467,13 +469,25 @@ class _Batch:
     def __init__(self, rings: list[_Pixels], starts: np.ndarray):
         self.n = np.array([r.xs.size for r in rings])
         m, width = len(rings), int(self.n.max())
+        self.pad = starts[:, :2] + (1e4, 0.0)  # where a row's padding lies
         self.mask = np.arange(width) < self.n[:, None]
-        self.xs = np.repeat(starts[:, :1] + 1e4, width, axis=1)
-        self.ys = np.repeat(starts[:, 1:2], width, axis=1)
+        self.xs = np.repeat(self.pad[:, :1], width, axis=1)
+        self.ys = np.repeat(self.pad[:, 1:2], width, axis=1)
         self.vals, self.nx, self.ny = (np.zeros((m, width)) for _ in range(3))
         for k, ring in enumerate(rings):
             for name in ("xs", "ys", "vals", "nx", "ny"):
                 getattr(self, name)[k, : self.n[k]] = getattr(ring, name)
+
+    def set_row(self, k, ring: _Pixels):
+        """Row `k` holds `ring`'s pixels (no more than it had: a subset after an
+        occluder cut, or its whole ring again), padded as before."""
+        n = ring.xs.size
+        self.n[k] = n
+        self.mask[k] = np.arange(self.mask.shape[1]) < n
+        for name in ("xs", "ys", "vals", "nx", "ny"):
+            getattr(self, name)[k, :n] = getattr(ring, name)
+        self.xs[k, n:], self.ys[k, n:] = self.pad[k]
+        self.vals[k, n:] = self.nx[k, n:] = self.ny[k, n:] = 0.0
 
     def rows(self, index):
         out = object.__new__(_Batch)
@@ -562,9 +576,10 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     convergence rule as :func:`fit_disc`, with every marker's step taken in one set
     of array operations (a photograph of a dot grid has hundreds of small markers,
     where per-marker calls cost more than their arithmetic). A marker whose ring
-    holds an occluder to cut goes on from that first examination in fit_disc's own
-    loop (:func:`_fit_from`), one marker at a time: the result is fit_disc's to
-    rounding either way.
+    holds an occluder to cut stays in the rows: its row then holds the pixels kept
+    (padded like the rest), and its whole ring is examined again as fit_disc's is,
+    each examination (the cut itself) made for that marker alone. The result is
+    fit_disc's to rounding.
 
     Parameters
     ----------
@@ -616,11 +631,41 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     lam = np.full(m, 1e-3)
     final = np.zeros(m, bool)
     active = np.ones(m, bool)
-    single = np.zeros(m, bool)  # an occluder to cut: finished by fit_disc's loop
     failed: dict[int, FitError] = {}
     diag = np.arange(8)
-    resume: dict[int, tuple] = {}  # occluders to cut: fit_disc's loop from the examination
-    for it in range(max_iter):
+    cuts = np.zeros(m, np.int64)  # examinations for an occluder made (fit_disc's `cuts`)
+    keeps: dict[int, np.ndarray] = {}  # rows with pixels cut: flags of the ring's pixels kept
+
+    def examine(k) -> bool:
+        """fit_disc's examination of row `k`'s whole ring for an occluder; its row
+        then holds the pixels kept. True when they changed and the fit goes on."""
+        keep, n = keeps.get(k), px.n[k]
+        full = (resid[k, :n], Jm[k, :, :n], u[k, :n]) if keep is None else _evaluate(P[k], rings[k])
+        new_keep = _cut_outliers(P[k], rings[k], patches[live[k]], *full)
+        cuts[k] += 1
+        if (
+            cuts[k] == 3
+            or (keep is None and new_keep is None)
+            or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
+        ):
+            final[k] = True
+        if keep is None and new_keep is None:
+            return False
+        if new_keep is None:
+            keeps.pop(k)
+            ring, (r_k, J_k, u_k) = rings[k], full
+        else:
+            keeps[k] = new_keep
+            ring, r_k, J_k, u_k = rings[k].subset(new_keep), full[0][new_keep], full[1][:, new_keep], full[2][new_keep]
+        n = r_k.size
+        px.set_row(k, ring)
+        resid[k, :n], resid[k, n:] = r_k, 0.0
+        Jm[k, :, :n], Jm[k, :, n:] = J_k, 0.0
+        u[k, :n], u[k, n:] = u_k, np.inf
+        ssr[k] = r_k @ r_k
+        A[k], b[k] = J_k @ J_k.T, J_k @ r_k
+        return not final[k]
+    for _ in range(max_iter):
         act = np.flatnonzero(active)
         if not act.size:
             break
@@ -668,28 +713,26 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
             A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
         lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
-        settled = acc[~final[acc] & (moved < _SETTLED_PX)]
-        if settled.size:
-            # the first examination for an occluder (fit_disc's): nothing to cut
-            # makes the fit final, anything to cut goes to fit_disc. Most rings
-            # have no pixel beyond 4.5 robust σ: that is settled for all at once.
-            sig = robust_sigma_rows(resid[settled], px.n[settled])
-            clean = (np.abs(resid[settled]) < 4.5 * sig[:, None]).all(axis=1)
-            final[settled[clean]] = True
-            for k in settled[~clean]:
-                n = px.n[k]
-                keep = _cut_outliers(P[k], rings[k], patches[live[k]], resid[k, :n], Jm[k, :, :n], u[k, :n])
-                if keep is None:
-                    final[k] = True
-                else:
-                    single[k] = True
-                    active[k] = False
-                    resume[k] = (keep, it + 1)
-        done = acc[final[acc] & (moved < _CONVERGED_PX)]
-        active[done] = False
+        # fit_disc's examinations for an occluder: first once the centre has
+        # settled, then once it has converged after each change of the pixels used
+        due = acc[~final[acc] & (moved < np.where(cuts[acc] == 0, _SETTLED_PX, _CONVERGED_PX))]
+        going_on = np.zeros(m, bool)  # rows whose pixels changed at their examination
+        if due.size:
+            # Most rings have no pixel beyond 4.5 robust σ at their first examination:
+            # that is settled for all at once (nothing to cut makes the fit final).
+            first = due[cuts[due] == 0]
+            clean = np.zeros(m, bool)
+            if first.size:
+                sig = robust_sigma_rows(resid[first], px.n[first])
+                clean[first[(np.abs(resid[first]) < 4.5 * sig[:, None]).all(axis=1)]] = True
+            final[clean] = True
+            cuts[clean] = 1
+            for k in due[~clean[due]]:
+                going_on[k] = examine(k)
+        active[acc[final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
     for k in np.flatnonzero(active):
         failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
-    unfit = single.copy()
+    unfit = np.zeros(m, bool)
     unfit[list(failed)] = True
     good = np.flatnonzero(~unfit)
     sigma2 = ssr / np.maximum(px.n - 8, 1)
@@ -728,13 +771,4 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         )
     for k, exc in failed.items():
         out[live[k]] = exc
-    for k, (keep, done) in resume.items():
-        n = px.n[k]
-        try:
-            out[live[k]] = _fit_from(
-                P[k].copy(), rings[k], patches[live[k]], resid[k, :n][keep], Jm[k, :, :n][:, keep], u[k, :n][keep],
-                max_iter=max_iter, lam=float(lam[k]), keep=keep, cuts=1, done=done,
-            )
-        except FitError as exc:
-            out[live[k]] = exc
     return out
