@@ -53,3 +53,36 @@ def test_break_search_chi2_is_the_plain_weighted_fit():
         assert chi2(brk)[0] == pytest.approx(expected, rel=1e-12)
     assert chi2([0.2, 0.1])[0] == np.inf          # unordered breaks
     assert chi2([0.001, 0.002])[0] == np.inf      # a segment with fewer than two measured levels
+
+
+def _branches(seed, n_levels=12):
+    # three-segment loading branches with noise (the catalogue's model, breaks between levels)
+    rng = np.random.default_rng(seed)
+    x = np.arange(n_levels) * 0.03
+    t1, t2 = rng.uniform(0.05, 0.12), rng.uniform(0.18, 0.28)
+    k = rng.uniform(800.0, 1200.0), rng.uniform(1800.0, 2500.0), rng.uniform(3500.0, 4500.0)
+    h = np.minimum(x, t1) / k[0] + np.clip(x - t1, 0, t2 - t1) / k[1] + np.maximum(x - t2, 0) / k[2]
+    tau = np.concatenate([x, -x])
+    th = np.concatenate([h, -h]) + rng.normal(0.0, 2e-6, 2 * n_levels)
+    sign = np.repeat([1.0, -1.0], n_levels)
+    return catalogue._BreakChi2(tau, th, sign, np.full(tau.size, 2e-6), np.full(tau.size, 1e-3)), x
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_break_grid_search_picks_what_the_plain_loop_picks(seed):
+    # The plain loop (the previous code path): χ² of every placement by lstsq, the first
+    # least one kept. The stacked ranking must give the same placement and the same χ²
+    # to the last bit; its own values are within 1e-6 of the exact ones.
+    chi2, x = _branches(seed)
+    mids = 0.5 * (x[1:] + x[:-1])
+    for cands in ([[m] for m in mids[1:-1]],
+                  [[mids[i], mids[j]] for i in range(1, mids.size - 1) for j in range(i + 1, mids.size - 1)],
+                  [[0.001, 0.002], [0.2, 0.1], [mids[3], mids[7]]]):  # two invalid placements first
+        exact = np.array([chi2(c)[0] for c in cands])
+        best_k = int(np.argmin(exact))                   # argmin: the first of equal minima
+        assert catalogue._first_best(chi2, cands) == (exact[best_k], list(cands[best_k]))
+        approx = chi2.many(cands)
+        valid = np.isfinite(exact)
+        np.testing.assert_allclose(approx[valid], exact[valid], rtol=1e-6)
+        assert np.all(np.isinf(approx[~np.isfinite(exact)]))
+    assert catalogue._first_best(chi2, [[0.2, 0.1]]) == (np.inf, None)
