@@ -86,3 +86,58 @@ def test_break_grid_search_picks_what_the_plain_loop_picks(seed):
         np.testing.assert_allclose(approx[valid], exact[valid], rtol=1e-6)
         assert np.all(np.isinf(approx[~np.isfinite(exact)]))
     assert catalogue._first_best(chi2, [[0.2, 0.1]]) == (np.inf, None)
+
+
+def _phase(seed):
+    # a loading phase whose stiffness switches: x = torque taken since the start, y = angle (rad)
+    rng = np.random.default_rng(100 + seed)
+    x = np.arange(19) * 0.0196
+    ts, c1, c2 = rng.uniform(0.08, 0.25), 1.0 / rng.uniform(0.2, 0.5), 1.0 / rng.uniform(3.0, 6.0)
+    y = 0.01 + c1 * np.minimum(x, ts) + c2 * np.maximum(x - ts, 0.0) + rng.normal(0.0, 3e-4, x.size)
+    return x, y, 1.0 / rng.uniform(2e-4, 4e-4, x.size) ** 2
+
+
+def _hinge(x):
+    return lambda t: np.column_stack([np.ones_like(x), np.minimum(x, t), np.maximum(x - t, 0.0)])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_switch_grid_picks_what_the_plain_loop_picks(seed):
+    from vision_torsion.analysis.fitcheck import _least_midpoint
+    from vision_torsion.numerics import weighted_lstsq
+
+    x, y, w = _phase(seed)
+    cands = (0.5 * (x[1:] + x[:-1]))[1:-1]
+    sse = [weighted_lstsq(_hinge(x)(c), y, w)[1] for c in cands]
+    assert _least_midpoint(x, y, w, cands, _hinge(x)) == int(np.argmin(sse))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_switch_between_two_levels_is_the_least_squares_optimum(seed):
+    # Truth independent of the closed form: the weighted sum of squares scanned on 2001
+    # switch torques across the bracket, and the Nelder-Mead refinement the closed form
+    # replaced (numerics.fit_breakpoints to 1e-9 of the torque range). Every bracket of
+    # the phase is tried, so both an interior crossing and an optimum at an end occur.
+    from vision_torsion.analysis.fitcheck import _switch_in_bracket
+    from vision_torsion.numerics import fit_breakpoints, weighted_lstsq
+
+    x, y, w = _phase(seed)
+    design = _hinge(x)
+    levels = np.unique(x)
+    kinds = set()
+    for lo, hi in zip(levels[1:-2], levels[2:-1]):
+        ts = _switch_in_bracket(x, y, w, lo, hi, design)
+        assert lo <= ts <= hi
+        kinds.add("end" if ts in (lo, hi) else "interior")
+        got = weighted_lstsq(design(ts), y, w)[1]
+        scan = np.linspace(lo, hi, 2001)
+        a = np.stack([np.ones((scan.size, x.size)), np.minimum(x, scan[:, None]), np.maximum(x - scan[:, None], 0)], 2)
+        coef = np.linalg.solve(np.einsum("bnk,n,bnl->bkl", a, w, a), np.einsum("bnk,n,n->bk", a, w, y)[:, :, None])
+        sse = np.sum(w * (y - np.einsum("bnk,bk->bn", a, coef[:, :, 0])) ** 2, axis=1)
+        assert got <= sse.min() * (1 + 1e-9)
+        assert abs(ts - scan[np.argmin(sse)]) <= (hi - lo) / 2000
+        nm = fit_breakpoints(lambda t: design(t[0]), y, [[0.5 * (lo + hi)]], weights=w,
+                             feasible=lambda t: lo <= t[0] <= hi, xatol=levels[-1] * 1e-9, fatol_rel=1e-12)
+        assert got <= nm.sse * (1 + 1e-12)
+        assert ts == pytest.approx(nm.breakpoints[0], abs=levels[-1] * 1e-8)
+    assert kinds == {"end", "interior"}

@@ -1,5 +1,5 @@
-"""Numerical mechanics shared across the layers: the numerical Jacobian and the
-breakpoint (hinge) fit.
+"""Numerical mechanics shared across the layers: the numerical Jacobian, the
+breakpoint (hinge) fit, and a grid search that ranks cheaply and decides exactly.
 
 Both are used by the measurement core and by the analyses beside it, so they live at
 the bottom of the layers (numpy only; scipy is imported when a breakpoint fit runs,
@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["numeric_jacobian", "BreakpointFit", "fit_breakpoints"]
+__all__ = ["numeric_jacobian", "BreakpointFit", "fit_breakpoints", "weighted_lstsq", "first_least"]
 
 
 def numeric_jacobian(fun: Callable[[np.ndarray], np.ndarray], p, steps, *, f0=None) -> np.ndarray:
@@ -119,19 +119,14 @@ def fit_breakpoints(design: Callable[[np.ndarray], np.ndarray], y, starts, *, we
     from scipy.optimize import minimize  # here: measuring alone never needs scipy
 
     y = np.asarray(y, dtype=float)
-    w = np.ones_like(y) if weights is None else np.asarray(weights, dtype=float)
-    sw = np.sqrt(w)
 
     def solve(t):
-        a = design(t)
-        return a, np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+        return weighted_lstsq(design(t), y, weights)[0]
 
     def sse(t):
         if feasible is not None and not feasible(t):
             return np.inf
-        a, coef = solve(t)
-        r = y - a @ coef
-        return float(r @ r) if weights is None else float(np.sum(w * r * r))
+        return weighted_lstsq(design(t), y, weights)[1]
 
     best, best_t = np.inf, None
     for t in starts:
@@ -145,4 +140,71 @@ def fit_breakpoints(design: Callable[[np.ndarray], np.ndarray], y, starts, *, we
         options["maxiter"] = maxiter
     res = minimize(sse, best_t, method="Nelder-Mead", options=options)
     t, value = (np.asarray(res.x, dtype=float), float(res.fun)) if res.fun <= best else (best_t, best)
-    return BreakpointFit(breakpoints=t, coef=solve(t)[1], sse=value)
+    return BreakpointFit(breakpoints=t, coef=solve(t), sse=value)
+
+
+def weighted_lstsq(a, y, weights=None) -> tuple[np.ndarray, float]:
+    """Weighted linear least squares ``y ≈ a @ coef``: ``(coef, Σ wᵢ rᵢ²)``.
+
+    ``numpy.linalg.lstsq`` of the rows scaled by ``√w`` (the SVD: no normal equations).
+
+    Examples
+    --------
+    >>> coef, sse = weighted_lstsq(np.array([[1.0, 0.0], [1.0, 1.0], [1.0, 2.0]]), np.array([1.0, 3.0, 5.0]))
+    >>> np.round(coef, 12).tolist(), round(sse, 12)
+    ([1.0, 2.0], 0.0)
+    """
+    a = np.asarray(a, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if weights is None:
+        coef = np.linalg.lstsq(a, y, rcond=None)[0]
+        r = y - a @ coef
+        return coef, float(r @ r)
+    w = np.asarray(weights, dtype=float)
+    sw = np.sqrt(w)
+    coef = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)[0]
+    r = y - a @ coef
+    return coef, float(np.sum(w * r * r))
+
+
+def first_least(approx, exact: Callable[[int], float], *, rtol: float = 1e-6,
+                atol: float = 0.0) -> tuple[float, int | None]:
+    """``(value, index)`` of the first candidate with the least `exact` value, evaluating few of them.
+
+    A grid search whose candidates can be ranked by a cheap approximation (e.g. one
+    stacked normal-equation solve for all of them) but must be decided by the exact
+    criterion (e.g. an ``lstsq`` each): candidates are tried in increasing `approx`
+    order until the approximation exceeds the best exact value by more than its error
+    bound ``rtol·best + atol``. The answer is that of a plain loop over all candidates
+    keeping the first least exact value, provided every ``|approx − exact|`` is within
+    ``(rtol·exact + atol)/2``.
+
+    Parameters
+    ----------
+    approx : array_like (n,)
+        Approximate values (``inf``: invalid, tried last).
+    exact : callable
+        ``exact(i) -> float`` for candidate ``i`` (``inf`` when invalid).
+    rtol, atol : float
+        The approximation's error bound, relative and absolute.
+
+    Returns
+    -------
+    (float, int or None)
+        ``(inf, None)`` when no candidate has a finite exact value.
+
+    Examples
+    --------
+    >>> vals = [3.0, 1.0, 2.0, 1.0]
+    >>> first_least(np.array(vals) + 1e-9, lambda i: vals[i], rtol=1e-6)
+    (1.0, 1)
+    """
+    approx = np.asarray(approx, dtype=float)
+    best, best_i = np.inf, None
+    for i in np.argsort(approx, kind="stable"):
+        if approx[i] > best * (1.0 + rtol) + atol:  # best = inf: every candidate is tried
+            break
+        v = exact(int(i))
+        if v < best or (v == best and best_i is not None and i < best_i):
+            best, best_i = v, int(i)
+    return (best, best_i) if best_i is not None else (np.inf, None)

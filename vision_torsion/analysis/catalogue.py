@@ -28,6 +28,7 @@ import numpy as np
 from scipy import optimize, special
 
 from ..errors import AnalysisError
+from ..numerics import first_least
 from .fitcheck import lack_of_fit
 from .uncertainty import linearised_covariance, torque_source_jacobian
 
@@ -267,26 +268,16 @@ def _first_best(chi2: _BreakChi2, candidates) -> tuple[float, list | None]:
     """``(χ², breaks)`` of the first of `candidates` with the least exact χ², as a loop
     over them with :meth:`_BreakChi2.__call__` would find (``(inf, None)`` if none is valid).
 
-    The stacked :meth:`_BreakChi2.many` ranks them; only those whose approximate χ² is
-    within its rounding (``1e-6`` relative, ``1e-10`` of the data's weighted sum of
-    squares) of the best exact value so far are evaluated exactly, so the result is
-    the loop's, for a fraction of its ``lstsq`` calls.
+    The stacked :meth:`_BreakChi2.many` ranks them and only those within its rounding
+    (``1e-6`` relative, ``1e-10`` of the data's weighted sum of squares) of the best
+    exact value are fitted by ``lstsq`` (:func:`vision_torsion.numerics.first_least`).
     """
     cands = np.atleast_2d(np.asarray(candidates, float))
     if cands.shape[0] == 0:
         return np.inf, None
-    approx = chi2.many(cands)
     slack = 1e-10 * float(np.sum(chi2.w0 * chi2.th**2))
-    best, best_k = np.inf, None
-    for k in np.argsort(approx, kind="stable"):
-        if approx[k] > best * (1.0 + 1e-6) + slack:  # inf > inf is False: all invalid => all tried, as the loop
-            break
-        v = chi2(cands[k])[0]
-        if v < best or (v == best and best_k is not None and k < best_k):
-            best, best_k = v, k
-    if best_k is None:
-        return np.inf, None
-    return best, cands[best_k].tolist()
+    best, k = first_least(chi2.many(cands), lambda i: chi2(cands[i])[0], rtol=1e-6, atol=slack)
+    return (best, cands[k].tolist()) if k is not None else (np.inf, None)
 
 
 def fit_catalogue_breaks(

@@ -36,7 +36,7 @@ import numpy as np
 from scipy import special  # chdtrc is scipy.stats.chi2.sf, without importing scipy.stats
 
 from ..errors import AnalysisError
-from ..numerics import fit_breakpoints
+from ..numerics import first_least, weighted_lstsq
 from .uncertainty import least_squares_weights, linearised_covariance
 
 __all__ = [
@@ -284,9 +284,9 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
 
     ``θ = θ₀ + c₁·min(x, τ_s) + c₂·max(x − τ_s, 0)`` with ``x = |τ − τ_start|`` the
     torque taken since the phase's start; the switch ``τ_s`` is profiled over the
-    mid-points between torque levels and refined between the best one's two levels
-    (:func:`vision_torsion.numerics.fit_breakpoints`, Nelder–Mead), the compliances
-    being a linear least-squares fit for each switch (weights ``1/σ_eff²``).
+    mid-points between torque levels and then solved exactly between the best one's
+    two levels (:func:`_switch_in_bracket`), the compliances being a linear
+    least-squares fit for each switch (weights ``1/σ_eff²``).
 
     torque_sources : array_like (n, m), optional
         Loading matrix of correlated torque errors for the uncertainty (the weight
@@ -323,23 +323,17 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
 
     mids = 0.5 * (levels[1:] + levels[:-1])
     cands = mids[min_per_side - 1 : mids.size - (min_per_side - 1)]
-    grid = set(cands.tolist())
     w = least_squares_weights(sa)
     best = None
     for _ in range(2):  # effective variance: the weights depend on the local compliance
-        # the shared hinge fit (weighted least squares for each switch): first the mid-point with the
-        # least sum of squares (the grid alone: no refinement), then refined between its two torque levels
-        on_grid = fit_breakpoints(lambda t: design(t[0]), y, [[c] for c in cands], weights=w,
-                                  feasible=lambda t: float(t[0]) in grid, xatol=0.0, fatol_rel=0.0, maxiter=0)
-        if on_grid.breakpoints is None:
+        # first the mid-point with the least sum of squares, then the exact optimum between its two torque levels
+        i = _least_midpoint(x, y, w, cands, design)
+        if i is None:
             raise AnalysisError("switch fit: no finite sum of squares at any mid-point between torque levels")
-        i = int(np.searchsorted(cands, on_grid.breakpoints[0]))
         lo_b = levels[max(i + min_per_side - 1, 0)]
         hi_b = levels[min(i + min_per_side, levels.size - 1)]
-        fit = fit_breakpoints(lambda t: design(t[0]), y, [[cands[i]]], weights=w,
-                              feasible=lambda t: lo_b <= t[0] <= hi_b,
-                              xatol=max(levels[-1], 1e-12) * 1e-9, fatol_rel=1e-12)
-        ts, coef = float(fit.breakpoints[0]), fit.coef
+        ts = _switch_in_bracket(x, y, w, lo_b, hi_b, design)
+        coef = weighted_lstsq(design(ts), y, w)[0]
         comp = np.where(x < ts, coef[1], coef[2])
         best = (ts, coef)
         var = sa**2 + (comp * st) ** 2
@@ -381,3 +375,53 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     out["weights"] = w
     out["compliance"] = np.where(x < ts, coef[1], coef[2])
     return out
+
+
+def _least_midpoint(x, y, w, cands, design):
+    """Index of the first of the switch candidates `cands` with the least weighted sum
+    of squares of the hinge ``design`` (``lstsq`` each), or None if none is finite.
+
+    One stacked normal-equation solve ranks them all; only those within its rounding
+    of the best are fitted by ``lstsq`` (:func:`vision_torsion.numerics.first_least`):
+    the same candidate as a loop over them.
+    """
+    c = np.asarray(cands, float)[:, None]
+    a = np.stack([np.ones((c.size, x.size)), np.minimum(x[None, :], c), np.maximum(x[None, :] - c, 0.0)], axis=2)
+    aw = a * w[None, :, None]
+    with np.errstate(all="ignore"):
+        try:
+            coef = np.linalg.solve(np.einsum("bnk,bnl->bkl", aw, a), np.einsum("bnk,n->bk", aw, y)[:, :, None])
+            r = y[None, :] - np.einsum("bnk,bk->bn", a, coef[:, :, 0])
+            approx = np.sum(w[None, :] * r * r, axis=1)
+        except np.linalg.LinAlgError:  # a singular candidate: rank them all exactly
+            approx = np.zeros(c.size)
+    slack = 1e-10 * float(np.sum(w * y * y))
+    return first_least(np.where(np.isnan(approx), np.inf, approx), lambda j: weighted_lstsq(design(c[j, 0]), y, w)[1],
+                       rtol=1e-6, atol=slack)[1]
+
+
+def _switch_in_bracket(x, y, w, lo, hi, design) -> float:
+    """The switch torque in ``[lo, hi]`` (two adjacent torque levels, no sample between)
+    with the least weighted sum of squares, exactly.
+
+    With no sample between ``lo`` and ``hi``, a switch there splits the samples the
+    same way wherever it is, and the hinge is two straight lines (the samples at or
+    below ``lo``; those at or above ``hi``) that meet at the switch. Its sum of squares
+    is the two free lines' plus ``g(τ_s)²/v(τ_s)``, ``g`` the free lines' difference at
+    ``τ_s`` (linear) and ``v`` its variance factor (a positive quadratic); this has one
+    minimum (zero, where the free lines cross) and one maximum. So the optimum is the
+    crossing of the two free weighted lines when it lies in ``[lo, hi]``, else the better
+    end (Hudson 1966, *J. Amer. Statist. Assoc.* 61, 1097: fitting segmented curves
+    whose join points have to be estimated). This replaces a Nelder–Mead search to
+    ``1e-9`` of the torque range.
+    """
+    below, above = x <= lo, x >= hi
+    if np.unique(x[below]).size >= 2 and np.unique(x[above]).size >= 2:
+        lines = [weighted_lstsq(np.column_stack([np.ones(int(m.sum())), x[m]]), y[m], w[m])[0] for m in (below, above)]
+        (a1, b1), (a2, b2) = lines
+        if b1 != b2:
+            cross = (a2 - a1) / (b1 - b2)
+            if lo <= cross <= hi:
+                return float(cross)
+    sse_lo, sse_hi = (weighted_lstsq(design(t), y, w)[1] for t in (lo, hi))
+    return float(lo if sse_lo <= sse_hi else hi)
