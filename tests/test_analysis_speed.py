@@ -141,3 +141,33 @@ def test_switch_between_two_levels_is_the_least_squares_optimum(seed):
         assert got <= nm.sse * (1 + 1e-12)
         assert ts == pytest.approx(nm.breakpoints[0], abs=levels[-1] * 1e-8)
     assert kinds == {"end", "interior"}
+
+
+def _relays_loop(h):
+    # the previous code path, written out: a Python loop with a set of rounded tuple keys
+    a_list, b_list, a_mir, b_mir, seen = [], [], [], [], set()
+    for i, al in enumerate(h):
+        for be in h[: i + 1]:
+            key = tuple(sorted([(round(al, 12), round(be, 12)), (round(-be, 12), round(-al, 12))]))
+            if key in seen:
+                continue
+            seen.add(key)
+            a_list.append(al)
+            b_list.append(be)
+            a_mir.append(-be)
+            b_mir.append(-al)
+    return np.array(a_list), np.array(b_list), np.array(a_mir), np.array(b_mir)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_preisach_relay_pairs_are_the_loops(seed):
+    from vision_torsion.analysis import preisach
+
+    rng = np.random.default_rng(seed)
+    step = 2 * 0.02 * 9.81 * 0.05 * rng.uniform(0.5, 2.0)
+    levels = np.arange(-18, 19) * step                      # symmetric levels, as a loop's are
+    tau = np.concatenate([levels, levels[::-1] + rng.normal(0, 1e-15, levels.size)])  # mirror images within rounding
+    for h in (preisach._thresholds(tau, 64), preisach._thresholds(tau, 10), preisach._thresholds(tau[:30], 64),
+              np.array([-0.0, 0.0, 0.1, -0.1])):
+        for got, want in zip(preisach._relays(h), _relays_loop(h)):
+            np.testing.assert_array_equal(got, want)

@@ -89,20 +89,24 @@ def _thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
 
 
 def _relays(h: np.ndarray):
-    """Symmetric relay pairs from thresholds ``h``: lists of (α, β) and their mirrors."""
-    a_list, b_list, a_mir, b_mir = [], [], [], []
-    seen = set()
-    for i, al in enumerate(h):
-        for be in h[: i + 1]:  # be == al: a reversible element (nonlinear elasticity)
-            key = tuple(sorted([(round(al, 12), round(be, 12)), (round(-be, 12), round(-al, 12))]))
-            if key in seen:
-                continue
-            seen.add(key)
-            a_list.append(al)
-            b_list.append(be)
-            a_mir.append(-be)
-            b_mir.append(-al)
-    return np.array(a_list), np.array(b_list), np.array(a_mir), np.array(b_mir)
+    """Symmetric relay pairs from thresholds ``h``: arrays of (α, β) and their mirrors.
+
+    Every ``(α, β) = (h[i], h[j])`` with ``j ≤ i`` (``j = i``: a reversible element,
+    nonlinear elasticity), in that order, except a pair whose mirror ``(−β, −α)`` came
+    earlier (thresholds compared rounded to 1e-12 N·m: the mirror of a mid-point is a
+    mid-point up to rounding). All pairs at once: a pair's key is its (pair, mirror)
+    sorted, and the first of equal keys is kept.
+    """
+    h = np.asarray(h, float)
+    i, j = np.tril_indices(h.size)  # row-major: (0,0), (1,0), (1,1), (2,0), ...
+    r = np.round(h, 12) + 0.0  # + 0.0: -0.0 is 0.0, as in a tuple key
+    p = np.column_stack([r[i], r[j]])
+    q = np.column_stack([-r[j], -r[i]]) + 0.0
+    p_first = (p[:, 0] < q[:, 0]) | ((p[:, 0] == q[:, 0]) & (p[:, 1] <= q[:, 1]))
+    key = np.where(p_first[:, None], np.hstack([p, q]), np.hstack([q, p]))
+    keep = np.sort(np.unique(key, axis=0, return_index=True)[1])
+    i, j = i[keep], j[keep]
+    return h[i], h[j], -h[j], -h[i]
 
 
 def _design(tau, a, b, am, bm):
