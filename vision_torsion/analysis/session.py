@@ -45,7 +45,8 @@ Torque errors follow the weight pieces when the rig is known (``rig=...``,
 
 Expanded uncertainties are ``u95 = k·std`` with ``k = 2``, or Student's ``t_0.975``
 at the Welch–Satterthwaite degrees of freedom when a Monte Carlo part rests on few
-draws (ν = draws − 1; the figures' ``coverage_factor`` column). The Monte Carlo of
+draws (ν = draws − 1), or at the lack-of-fit test's dof when the uncertainty was
+inflated by ``√χ²_red`` (the figures' ``coverage_factor`` column). The Monte Carlo of
 the loop figures carries each torque error as the data would show it: the torque
 axis of the image and, at the loop's tips, the loop's amplitude
 (:func:`.uncertainty.tip_amplitude_response`); the phase secants take their torque
@@ -332,6 +333,11 @@ class _Collector:
         }
         if draws:
             k = _coverage_factor(std0, [(std_angle, draws - 1)] + [(u, draws - 1) for u in (parts or {}).values()])
+            row.update(coverage_factor=k, u95=k * std)
+        if infl > 1.0 and check.dof > 0:
+            # u·√χ²_red: the noise scale is estimated from the residuals, with the test's dof (a Type A
+            # estimate): Student's t at that dof (GUM G.3), never below 2
+            k = max(COVERAGE_FACTOR, float(special.stdtrit(check.dof, 0.975)))
             row.update(coverage_factor=k, u95=k * std)
         for k in SOURCE_KINDS:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))

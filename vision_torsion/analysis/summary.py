@@ -16,8 +16,17 @@ Notes
   propagated noise, adding both would count it twice). The torque parts (weights,
   g and r, friction) and the lack of fit are common to all loops and do not average
   down: the mean of each over loops. All in quadrature give ``u_c``.
-  The coverage factor is Student's ``t_0.975`` at the Welch–Satterthwaite degrees of
-  freedom ``ν = u_c⁴/(u_A⁴/(n−1))`` when Type A is the random part, never below 2.
+  When Type A is the random part, the coverage factor is that of its Student t at
+  ``n − 1`` degrees of freedom convolved with the normal rest
+  (:func:`.uncertainty.coverage_factor_t_normal`, JCGM 101), never below 2. The
+  Welch–Satterthwaite ``t`` at ``ν_eff = u_c⁴/(u_A⁴/(n−1))`` (GUM G.4) covered only
+  87–92 % of the benchmark's two-loop session means (``benchmarks/bench_figures.py``):
+  with ``n = 2`` it is known to under-cover when the other parts are about a third
+  of ``u_A``. ``dof`` reports ``ν_eff`` for information.
+- A **mean of one loop** is flagged: its uncertainty holds the measurement only, the
+  repeatability between loops cannot be observed from one loop (the benchmark's 2 %
+  cycle-to-cycle scatter put such means 20–500 u off the gear's value). A mean that
+  includes flagged loop figures is flagged too (``flag`` says which and why).
 - **Orientation effect**: a one-way ANOVA of the loop values grouped by orientation
   (:func:`orientation_anova`): the orientation effect is tested against the
   cycle-to-cycle scatter, never against the measurement noise alone (which leaves
@@ -38,7 +47,7 @@ import pandas as pd
 # ~0.5 s less to import (`analyze` must run in <= 3 s: benchmarks/bench_analyze.py)
 from scipy import special
 
-from .uncertainty import COVERAGE_FACTOR
+from .uncertainty import COVERAGE_FACTOR, coverage_factor_t_normal
 
 __all__ = ["ALPHA", "summarise_figures", "orientation_test", "orientation_anova", "mean_uncertainty", "BUDGET_LABELS"]
 
@@ -226,9 +235,11 @@ def mean_uncertainty(sub) -> dict:
         total += u * u
     std = math.sqrt(total)
     dof = math.inf
+    k = COVERAGE_FACTOR
     if n >= 2 and u_a >= u_prop and u_a > 0:
-        dof = std**4 / (u_a**4 / (n - 1))
-    k = max(COVERAGE_FACTOR, float(special.stdtrit(dof, 0.975))) if np.isfinite(dof) else COVERAGE_FACTOR
+        dof = std**4 / (u_a**4 / (n - 1))  # Welch–Satterthwaite, for information
+        u_rest = math.sqrt(max(total - u_a * u_a, 0.0))
+        k = max(COVERAGE_FACTOR, coverage_factor_t_normal(u_a, n - 1, u_rest))
     return {
         "mean": float(np.mean(v)) if n else None,
         "n": n,
@@ -239,6 +250,19 @@ def mean_uncertainty(sub) -> dict:
         "dof": dof if np.isfinite(dof) else None,
         "budget": budget,
     }
+
+
+def _mean_flag(entry: dict) -> str:
+    """Why a session mean cannot be taken at its u95 (module notes), or ""."""
+    why = []
+    if entry["n"] == 1 and entry.get("mean_u95") is not None:
+        why.append(
+            "mean of one loop: its uncertainty holds the measurement only, the repeatability between loops "
+            "is not observed (measure more loops or cycles)"
+        )
+    if entry["flagged"]:
+        why.append(f"{entry['flagged']} of its {entry['n']} loop values are flagged (see the issues)")
+    return "flagged: " + "; ".join(why) if why else ""
 
 
 def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
@@ -254,7 +278,9 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
     -------
     summary : dict
         ``{figure: {unit, n, mean, sd, min, max, range, mean_std, mean_u95,
-        coverage_factor, dof, budget, flagged, orientation_test}}`` over finite values.
+        coverage_factor, dof, budget, flagged, withheld, flag, orientation_test}}`` over
+        finite values (``flagged``: how many loop values are flagged; ``flag``: why the
+        mean itself is flagged, or "").
     per_orientation : pandas.DataFrame
         ``orientation_deg, figure, unit, n_cycles, mean, sd, std, std_angle,
         std_torque, u95`` (``std``: 1σ of the orientation mean, same rules).
@@ -287,6 +313,7 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
             entry.update(mean_std=None, mean_u95=None, coverage_factor=None, dof=None, budget=None)
         entry["flagged"] = int(np.sum(good["flag"].astype(str) != "")) if "flag" in good else 0
         entry["withheld"] = int(rows_all.size - idx.size)
+        entry["flag"] = _mean_flag(entry)
         groups = []
         orient = orient_all[idx]
         for o in np.unique(orient[np.isfinite(orient)]):

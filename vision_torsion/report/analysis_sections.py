@@ -47,11 +47,13 @@ def _g2(v, scale):
 
 
 def budget_section(analysis):
-    rows = []
+    rows, flags = [], []
     for fig, label, unit, scale in HEADLINE_FIGURES:
         s = analysis.summary.get(fig)
         if not s or not s.get("n") or s.get("budget") is None or s.get("mean_std") is None:
             continue
+        if s.get("flag"):
+            flags.append(f"<li>{html.escape(label)}: {html.escape(s['flag'])}</li>")
         b = s["budget"]
         row = {"figure": label, "unit": unit, "mean ± u": fmt_value(s["mean"] * scale, s["mean_std"] * scale)}
         for key, name in _PARTS:
@@ -68,8 +70,11 @@ def budget_section(analysis):
         '<p class="muted">Standard uncertainty of each session mean and its parts (1σ, in the unit shown). '
         "Repeatability is the observed scatter between loops (sd/√n); the propagated angle noise is inside it, "
         "the larger of the two is used. Weights, g and r, friction and lack of fit are common to all loops and "
-        "do not average down. U95 = k·u with k from Student's t at the effective degrees of freedom.</p>"
+        "do not average down. U95 = k·u with k from the repeatability's Student t (n − 1 degrees of freedom) "
+        "combined with the other parts (JCGM 101), at least 2.</p>"
     )
+    if flags:
+        text += '<p class="note">Session means shown with a flag:</p><ul class="note">' + "".join(flags) + "</ul>"
     if any(s.get("output_side") for s in analysis.summary.values()):
         from ..analysis.session import OUTPUT_SIDE_CAVEAT
 
