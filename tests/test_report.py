@@ -29,7 +29,7 @@ def test_files_written(report):
     _, _, files = report
     for p in (files.summary_json, files.stiffness_table_csv, files.report_html, *files.figures):
         assert p.exists() and p.stat().st_size > 0
-    assert {p.name for p in files.figures} >= {"loops_overlay.png", "fit_residuals.png"}
+    assert {p.name for p in files.figures} >= {"loops_overlay.svg", "fit_residuals.svg"}
     assert not list(files.out_dir.glob(".*.tmp"))  # atomic writes leave no temporaries
 
 
@@ -63,7 +63,7 @@ def test_html_self_contained_and_complete(report):
     page = files.report_html.read_text()
     assert not re.search(r"(src|href)=\"(https?:)?//", page)  # nothing fetched from the network
     assert "<script" not in page
-    assert page.count("data:image/png;base64,") == 4  # overlay, fit residuals, stiffness, orientation
+    assert page.count("data:image/svg+xml;base64,") == 4  # overlay, fit residuals, stiffness, orientation
     for text in ("Test conditions", "Failed images", "unreadable file", "marker not found: 1 of 2 markers",
                  "Figures withheld or flagged, and why", "phase(s) positive_loading missing", "id='extra'",
                  "Stiffness per phase and orientation"):

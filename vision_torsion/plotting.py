@@ -1,4 +1,4 @@
-"""Figures to PNG: the one way a matplotlib figure becomes PNG bytes or a file.
+"""Figures to PNG or SVG: the one way a matplotlib figure becomes image bytes or a file.
 
 Figures are :class:`matplotlib.figure.Figure` objects drawn by the Agg canvas, never
 ``pyplot``: no global backend or figure registry is touched (safe in threads, no
@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import io
 
+import matplotlib as mpl
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .fileio import atomic_write_bytes
 
-__all__ = ["png_bytes", "save_figure", "fixed_figure"]
+__all__ = ["png_bytes", "svg_bytes", "save_figure", "fixed_figure"]
 
 
 #: zlib level of the PNG files: 3 encodes a report figure in about two thirds of the default
@@ -42,6 +43,29 @@ def png_bytes(fig: Figure, *, dpi: float | None = None) -> bytes:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=dpi if dpi is not None else "figure",
                 pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
+    return buffer.getvalue()
+
+
+def svg_bytes(fig: Figure) -> bytes:
+    """Render `fig` to SVG bytes (vector: sharp at any size and in print).
+
+    Text is drawn as glyph outlines (``svg.fonttype = "path"``), so the figure looks
+    the same whatever fonts the viewer has, and the file is reproducible: no date in
+    its metadata, a fixed salt for its element ids. On the report's figures it takes
+    about four fifths of the PNG's time (no glyph rasterising, no compression).
+
+    Examples
+    --------
+    >>> fig = Figure(figsize=(1, 1))
+    >>> b"<svg" in svg_bytes(fig)
+    True
+    """
+    from matplotlib.backends.backend_svg import FigureCanvasSVG
+
+    FigureCanvasSVG(fig)
+    buffer = io.BytesIO()
+    with mpl.rc_context({"svg.fonttype": "path", "svg.hashsalt": "vision-torsion"}):
+        fig.savefig(buffer, format="svg", metadata={"Date": None})
     return buffer.getvalue()
 
 

@@ -49,7 +49,7 @@ def _failures(analysis, failures) -> pd.DataFrame:
 
 def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failures=None, extra_sections=None,
                  title="Torsional stiffness and hysteresis report", metadata=None) -> ReportFiles:
-    """Write summary.json, stiffness_table.csv, figures/*.png and report.html.
+    """Write summary.json, stiffness_table.csv, figures/*.svg and report.html.
 
     Parameters
     ----------
@@ -92,13 +92,13 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     stiff = stiffness_table(analysis)
     metrics = metrics_table(analysis)
 
-    pngs = {
-        "loops_overlay.png": _fig.safe_png(_fig.loops_overlay, analysis),
-        "fit_residuals.png": _fig.safe_png(_fig.fit_residuals, analysis),
-        "phase_stiffness.png": _fig.safe_png(_fig.phase_stiffness_chart, analysis),
-        "orientation_effect.png": _fig.safe_png(_fig.orientation_chart, analysis),
+    svgs = {
+        "loops_overlay.svg": _fig.safe_svg(_fig.loops_overlay, analysis),
+        "fit_residuals.svg": _fig.safe_svg(_fig.fit_residuals, analysis),
+        "phase_stiffness.svg": _fig.safe_svg(_fig.phase_stiffness_chart, analysis),
+        "orientation_effect.svg": _fig.safe_svg(_fig.orientation_chart, analysis),
     }
-    fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in pngs.items())
+    fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in svgs.items())
 
     summary = analysis.to_dict()
     summary["conditions"] = dict(conditions)
@@ -112,8 +112,8 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     table_path = write_csv(out / "stiffness_table.csv", stiff)
     page = render_html(
         title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
-        figures={"overlay": pngs["loops_overlay.png"], "stiffness": pngs["phase_stiffness.png"],
-                 "orientation": pngs["orientation_effect.png"], "residuals": pngs["fit_residuals.png"]},
+        figures={"overlay": svgs["loops_overlay.svg"], "stiffness": svgs["phase_stiffness.svg"],
+                 "orientation": svgs["orientation_effect.svg"], "residuals": svgs["fit_residuals.svg"]},
         failed=failed, extra_sections=extra_sections or (), metadata=metadata,
     )
     html_path = atomic_write_text(out / "report.html", page)

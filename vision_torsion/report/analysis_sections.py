@@ -160,7 +160,7 @@ def checks_section(analysis):
 
 def preisach_section(analysis):
     from ..plotting import fixed_figure
-    from .figures import png_bytes
+    from .figures import svg_bytes
 
     fits = [(k, f["preisach"]) for k, f in sorted(analysis.fits.items()) if f.get("preisach") is not None]
     if not fits:
@@ -200,7 +200,7 @@ def preisach_section(analysis):
         f"0 < α < τ_c, −τ_c < β < 0. This loop: {html.escape(verdict)}; "
         f"{int(np.sum(m))} elements in use.</p>"
     )
-    return "Preisach model: element distribution", text + _img(png_bytes(fig), "Preisach element distribution")
+    return "Preisach model: element distribution", text + _img(svg_bytes(fig), "Preisach element distribution")
 
 
 def analysis_sections(analysis) -> list:

@@ -60,8 +60,9 @@ def fmt_value(value, std=None, digits=2) -> str:
     return f"{value:.{decimals}f} ± {std:.{decimals}f}"
 
 
-def _img(png: bytes, alt: str) -> str:
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+def _img(data: bytes, alt: str, *, mime: str = "image/svg+xml") -> str:
+    """A figure embedded in the page (the report's figures are SVG: :mod:`.figures`)."""
+    return f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{base64.b64encode(data).decode("ascii")}">'
 
 
 def _table(frame: pd.DataFrame, left=()) -> str:
@@ -220,7 +221,7 @@ def render_html(
         temperature, notes from session.toml's ``[test]``/``[gear]`` tables); None
         or blank values are left out. The software version and date are always shown.
     figures : dict
-        ``{"overlay": png, "residuals": png, "stiffness": png, "orientation": png}`` (PNG bytes).
+        ``{"overlay": svg, "residuals": svg, "stiffness": svg, "orientation": svg}`` (SVG bytes).
     failed : pandas.DataFrame
         ``image, orientation_deg, cycle, phase, step, message`` of failed images.
     extra_sections : sequence of (title, html)

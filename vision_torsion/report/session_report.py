@@ -118,7 +118,7 @@ def _stiffness_section(measurements: pd.DataFrame):
 
     from ..errors import VisionTorsionError
     from ..stiffness.report import stiffness_section
-    from .figures import png_bytes
+    from .figures import svg_bytes
     from .html import _img, _table
 
     try:
@@ -136,7 +136,7 @@ def _stiffness_section(measurements: pd.DataFrame):
         _table(_step_table(section.summary), left=("step",)),
     ]
     for name, fig in section.figures.items():
-        parts.append(f"<figure>{_img(png_bytes(fig), name.replace('_', ' '))}</figure>")
+        parts.append(f"<figure>{_img(svg_bytes(fig), name.replace('_', ' '))}</figure>")
     return _STIFFNESS_TITLE, "\n".join(parts), section.steps
 
 
