@@ -523,18 +523,19 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n) -> list:
     m = len(P)
     if not m:
         return []
-    band = (np.abs(u) < 3.0) & (np.arange(u.shape[1]) < n[:, None])
-    g_cos, g_sin, g = Jm[:, 0], Jm[:, 1], Jm[:, 2]
+    # the edge zone's pixels only (row by row, in order), as flat arrays
+    zr, zc = np.nonzero((np.abs(u) < 3.0) & (np.arange(u.shape[1]) < n[:, None]))
+    g_cos, g_sin, gb = Jm[zr, 0, zc], Jm[zr, 1, zc], Jm[zr, 2, zc]
     psi = np.arctan2(g_sin, g_cos)
-    psi[P[:, 5] < P[:, 4]] += np.pi  # a dark marker: g < 0 turns the direction round
+    psi[(P[:, 5] < P[:, 4])[zr]] += np.pi  # a dark marker: g < 0 turns the direction round
     n_sec = np.maximum(16, np.round(2 * np.pi * P[:, 2]).astype(np.int64))
-    sector = ((psi + np.pi) * (n_sec / (2 * np.pi))[:, None]).astype(np.int64) % n_sec[:, None]
+    per_row = n_sec[zr]
+    sector = ((psi + np.pi) * (per_row / (2 * np.pi))).astype(np.int64) % per_row
     first = np.concatenate([[0], np.cumsum(n_sec)[:-1]])
-    where = (first[:, None] + sector)[band]
+    where = first[zr] + sector
     total = int(n_sec.sum())
-    gb = g[band]
     den, num, cs, sn = (
-        np.bincount(where, w, minlength=total) for w in (gb * gb, gb * resid[band], gb * g_cos[band], gb * g_sin[band])
+        np.bincount(where, w, minlength=total) for w in (gb * gb, gb * resid[zr, zc], gb * g_cos, gb * g_sin)
     )
     # per row: its sectors as a padded row (M x the most sectors)
     col = np.arange(int(n_sec.max()))
