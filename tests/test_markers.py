@@ -1,5 +1,6 @@
 """find_markers on rendered images of known truth."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -245,3 +246,30 @@ def test_settings_and_explicit_options_are_not_mixed(small_scene):
     by_settings = find_markers(image, settings=MeasureSettings(fit="algebraic"))
     assert by_options.equals(by_settings)
     assert not by_options.equals(find_markers(image))  # the option really chose another fit
+
+
+@pytest.mark.parametrize("gap_px", [4.0, 9.0])
+def test_a_large_neighbour_does_not_take_a_marker_s_own_pixels(gap_px):
+    """A neighbour's pixels are left out to 1.15 times its coarse radius plus its
+    blurred edge: for a dark disc of radius 60 px that reached 5-10 px into the
+    marker beside it, whose fit lost its own edge on that side. A marker seen at an
+    angle (an ellipse, axis ratio 0.82, still judged round) then moved 0.2-0.8 px
+    (dots beside the dark surround of the card on a full UCL frame: 1-4.5 px).
+    Truth: the ellipse (semi-axes 9 and 7.4 px at 40°) at a sub-pixel centre,
+    `gap_px` from the large disc's edge, rendered 4x supersampled, blurred (σ 1.2
+    px), noise σ 2 DN on a contrast of 160 DN: its centre's σ is ~0.01 px, so 0.05 px."""
+    h, w, n = 260, 330, 4
+    big, r_big, a, b, tilt = (90.3, 130.2), 60.0, 9.0, 7.4, np.deg2rad(40.0)
+    small = (big[0] + r_big + gap_px + a, 130.63)
+    ys, xs = (np.mgrid[0 : h * n, 0 : w * n] + 0.5) / n - 0.5
+    u = (xs - small[0]) * np.cos(tilt) + (ys - small[1]) * np.sin(tilt)
+    v = (ys - small[1]) * np.cos(tilt) - (xs - small[0]) * np.sin(tilt)
+    dark = (np.hypot(xs - big[0], ys - big[1]) < r_big) | ((u / a) ** 2 + (v / b) ** 2 < 1.0)
+    img = 200.0 - 160.0 * dark.reshape(h, n, w, n).mean(axis=(1, 3))
+    img = cv2.GaussianBlur(img, (0, 0), 1.2) + np.random.default_rng(7).normal(0.0, 2.0, img.shape)
+    table = find_markers(img.astype(np.float32))
+    ok = table[table["status"] == "ok"]
+    assert len(ok) == 2, table
+    near = ok[np.hypot(ok["x_px"] - small[0], ok["y_px"] - small[1]) < 3.0]
+    assert len(near) == 1, table
+    assert (float(near["x_px"].iloc[0]), float(near["y_px"].iloc[0])) == pytest.approx(small, abs=0.05)
