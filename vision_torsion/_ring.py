@@ -103,8 +103,10 @@ class MarkerPatch:
 
     def coordinates(self, index) -> tuple[np.ndarray, np.ndarray]:
         """(x, y) in px of the pixels at flat positions `index`."""
-        row, col = np.divmod(index, self.shape[1])
-        return col + float(self.x0), row + float(self.y0)
+        # taken from the block's cached grid: an integer divmod of the indices
+        # cost four times as much (the same values: whole numbers in float64)
+        gx, gy = _grid(*self.shape)
+        return gx.take(index) + float(self.x0), gy.take(index) + float(self.y0)
 
     def squared_distance(self, cx, cy) -> np.ndarray:
         """Squared distance (px²) of every pixel centre from (cx, cy), flat like
@@ -310,13 +312,19 @@ def sector_edge_offsets(sector, n_sec, g, resid, g_cos, g_sin, *, drop=None):
 
 
 def fast_median(values) -> float:
-    """np.median of a 1-D array by one partition (np.median's checks and copies
-    cost more than the partition itself on a few thousand values)."""
+    """np.median of a 1-D array by one sort (np.median's checks and copies cost
+    more than the sort itself on a few thousand values).
+
+    A sort, not a partition: the grey levels and pixel differences this is asked
+    for hold few distinct values (a 4x reduced 8-bit image's row differences: ~30
+    among 6000), where numpy's introselect degrades (0.11 ms against 0.017 ms for
+    the SIMD sort); on a few hundred distinct values the sort is as fast. The
+    median is the same value either way."""
     k = values.size // 2
+    ordered = np.sort(values)
     if values.size % 2:
-        return float(np.partition(values, k)[k])
-    lo, hi = np.partition(values, (k - 1, k))[k - 1 : k + 1]
-    return 0.5 * (float(lo) + float(hi))
+        return float(ordered[k])
+    return 0.5 * (float(ordered[k - 1]) + float(ordered[k]))
 
 
 def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:

@@ -150,17 +150,20 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         small = cv2.resize(small, (small.shape[1] // 2, small.shape[0] // 2), interpolation=cv2.INTER_AREA)
     small = np.asarray(small, dtype=np.float32)  # integer images are reduced first, converted after
     background = _background(small, r_max / f, polarity)
-    diff = background - small if polarity == "dark" else small - background
-    top = float(diff.max())
+    # OpenCV's float32 subtraction and maximum are numpy's to the bit, in fewer passes
+    diff = cv2.subtract(background, small) if polarity == "dark" else cv2.subtract(small, background)
+    top = float(cv2.minMaxLoc(diff)[1])
     if not top > 0:
         logger.info("no marker candidates: nothing in the image is %s than its surroundings (a constant image?)",
                     "darker" if polarity == "dark" else "brighter")
         return []
-    scaled = np.clip(diff * (255.0 / top), 0, 255).astype(np.uint8)
-    otsu, _ = cv2.threshold(scaled, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    scaled = np.multiply(diff, 255.0 / top)
+    np.clip(scaled, 0, 255, out=scaled)
+    otsu, _ = cv2.threshold(scaled.astype(np.uint8), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     noise = _noise_sigma(small)
     level = max(otsu * top / 255.0, 5.0 * noise)
-    mask = (diff > level).astype(np.uint8)
+    # 255 where diff > level (the blobs' outlines are the same as from a 0/1 mask)
+    mask = cv2.compare(diff, level, cv2.CMP_GT)
     if r_min / f >= _MIN_REDUCED_RADIUS_2X:
         # cut thin lines (a wire) away from the markers they cross (a marker of
         # 1.5 reduced px in radius keeps its core through the 3x3 opening)
