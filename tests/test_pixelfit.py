@@ -6,7 +6,7 @@ from scipy.special import ndtr
 
 from vision_torsion._ring import fast_median, marker_patch, normal_cdf, robust_sigma
 from vision_torsion.errors import FitError
-from vision_torsion.pixelfit import fit_disc
+from vision_torsion.pixelfit import _clean, _damped, _solve, fit_disc
 from vision_torsion.synthetic import render
 
 
@@ -23,6 +23,42 @@ def test_fast_median_is_numpys_median():
     for n in (1, 2, 3, 10, 11, 999, 1000):
         x = rng.normal(size=n)
         assert fast_median(x) == np.median(x)
+    # few distinct values among many (grey levels, a reduced image's pixel
+    # differences), float32 too
+    for n in (5933, 5934):
+        x = rng.integers(-15, 15, size=n).astype(np.float32) / 16
+        assert fast_median(x) == np.median(x)
+        assert fast_median(np.abs(x - 0.25)) == np.median(np.abs(x - 0.25))
+
+
+def test_the_damped_8x8_solve_is_linalgs():
+    """The Levenberg-Marquardt step of the one-marker fit (OpenCV's LU) against
+    numpy.linalg on normal matrices of a Jacobian's scale; a singular one is a
+    FitError, not garbage."""
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        J = rng.normal(size=(8, 3000)) * rng.uniform(0.01, 100.0, size=(8, 1))
+        A, b = J @ J.T, J @ rng.normal(size=3000)
+        lam = rng.uniform(1e-9, 10.0)
+        damped = _damped(A, lam)
+        np.testing.assert_array_equal(damped, A + lam * np.diag(np.diag(A)))
+        assert damped is not A and np.array_equal(A, J @ J.T)  # A itself left alone
+        expected = np.linalg.solve(damped, b)
+        np.testing.assert_allclose(_solve(damped, b), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    singular = np.ones((8, 8))
+    with pytest.raises(FitError, match="degenerate"):
+        _solve(singular, np.ones(8))
+
+
+def test_a_clean_ring_is_what_the_occluder_cut_leaves_alone():
+    """pixelfit._clean is cut_occluders' first test: nothing beyond 4.5 robust σ."""
+    rng = np.random.default_rng(12)
+    resid = rng.normal(0.0, 2.0, size=4000)
+    sigma = robust_sigma(resid)
+    resid = np.clip(resid, -4.4 * sigma, 4.4 * sigma)
+    assert _clean(resid)
+    resid[123] = 6.0 * robust_sigma(resid)
+    assert not _clean(resid)
 
 
 def test_patch_geometry_matches_explicit_coordinates():
