@@ -273,3 +273,25 @@ def test_a_large_neighbour_does_not_take_a_marker_s_own_pixels(gap_px):
     near = ok[np.hypot(ok["x_px"] - small[0], ok["y_px"] - small[1]) < 3.0]
     assert len(near) == 1, table
     assert (float(near["x_px"].iloc[0]), float(near["y_px"].iloc[0])) == pytest.approx(small, abs=0.05)
+
+
+def test_neighbours_of_a_few_candidates_are_the_array_rule():
+    """_neighbours' plain-float path (up to 8 candidates: the pair search) picks the
+    same circles as _near's array rule, including circles exactly at its reach."""
+    from vision_torsion.markers import _near, _neighbours, _patch_extent
+
+    rng = np.random.default_rng(21)
+    for _ in range(2000):
+        k = int(rng.integers(1, 9))
+        circles = np.column_stack([rng.uniform(0, 300, k), rng.uniform(0, 300, k), rng.uniform(1, 60, k)])
+        width = float(rng.choice([0.8, 1.2, 2.5]))
+        for i in range(k):
+            np.testing.assert_array_equal(_neighbours(circles, i, width),
+                                          circles[_near(circles, np.array([i]), width)[0]])
+    # a neighbour exactly at the reach is not near (strict), one a hair inside is
+    circles = np.array([[100.0, 100.0, 20.0], [0.0, 100.0, 10.0]])
+    x_reach = 100.0 - (float(_patch_extent(20.0, 1.2)) + 1.15 * 10.0 + 3.0 * 1.2 + 1.0)
+    for x, expected in ((x_reach, 0), (np.nextafter(x_reach, 100.0), 1)):
+        circles[1, 0] = x
+        assert len(_neighbours(circles, 0, 1.2)) == expected
+        assert len(circles[_near(circles, np.array([0]), 1.2)[0]]) == expected

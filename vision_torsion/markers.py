@@ -512,7 +512,18 @@ def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, fl
 def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
     """The coarse circles (rows of (x, y, r), px) other than row `i` whose blurred
     disc reaches into the square of pixels marker `i`'s fit uses."""
-    return circles[_near(circles, np.array([i]), edge_width)[0]]
+    if len(circles) > 8:
+        return circles[_near(circles, np.array([i]), edge_width)[0]]
+    # a few candidates (the pair search): :func:`_near`'s arithmetic on plain floats,
+    # without its dozen small array operations
+    x, y, r = circles[i].tolist()
+    extent, spread = float(_patch_extent(r, edge_width)), 3.0 * max(edge_width, 1.0)
+    near = []
+    for j, (xj, yj, rj) in enumerate(circles.tolist()):
+        reach = extent + 1.15 * rj + spread + 1.0
+        if j != i and abs(xj - x) < reach and abs(yj - y) < reach:
+            near.append(j)
+    return circles[near]
 
 
 def _near(circles: np.ndarray, rows: np.ndarray, edge_width: float) -> np.ndarray:
