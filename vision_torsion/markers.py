@@ -262,12 +262,13 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) ->
     dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
     d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
     inside = d2 < (reach**2)[:, None, None]
-    if own is not None:
-        # of the pixels flagged (few), those nearer this marker's coarse edge stay
-        k, y, x = np.nonzero(inside)
+    large = np.flatnonzero(nb[:, 2] > 1.5 * own[2]) if own is not None else ()
+    if len(large):
+        # of a large neighbour's flagged pixels, those nearer this marker's coarse edge stay
+        k, y, x = np.nonzero(inside[large])
+        k = large[k]
         ox, oy, r_own = own
         ours = np.hypot(x + (patch.x0 - ox), y + (patch.y0 - oy)) - r_own <= np.sqrt(d2[k, y, x]) - nb[k, 2]
-        ours &= nb[k, 2] > 1.5 * r_own
         inside[k[ours], y[ours], x[ours]] = False
     excluded = inside.any(axis=0).ravel()
     return replace(patch, excluded=excluded) if excluded.any() else patch
