@@ -158,7 +158,7 @@ def coverage_factor_t_normal(u_a: float, dof: float, u_b: float, *, p: float = 0
     u_c⁴/(u_a⁴/dof)``; with few observations (``n = 2, 3``) and a normal part of about
     a third of ``u_a`` its intervals cover only 87–92 % (Hall & Willink, Metrologia 38,
     2001), while this one covers at least ``p`` for any ratio (tested by simulation in
-    ``tests/test_analysis_coverage.py``). The probability is integrated over the
+    ``tests/test_analysis_coverage_factor.py``). The probability is integrated over the
     smoother of the two variables: over ``Z`` (Gauss–Hermite) when ``u_a ≥ u_b``,
     else over ``T`` through its quantile function (Gauss–Legendre on (0, 1)).
 
