@@ -246,6 +246,12 @@ def robust_sigma_rows(resid, n):
     return np.where(sig > 0, sig, 1e-6)
 
 
+#: Pixels this many robust σ (:func:`robust_sigma`) off the model are an occluder's
+#: (a wire or a speck in the ring), by :func:`cut_occluders` and the fits' quick
+#: "nothing to cut" tests before it.
+OCCLUDER_SIGMAS = 4.5
+
+
 def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
     """Flags of the ring pixels to keep, or None when nothing is to be cut.
 
@@ -258,11 +264,11 @@ def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
     iteration, a sharp or odd edge profile), not an occluder: None; so is half of
     it cut once grown (a wire lying along the edge for 60° of arc loses ~30 %).
     """
-    keep = np.abs(resid) < 4.5 * robust_sigma(resid)
+    keep = np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)
     if keep.all() or keep[edge_zone].mean() <= 0.75:
         return None
     resid = resolve(keep)
-    keep = grow_cut(np.abs(resid) < 4.5 * robust_sigma(resid[keep]), ring_idx, shape)
+    keep = grow_cut(np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid[keep]), ring_idx, shape)
     return keep if keep[edge_zone].mean() > 0.5 else None
 
 
@@ -350,9 +356,14 @@ def check_contrast(contrast, sigma2) -> None:
         )
 
 
-def bounded_edge_width(new, old) -> float:
+def bounded_edge_width(new, old):
     """An updated edge width s (px) kept within [old/2, 2·old] and never below 0.3 px:
-    an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12))."""
+    an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12)).
+
+    A float for floats (one marker's fit, where numpy calls on scalars would cost
+    more than the rule), element-wise for arrays (many markers' rows)."""
+    if isinstance(new, np.ndarray):
+        return np.minimum(np.maximum(np.maximum(new, 0.3), 0.5 * old), 2.0 * old)
     return float(min(max(new, 0.3, 0.5 * old), 2.0 * old))
 
 

@@ -240,6 +240,13 @@ def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
     return harmonic_circularity(dist - radius, dx / dist, dy / dist, radius)
 
 
+def _neighbour_reach(radius, edge_width):
+    """How far (px) from a neighbouring candidate's centre its pixels are left out of
+    a marker's fit: 1.15 times its coarse radius (good to ~10 %) plus its blurred
+    edge (3s + 1 px). Floats or arrays of `radius`."""
+    return 1.15 * radius + 3.0 * max(float(edge_width), 1.0) + 1.0
+
+
 def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) -> MarkerPatch:
     """`patch` with the pixels of neighbouring candidates flagged as excluded: within
     1.15 times their coarse radius (good to ~10 %) plus their blurred edge (3s + 1 px).
@@ -255,7 +262,7 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) ->
         return patch
     rows, cols = patch.shape
     nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
-    reach = 1.15 * nb[:, 2] + 3.0 * max(float(edge_width), 1.0) + 1.0
+    reach = _neighbour_reach(nb[:, 2], edge_width)
     # pixel centres within each neighbour's reach: (k, rows, cols) by broadcasting
     # one row and one column per neighbour (a few neighbours, a small patch)
     dx = np.arange(cols) + (patch.x0 - nb[:, :1])
@@ -518,10 +525,10 @@ def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
     # a few candidates (the pair search): :func:`_near`'s arithmetic on plain floats,
     # without its dozen small array operations
     x, y, r = circles[i].tolist()
-    extent, spread = float(_patch_extent(r, edge_width)), 3.0 * max(edge_width, 1.0)
+    extent = float(_patch_extent(r, edge_width))
     near = []
     for j, (xj, yj, rj) in enumerate(circles.tolist()):
-        reach = extent + 1.15 * rj + spread + 1.0
+        reach = extent + _neighbour_reach(rj, edge_width)
         if j != i and abs(xj - x) < reach and abs(yj - y) < reach:
             near.append(j)
     return circles[near]
@@ -530,7 +537,7 @@ def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
 def _near(circles: np.ndarray, rows: np.ndarray, edge_width: float) -> np.ndarray:
     """Flags (len(rows) x len(circles)) of :func:`_neighbours` for each of `rows`."""
     x, y, r = circles[rows].T[:, :, None]
-    reach = _patch_extent(r, edge_width) + 1.15 * circles[:, 2] + 3.0 * max(edge_width, 1.0) + 1.0
+    reach = _patch_extent(r, edge_width) + _neighbour_reach(circles[:, 2], edge_width)
     near = (np.abs(circles[:, 0] - x) < reach) & (np.abs(circles[:, 1] - y) < reach)
     near[np.arange(rows.size), rows] = False
     return near

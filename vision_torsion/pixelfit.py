@@ -48,6 +48,7 @@ import numpy as np
 
 from ._ring import (
     INV_SQRT_2PI,
+    OCCLUDER_SIGMAS,
     MarkerPatch,
     bounded_edge_width,
     check_contrast,
@@ -394,10 +395,10 @@ def _solve(A, b):
 
 
 def _clean(resid) -> bool:
-    """True when no residual lies beyond 4.5 robust σ (:func:`~vision_torsion._ring.robust_sigma`):
+    """True when no residual lies beyond OCCLUDER_SIGMAS robust σ (:func:`~vision_torsion._ring.robust_sigma`):
     the test :func:`~vision_torsion._ring.cut_occluders` begins with, by which
     nothing is to be cut."""
-    return bool((np.abs(resid) < 4.5 * robust_sigma(resid)).all())
+    return bool((np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)).all())
 
 
 def _fit_from(
@@ -714,8 +715,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             keep = active[act]
             act, step = act[keep], step[keep]
         trial = P[act] + step
-        old_s = P[act, 3]
-        trial[:, 3] = np.minimum(np.maximum(np.maximum(trial[:, 3], 0.3), 0.5 * old_s), 2.0 * old_s)
+        trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
         small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
         last = final[act] & small
         # converged: the last step taken without evaluating the model (as fit_disc)
@@ -754,7 +754,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             clean = np.zeros(m, bool)
             if first.size:
                 sig = robust_sigma_rows(resid[first], px.n[first])
-                clean[first[(np.abs(resid[first]) < 4.5 * sig[:, None]).all(axis=1)]] = True
+                clean[first[(np.abs(resid[first]) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)]] = True
             final[clean] = True
             cuts[clean] = 1
             for k in due[~clean[due]]:
