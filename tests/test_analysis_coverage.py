@@ -57,7 +57,44 @@ def test_a_bilinear_loop_has_no_amplitude_effect():
     d = np.random.default_rng(0).standard_normal((5, tau.size))
     # the arriving and the departing slope at each tip are both 1/k_u: nothing hysteretic switches there
     # (to rounding: 1e-12 rad per N·m is 1e-16 rad for this rig's 1e-4 N·m tip errors)
-    assert np.max(np.abs(resp(d))) < 1e-12
+    held = resp.held
+    assert np.flatnonzero(held).tolist() == [0, 36]  # the two tip images: +Tmax (start) and −Tmax
+    assert np.max(np.abs(resp(d)[:, ~held])) < 1e-12
+    # a held tip's angle answers its own torque along the arriving branch, 1/k_u on both tips here (+Tmax:
+    # its own torque only; −Tmax: its own, and nothing from +Tmax)
+    assert resp(d)[:, held] == pytest.approx(d[:, held] / 4.4, rel=1e-9)
+
+
+def test_a_tip_image_answers_along_the_arriving_branch_in_the_loop_energy():
+    """Masing loop energy's torque part: the bottom tip, read by the polygon as a vertex of both runs.
+
+    The energy ``W(τ₊ − τ₋)`` of a Masing loop depends on its amplitude only; its
+    derivative by the bottom tip's torque, from the closed form by central differences,
+    against the Monte Carlo's linear response (one unit draw at the −Tmax image).
+    Before the tip images were held, the shifted torque axis added ``δ·w(Δ)/2`` there
+    and the response was 7 % short.
+    """
+    from vision_torsion.analysis.metrics import loop_energy
+    from vision_torsion.analysis.uncertainty import monte_carlo_std
+
+    tau, th, is_desc = _masing_runs()
+
+    def energy(bottom):  # the periodic Masing loop between +T and `bottom`, on the same nominal levels
+        th_bottom = _f(T) - 2 * _f((T - bottom) / 2)  # the bottom image, taken at the true bottom torque
+        d = np.concatenate([_f(T) - 2 * _f((T - DESC[:-1]) / 2), [th_bottom]])
+        a = th_bottom + 2 * _f((ASC - bottom) / 2)  # the ascending branch leaves the true bottom
+        return loop_energy(np.concatenate([DESC, ASC]), np.concatenate([d, a]))
+
+    h = 1e-5
+    truth = (energy(-T - h) - energy(-T + h)) / (2 * h)  # per N·m of a more negative bottom torque
+    ev = lambda t2, y2: {"w": loop_energy(t2, y2)}  # noqa: E731
+    L = np.zeros((tau.size, 1))
+    L[36, 0] = -1e-4  # one source: the bottom tip's torque, 1σ = 1e-4 N·m (this rig's scale), more negative
+    # the Monte Carlo's std of a single source is |dW/dδ|·σ: 4000 draws of ξ give it to ≈ 1 %
+    _, st = monte_carlo_std(ev, tau, th, angle_std_rad=np.full(tau.size, 1e-12), torque_sources=L, n_draws=4000,
+                            seed=1, torque_response=tip_amplitude_response(tau, th, is_desc))
+    # the slopes are secants over the 0.02 N·m steps (the arriving one over the last step): 3 % covers that
+    assert st["w"] / 1e-4 == pytest.approx(abs(truth), rel=0.03)
 
 
 def _table(kind, *, noise_deg, rng):

@@ -476,7 +476,10 @@ def monte_carlo_std(
         moves the branch that follows it). Given it, a torque draw is evaluated as the
         data would be measured, at the nominal torques ``τ`` with angles
         ``θ + ∂θ/∂τ·δτ + torque_response(δτ)``, the first term by shifting the torque
-        axis the other way (``τ − δτ``).
+        axis the other way (``τ − δτ``). Where the callable has an attribute ``held``
+        (bool, (n,)), those samples' torque axis is not shifted: ``torque_response``
+        gives their whole angle response (a loop's tips, where the image is read on two
+        branches whose slopes differ; :func:`tip_amplitude_response`).
 
     Returns
     -------
@@ -498,10 +501,13 @@ def monte_carlo_std(
     d_theta = rng.standard_normal((n_draws, th.shape[1])) * np.asarray(angle_std_rad, float)[None, :]
     by_angle = evaluate(np.repeat(tau, n_draws, axis=0), th + d_theta)
 
+    held = getattr(torque_response, "held", None)
+    moved = 1.0 if held is None else (~np.asarray(held, bool)).astype(float)[None, :]
+
     def torque_draw(d_tau):
         if torque_response is None:
             return evaluate(tau + d_tau, np.repeat(th, n_draws, axis=0))
-        return evaluate(tau - d_tau, th + torque_response(d_tau))
+        return evaluate(tau - d_tau * moved, th + torque_response(d_tau))
 
     if kinds is None:
         d_tau = rng.standard_normal((n_draws, L.shape[1])) @ L.T
@@ -552,7 +558,9 @@ def tip_amplitude_response(torque_nm, angle_rad, is_desc):
     -------
     callable
         ``response(d_tau) -> d_theta``, ``(D, n)`` → ``(D, n)`` (N·m → rad), for
-        ``torque_response`` of :func:`monte_carlo_std`.
+        ``torque_response`` of :func:`monte_carlo_std`, with ``response.held`` (bool,
+        (n,)): the tip images, whose whole response it gives (their torque axis is
+        not shifted).
 
     Notes
     -----
@@ -572,11 +580,19 @@ def tip_amplitude_response(torque_nm, angle_rad, is_desc):
     the data along each branch; the top tip's arriving slope is the ascending run's
     last step (the loop came up to +Tmax the same way before it), the bottom tip's
     the descending run's last step. The bottom reversal point itself moves by
-    ``S_desc(−Tmax)·δ_top`` and carries that to the whole ascending branch. The +Tmax
-    image itself gets ``s_arr − s_dep`` unclipped: the torque axis's shift reads it
-    along the descending run's first step, and its angle answers along the arriving
-    one. Where a stop-type play is open (within its width after a reversal) ``S`` is
-    negative and the clip leaves it at zero: no figure is evaluated there.
+    ``S_desc(−Tmax)·δ_top`` and carries that to the whole ascending branch.
+
+    A tip image's own angle answers its torque along the **arriving** branch
+    (``s_arr·δ_r``), but a shift of the torque axis is read differently by each
+    figure at a tip: along the departing run by an interpolation, as a vertex
+    between both runs by the loop energy's polygon (which then gains a spurious
+    ``δ_r·w(one step)/2``, w the loop's width one step from the tip: 7 % of the
+    Masing loop energy's torque part). So the two tip images (+Tmax at the start of
+    the descending run when the loop comes back to it; −Tmax, the descending run's
+    last image) are ``held``: their axis is not shifted and the response moves their
+    angle by ``s_arr·δ_r`` (plus, at −Tmax, the descending branch's shift from
+    +Tmax). Where a stop-type play is open (within its width after a reversal) ``S``
+    is negative and the clip leaves it at zero: no figure is evaluated there.
     """
     tau = np.asarray(torque_nm, float)
     th = np.asarray(angle_rad, float)
@@ -603,12 +619,13 @@ def tip_amplitude_response(torque_nm, angle_rad, is_desc):
 
     S_d = sens(s_arr_top, h_top, sd)
     S_a = sens(s_arr_bot, h_bot, sa)
-    if np.isfinite(h_top):
-        # the +Tmax image itself responds to its torque along the branch that arrived there; the torque axis's
-        # shift reads the descending run's first step instead (a stop-type play: open after the tip, closed before)
-        S_d[0] = h_top
-    if not (np.any(S_d) or np.any(S_a)):
-        return zero
+    held = np.zeros(tau.size, bool)
+    held[desc[-1]] = np.isfinite(s_arr_bot)
+    if np.isfinite(s_arr_top):
+        # the +Tmax image answers its torque along the branch that arrived there (a stop-type play: closed before
+        # the tip, open after it)
+        S_d[0] = s_arr_top
+        held[desc[0]] = True
 
     def response(d_tau):
         d_tau = np.asarray(d_tau, float)
@@ -617,8 +634,11 @@ def tip_amplitude_response(torque_nm, angle_rad, is_desc):
         d_bot = d_tau[:, desc[-1] : desc[-1] + 1]
         out[:, desc] = S_d[None, :] * d_top
         out[:, asc] = S_d[-1] * d_top + S_a[None, :] * d_bot
+        if held[desc[-1]]:
+            out[:, desc[-1]] += s_arr_bot * d_bot[:, 0]
         return out
 
+    response.held = held
     return response
 
 
