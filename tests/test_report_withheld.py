@@ -67,3 +67,15 @@ def test_inverted_angle_sign_on_the_command_line(tmp_path, capsys):
     assert "angle_sign looks inverted; set angle_sign = -1" in out.out
     page = (tmp_path / "out" / "report.html").read_text()
     assert "angle_sign looks inverted; set angle_sign = -1" in page[:page.index("<h2>")]  # said at the top
+
+
+def test_orientation_means_of_one_cycle_are_flagged_in_the_report(switching, tmp_path):
+    """One cycle per orientation: every orientation mean is a mean of one loop (issue 14)."""
+    df, a = switching
+    po = a.per_orientation
+    with_u = np.isfinite(po["u95"].to_numpy(float))  # T1 (a profiled break) has no u95 to qualify
+    assert (po["n_cycles"] == 1).all() and with_u.sum() >= 40
+    assert po["flag"][with_u].str.contains("mean of one loop").all() and (po["flag"][~with_u] == "").all()
+    page = write_report(df, a, conditions={}, out_dir=tmp_path).report_html.read_text()
+    assert "† Orientation means shown with a flag:" in page
+    assert "repeatability between loops is not observed" in page

@@ -23,6 +23,7 @@ Notes
   87–92 % of the benchmark's two-loop session means (``benchmarks/bench_figures.py``):
   with ``n = 2`` it is known to under-cover when the other parts are about a third
   of ``u_A``. ``dof`` reports ``ν_eff`` for information.
+- The same rules give each **orientation's mean** over its cycles (``per_orientation``).
 - A **mean of one loop** is flagged: its uncertainty holds the measurement only, the
   repeatability between loops cannot be observed from one loop (the benchmark's 2 %
   cycle-to-cycle scatter put such means 20–500 u off the gear's value). A mean that
@@ -252,8 +253,14 @@ def mean_uncertainty(sub) -> dict:
     }
 
 
+def _flagged(rows: dict) -> int:
+    """How many of the loop values in ``rows`` (column arrays) carry a flag."""
+    return int(np.sum(rows["flag"].astype(str) != "")) if "flag" in rows else 0
+
+
 def _mean_flag(entry: dict) -> str:
-    """Why a session mean cannot be taken at its u95 (module notes), or ""."""
+    """Why a mean across loops (of the session or of one orientation) cannot be taken at its
+    u95 (module notes), or "": ``entry`` holds ``n``, ``mean_u95`` and ``flagged``."""
     why = []
     if entry["n"] == 1 and entry.get("mean_u95") is not None:
         why.append(
@@ -283,7 +290,10 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
         mean itself is flagged, or "").
     per_orientation : pandas.DataFrame
         ``orientation_deg, figure, unit, n_cycles, mean, sd, std, std_angle,
-        std_torque, u95`` (``std``: 1σ of the orientation mean, same rules).
+        std_torque, coverage_factor, u95, flag``: the mean over the orientation's
+        cycles by the same rules as the session mean (:func:`mean_uncertainty`: 1σ
+        ``std``, ``u95 = coverage_factor·std``; ``flag`` as the session mean's, so a
+        mean of one cycle is flagged).
     """
     rows = []
     summary = {}
@@ -311,7 +321,7 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
             )
         else:
             entry.update(mean_std=None, mean_u95=None, coverage_factor=None, dof=None, budget=None)
-        entry["flagged"] = int(np.sum(good["flag"].astype(str) != "")) if "flag" in good else 0
+        entry["flagged"] = _flagged(good)
         entry["withheld"] = int(rows_all.size - idx.size)
         entry["flag"] = _mean_flag(entry)
         groups = []
@@ -320,6 +330,7 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
             og = {c: a[orient == o] for c, a in good.items()}
             v = value[idx][orient == o]
             mu = mean_uncertainty(og)
+            u95 = mu["u95"] if np.isfinite(mu["u95"]) else None
             rows.append(
                 {
                     "orientation_deg": float(o),
@@ -331,11 +342,14 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
                     "std": mu["std"],
                     "std_angle": mu["budget"]["angle_noise"],
                     "std_torque": _finite_mean(_col(og, "std_torque")),
+                    "coverage_factor": mu["coverage_factor"] if mu["coverage_factor"] is not None else np.nan,
                     "u95": mu["u95"],
+                    "flag": _mean_flag({"n": int(v.size), "mean_u95": u95, "flagged": _flagged(og)}),
                 }
             )
             groups.append(v)
         entry["orientation_test"] = orientation_anova(groups)
         summary[fig] = entry
-    cols = ["orientation_deg", "figure", "unit", "n_cycles", "mean", "sd", "std", "std_angle", "std_torque", "u95"]
+    cols = ["orientation_deg", "figure", "unit", "n_cycles", "mean", "sd", "std", "std_angle", "std_torque",
+            "coverage_factor", "u95", "flag"]
     return summary, pd.DataFrame(rows, columns=cols)

@@ -233,7 +233,7 @@ def phase_stiffness_chart(analysis) -> Figure:
         x = np.arange(len(orients)) + (j - 1.5) * width
         k = sub["mean"].to_numpy(dtype=float)
         colour = next(colours)
-        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0)
+        yerr = np.nan_to_num(sub["u95"].to_numpy(dtype=float), nan=0.0)
         if np.isfinite(k).any():
             ax.bar(x, k, width, yerr=yerr, label=label, capsize=2, color=colour)
         # where the straight line does not fit (withheld), the phase's secant, hatched
@@ -251,7 +251,7 @@ def phase_stiffness_chart(analysis) -> Figure:
                 ha="center", va="center", transform=ax.transAxes, fontsize=9)
     ax.set_ylabel("stiffness (N·m/rad)")
     ax.set_xlabel("flexspline orientation (deg)")
-    _title(ax, "Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95 (k = 2)",
+    _title(ax, "Segmental stiffness of each phase (N·m/rad) per orientation, mean over cycles ± u95",
            fontsize=10)
     ax.grid(True, axis="y", which="both", alpha=0.3)
     if ax.get_legend_handles_labels()[0]:  # nothing drawn (e.g. an inverted angle sign): no legend
@@ -294,7 +294,7 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
                    else "no orientation effect found" if test.get("significant") is False
                    else "orientation effect not tested")
         scale = 100.0 / abs(mean)
-        yerr = np.nan_to_num(2 * sub["std"].to_numpy(dtype=float), nan=0.0) * scale
+        yerr = np.nan_to_num(sub["u95"].to_numpy(dtype=float), nan=0.0) * scale
         x = sub["orientation_deg"].to_numpy(dtype=float) + (j - (len(figures) - 1) / 2) * width
         ax.errorbar(x, (values - mean) * scale, yerr=yerr, fmt="o", ms=4, capsize=2,
                     label=f"{words} (session mean {mean:.4g} {unit}): {verdict}")

@@ -140,12 +140,27 @@ def _metrics(mt: pd.DataFrame, orients) -> str:
     if mt.empty:
         return '<p class="muted">No loop figure could be computed.</p>'
     cols = {"figure": mt["label"], "unit": mt["unit"]}
+    flags = mt["flags"] if "flags" in mt else [{}] * len(mt)
     for o in orients:
-        cols[f"{o:g}°"] = [fmt_value(m, s) for m, s in mt[o]]
+        cols[f"{o:g}°"] = [fmt_value(m, s) + ("†" if o in fl else "") for (m, s), fl in zip(mt[o], flags)]
     cols["session mean ± std"] = [fmt_value(m, s) for m, s in zip(mt["mean"], mt["mean_std"])]
     cols["sd between loops"] = [f"{v:.3g}" if np.isfinite(v) else "—" for v in mt["sd"]]
     cols["orientation test p"] = ["—" if p is None else f"{p:.3g}" for p in mt["p_value"]]
-    return _table(pd.DataFrame(cols), left=("figure", "unit"))
+    # † orientation means shown with a flag: each reason once, with the figures and orientations it holds for
+    why = {}
+    for label, fl in zip(mt["label"], flags):
+        for o, text in fl.items():
+            why.setdefault(text, {}).setdefault(label, []).append(f"{o:g}°")
+    notes = ""
+    for text, by in why.items():
+        where = "; ".join(
+            label if len(at) == len(orients) else f"{label} ({', '.join(at)})" for label, at in by.items()
+        )
+        notes += f"<li>{html.escape(where)}: {html.escape(text)}</li>"
+    out = _table(pd.DataFrame(cols), left=("figure", "unit"))
+    if notes:
+        out += '<p class="note">† Orientation means shown with a flag:</p><ul class="note">' + notes + "</ul>"
+    return out
 
 
 _TORQUE_MODELS = {

@@ -138,9 +138,13 @@ def metrics_table(analysis) -> pd.DataFrame:
 
     Cells are ``(mean, std)`` tuples of the orientation mean (NaN when missing); the
     last columns hold the session mean, its standard uncertainty, the sd between
-    loops and the orientation test p-value.
+    loops and the orientation test p-value; ``flags`` maps an orientation to why its
+    mean is flagged (:func:`vision_torsion.analysis.summary.summarise_figures`), for
+    the flagged ones.
     """
     po = _index(analysis.per_orientation)
+    pof = analysis.per_orientation
+    flags = {(float(o), f): str(g) for o, f, g in zip(pof["orientation_deg"], pof["figure"], pof["flag"]) if g}
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     rows = []
     for fig, label, unit, scale in CATALOGUE_FIGURES:
@@ -159,5 +163,6 @@ def metrics_table(analysis) -> pd.DataFrame:
         row["mean_std"] = scale_or_nan(s["mean_std"])
         row["sd"] = scale_or_nan(s["sd"])
         row["p_value"] = s["orientation_test"].get("p_value")
+        row["flags"] = {o: flags[(float(o), fig)] for o in orients if (float(o), fig) in flags}
         rows.append(row)
     return pd.DataFrame(rows)
