@@ -31,9 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
-from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
 from .detect import Blob, default_radius_range, detect_blobs
-from .edges import edge_points
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
@@ -338,6 +336,11 @@ def fit_marker(
                 _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
                 image.shape,
             )
+        # the edge-point fits' modules only when asked for: the default fit (and the
+        # start-up of every command that measures) does without them (~6 ms)
+        from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
+        from .edges import edge_points
+
         s = float(edge_width)
         shape = None
         for _ in range(max_iter):

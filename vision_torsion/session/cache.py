@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import logging
 import os
-import secrets
 from pathlib import Path
 
 import xxhash
@@ -161,8 +160,10 @@ class CacheLog:
 
     @staticmethod
     def new_run() -> str:
-        """A fresh, unique run name."""
-        return secrets.token_hex(6)
+        """A fresh, unique run name (12 hex digits of os.urandom, as
+        ``secrets.token_hex(6)`` makes them, without importing secrets and hmac at
+        every start-up)."""
+        return os.urandom(6).hex()
 
     def files(self) -> list[Path]:
         """Logs of this run in the cache folder (of any of its processes)."""

@@ -356,7 +356,7 @@ def _table(session: Session, entries: list[dict], correction=None) -> tuple[list
                    torque_source="weights" if row.torque_nm is None else "measured",
                    angle_deg=angle, angle_std_deg=angle_std,
                    status=status,
-                   message=_relative_message(why, manifest.image_path(row), row.image))
+                   message=_relative_message(why, manifest.image_path(row), row.image) if why else "")
         records.append(rec)
     return keep + list(OUTPUT_COLUMNS), records
 
