@@ -39,6 +39,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import compile_package  # noqa: E402
+
 RESULTS = Path(__file__).resolve().parent / "results" / "commands.json"
 _SCRIPT = Path(sys.executable).parent / "vision-torsion"  # the installed command, as a user runs it
 CLI = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "vision_torsion"]
@@ -107,11 +110,7 @@ def main() -> None:
     # bytecode as an installed package has it (pip compiles it at install; an editable
     # install writes it at the first import, unless PYTHONDONTWRITEBYTECODE is set, as
     # on some CI machines): the decode command's OpenCV and numpy have theirs
-    import compileall
-
-    import vision_torsion
-
-    compileall.compile_dir(str(Path(vision_torsion.__file__).parent), quiet=1)
+    compile_package()
     starts = startup()
     pairs = []
     for i in range(args.repeats):

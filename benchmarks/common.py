@@ -26,6 +26,20 @@ def one_core() -> None:
     threadpool_limits(1)
 
 
+def compile_package() -> None:
+    """Byte-compile the vision_torsion package as an install leaves it.
+
+    ``pip install`` compiles it; an editable install writes the bytecode at the first
+    import, unless ``PYTHONDONTWRITEBYTECODE`` is set (as on some CI machines and this
+    one), and then every timed command would compile the modules it imports again."""
+    import compileall
+    from pathlib import Path
+
+    import vision_torsion
+
+    compileall.compile_dir(str(Path(vision_torsion.__file__).parent), quiet=1)
+
+
 def cpu_model() -> str:
     """CPU model name from /proc/cpuinfo (platform.processor() elsewhere)."""
     try:
