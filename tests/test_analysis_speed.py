@@ -171,3 +171,28 @@ def test_preisach_relay_pairs_are_the_loops(seed):
               np.array([-0.0, 0.0, 0.1, -0.1])):
         for got, want in zip(preisach._relays(h), _relays_loop(h)):
             np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("enabled", [True, False])
+def test_analyze_command_gives_the_garbage_collector_back_as_it_found_it(tmp_path, capsys, enabled):
+    # The command runs with the cyclic collector off (a short batch job); a program that
+    # calls the command line in-process must get it back as it was, also after an error.
+    import gc
+    import logging
+
+    from vision_torsion.cli import main
+
+    own = logging.getLogger("vision_torsion")
+    level, handlers = own.level, list(own.handlers)
+    (tmp_path / "bad.csv").write_text("image,angle_deg\na.png,1.0\n")
+    try:
+        (gc.enable if enabled else gc.disable)()
+        assert main(["analyze", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "out")]) == 2
+        assert gc.isenabled() is enabled
+    finally:
+        gc.enable()
+        own.setLevel(level)
+        for h in list(own.handlers):
+            if h not in handlers:
+                own.removeHandler(h)
+    assert "bad.csv" in capsys.readouterr().err
