@@ -196,3 +196,33 @@ def test_analyze_command_gives_the_garbage_collector_back_as_it_found_it(tmp_pat
             if h not in handlers:
                 own.removeHandler(h)
     assert "bad.csv" in capsys.readouterr().err
+
+
+def _interp_rows_by_counting(xq, x, y, *, tol=0.0):
+    # the comparison-count form interp_rows had (every row value against every query)
+    x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+    xq = np.broadcast_to(np.asarray(xq, float), (x.shape[0],) + np.shape(xq)[-1:])
+    idx = np.clip(np.sum(x[:, None, :] <= xq[:, :, None], axis=-1) - 1, 0, x.shape[1] - 2)
+    x0, x1 = np.take_along_axis(x, idx, 1), np.take_along_axis(x, idx + 1, 1)
+    y0, y1 = np.take_along_axis(y, idx, 1), np.take_along_axis(y, idx + 1, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = y0 + (xq - x0) / (x1 - x0) * (y1 - y0)
+    return np.where((xq < x[:, :1] - tol) | (xq > x[:, -1:] + tol), np.nan, out)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_interp_rows_bisection_equals_counting(seed):
+    # Rows with repeated values (a torque level measured twice), a NaN sorted last, queries
+    # on, between and beyond the knots, and a shared query row: the same bits as counting.
+    from vision_torsion.analysis.metrics import interp_rows
+
+    rng = np.random.default_rng(seed)
+    for _ in range(300):
+        n_rows, m, q = int(rng.integers(1, 6)), int(rng.integers(2, 40)), int(rng.integers(1, 9))
+        x = np.sort(rng.choice(np.round(rng.normal(size=3 * m), 1), size=(n_rows, m)), axis=1)
+        if rng.random() < 0.3:
+            x[rng.integers(n_rows), -1] = np.nan
+        y = rng.normal(size=(n_rows, m))
+        xq = np.round(rng.normal(scale=1.5, size=(1 if rng.random() < 0.3 else n_rows, q)), 1)
+        xq[0, 0] = np.nan if rng.random() < 0.2 else xq[0, 0]
+        np.testing.assert_array_equal(interp_rows(xq, x, y, tol=0.1), _interp_rows_by_counting(xq, x, y, tol=0.1))

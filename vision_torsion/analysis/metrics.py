@@ -89,16 +89,37 @@ def interp_rows(xq, x, y, *, tol=0.0):
     """
     x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
     xq = np.broadcast_to(np.asarray(xq, float), (x.shape[0],) + np.shape(xq)[-1:])
-    idx = np.sum(x[:, None, :] <= xq[:, :, None], axis=-1) - 1
-    # flat indices into the rows (one gather each; the Monte Carlo calls this ~150 times per session)
-    flat = np.clip(idx, 0, x.shape[1] - 2) + (np.arange(x.shape[0]) * x.shape[1])[:, None]
     xf, yf = x.reshape(-1), y.reshape(-1)
+    starts = (np.arange(x.shape[0]) * x.shape[1])[:, None]
+    idx = _count_at_most(xf, starts, x.shape[1], xq) - 1
+    # flat indices into the rows (one gather each; the Monte Carlo calls this ~150 times per session)
+    flat = np.clip(idx, 0, x.shape[1] - 2) + starts
     x0, x1, y0, y1 = xf[flat], xf[flat + 1], yf[flat], yf[flat + 1]
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (xq - x0) / (x1 - x0)
     out = y0 + t * (y1 - y0)
     outside = (xq < x[:, :1] - tol) | (xq > x[:, -1:] + tol)
     return np.where(outside, np.nan, out)
+
+
+def _count_at_most(xf, starts, m, xq):
+    """How many of each row's `m` sorted values are <= each query: ``searchsorted(row, xq, "right")``
+    of every row at once, by bisection (``log2 m`` gathers of the query's shape).
+
+    ``xf`` holds the rows one after another (row ``d`` at ``starts[d]``); NaN, sorted last,
+    counts as larger than any query, as in ``np.sum(row <= q)``. The comparison cube that
+    sum needs, (rows, queries, m), was ~5 % of ``vision-torsion analyze``'s instructions.
+    """
+    count = np.zeros(xq.shape, dtype=np.intp)
+    step = 1 << max(m.bit_length() - 1, 0)
+    while step:
+        # may `step` more values be counted? (the last of them is <= the query)
+        more = count + step
+        fits = more <= m
+        fits &= xf[starts + np.minimum(more, m) - 1] <= xq
+        count = np.where(fits, more, count)
+        step >>= 1
+    return count
 
 
 def _sorted(tau, th):
