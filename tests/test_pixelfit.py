@@ -219,10 +219,20 @@ def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypat
     # in groups of 5 (as hundreds are, in groups of 64): the same results
     import vision_torsion.pixelfit as pixelfit
 
+    kept = [None if isinstance(a, FitError) else (a.edge_x_px.copy(), a.cov.copy()) for a in together]
     monkeypatch.setattr(pixelfit, "_BATCH", 5)
     grouped = fit_discs(patches, starts, edge_width=1.2)
     for a, b in zip(together, grouped):
         assert str(a) == str(b) if isinstance(a, FitError) else (a.x_px, a.y_px) == (b.x_px, b.y_px)
+    # the batch's arrays are reused from call to call: nothing returned is one of them
+    for a, k in zip(together, kept):
+        if k is not None:
+            assert np.array_equal(a.edge_x_px, k[0]) and np.array_equal(a.cov, k[1])
+    # evaluated one row at a time (blocks of rows, as large rings are): the same values
+    monkeypatch.setattr(pixelfit, "_BLOCK", 1)
+    for a, b in zip(grouped, fit_discs(patches, starts, edge_width=1.2)):
+        assert str(a) == str(b) if isinstance(a, FitError) else (a.x_px, a.y_px, a.radius_px) == (
+            b.x_px, b.y_px, b.radius_px)
     # the wired marker went through the occluder cut: fewer pixels than without the wire
     sx, sy, sr, b, f = starts[0]
     clean = fit_disc(plain.image, sx, sy, sr, edge_width=1.2, levels=(b, f))

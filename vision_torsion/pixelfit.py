@@ -41,6 +41,8 @@ y downwards.
 
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
 
 import cv2
@@ -93,6 +95,13 @@ _MISFIT_EDGE_SHARE = 0.9
 _MISFIT_ARC = 0.25
 #: Markers fitted together by :func:`fit_discs` at most (more are fitted in groups).
 _BATCH = 64
+#: Elements (float64) of one block of rows :func:`_evaluate_rows` evaluates at a
+#: time: its temporaries stay under 64 kB, which glibc's malloc serves from its
+#: free lists and never hands back to the system (larger ones are mapped afresh
+#: or trimmed off the heap top, and each page touched again is a page fault).
+_BLOCK = 6000
+#: Largest scratch array (bytes) :class:`_Scratch` keeps for the next call.
+_KEEP_BYTES = 64 << 20
 #: Centre step (px) that ends the fit. Levenberg-Marquardt converges about
 #: quadratically here, so what remains after such a step is far below it.
 _CONVERGED_PX = 1e-3
@@ -490,20 +499,51 @@ def _fit_from(
     )
 
 
+class _Scratch(threading.local):
+    """The batched fit's large arrays, kept from one call to the next (one set per
+    thread): a fit's rings, Jacobians and residuals are a few MB, and on a virtual
+    machine each page of freshly allocated memory costs a page fault when first
+    touched (on discorpy 06 the faults were a quarter of :func:`fit_discs`'s
+    time). Each array is asked for by name; a later call's arrays overwrite an
+    earlier call's, so nothing returned to a caller may be one of them."""
+
+    def __init__(self):
+        self.arrays: dict = {}
+
+    def get(self, name, shape, dtype=np.float64) -> np.ndarray:
+        """An uninitialised array of `shape` (a view of the buffer `name`)."""
+        size = math.prod(shape)
+        buf = self.arrays.get(name)
+        if buf is None or buf.size < size or buf.dtype != dtype:
+            buf = np.empty(max(size, int(1.25 * buf.size) if buf is not None else 0), dtype)
+            if buf.nbytes <= _KEEP_BYTES:
+                self.arrays[name] = buf
+        return buf[:size].reshape(shape)
+
+
+_SCRATCH = _Scratch()
+
+
 class _Batch:
     """The rings of many markers as rows of padded arrays (M x N), for the
     vectorised fit: pixel coordinates, values and the lighting frame as in
     :class:`_Pixels`; `mask` is 1 on a ring's pixels and 0 on the padding (whose
-    coordinates lie far outside every marker, so the model there is flat)."""
+    coordinates lie far outside every marker, so the model there is flat).
+    The arrays are :class:`_Scratch` buffers."""
+
+    _NAMES = ("xs", "ys", "vals", "nx", "ny", "mask")
 
     def __init__(self, rings: list[_Pixels], starts: np.ndarray):
         self.n = np.array([r.xs.size for r in rings])
         m, width = len(rings), int(self.n.max())
         self.pad = starts[:, :2] + (1e4, 0.0)  # where a row's padding lies
-        self.mask = np.arange(width) < self.n[:, None]
-        self.xs = np.repeat(self.pad[:, :1], width, axis=1)
-        self.ys = np.repeat(self.pad[:, 1:2], width, axis=1)
-        self.vals, self.nx, self.ny = (np.zeros((m, width)) for _ in range(3))
+        self.mask = _SCRATCH.get("batch mask", (m, width), bool)
+        np.less(np.arange(width), self.n[:, None], out=self.mask)
+        for name in ("xs", "ys", "vals", "nx", "ny"):
+            setattr(self, name, _SCRATCH.get("batch " + name, (m, width)))
+        self.xs[:] = self.pad[:, :1]
+        self.ys[:] = self.pad[:, 1:2]
+        self.vals[:] = self.nx[:] = self.ny[:] = 0.0
         for k, ring in enumerate(rings):
             for name in ("xs", "ys", "vals", "nx", "ny"):
                 getattr(self, name)[k, : self.n[k]] = getattr(ring, name)
@@ -520,23 +560,43 @@ class _Batch:
         self.vals[k, n:] = self.nx[k, n:] = self.ny[k, n:] = 0.0
 
     def rows(self, index):
+        """The rows `index` (into :class:`_Scratch` buffers of their own)."""
         out = object.__new__(_Batch)
-        for name in ("xs", "ys", "vals", "nx", "ny", "mask"):
-            setattr(out, name, getattr(self, name)[index])
+        for name in self._NAMES:
+            a = getattr(self, name)
+            buf = _SCRATCH.get("rows " + name, (len(index),) + a.shape[1:], a.dtype)
+            setattr(out, name, np.take(a, index, axis=0, out=buf))
+        return out
+
+    def block(self, lo, hi):
+        """Rows lo … hi-1 (views)."""
+        out = object.__new__(_Batch)
+        for name in self._NAMES:
+            setattr(out, name, getattr(self, name)[lo:hi])
         return out
 
 
-def _evaluate_rows(P, px: _Batch):
+def _evaluate_rows(P, px: _Batch, slot=0):
     """:func:`_evaluate` for rows of markers (parameters `P`, M x 8): residuals (M x N),
-    Jacobian (M x 8 x N) and u (M x N), zero on the padding.
+    Jacobian (M x 8 x N) and u (M x N), zero on the padding, in the
+    :class:`_Scratch` buffers of `slot` (0 or 1: the fit's current state and a trial).
 
     The padding lies 1e4 px from every marker with no lighting offset, where the
     edge terms (exp(-u²/2), Φ) are exactly 0 and L is 1: only the residual and
-    ∂I/∂B (= L) are not 0 there and need the mask."""
-    Jm = np.empty((P.shape[0], 8, px.xs.shape[1]))
-    resid, _, u = _evaluate(P.T[:, :, None], px, J=Jm.transpose(1, 0, 2))
-    resid *= px.mask
-    Jm[:, 4] *= px.mask
+    ∂I/∂B (= L) are not 0 there and need the mask. Evaluated in blocks of rows
+    (:data:`_BLOCK`) whose temporaries malloc reuses: element-wise, the same values."""
+    m, width = px.xs.shape
+    Jm = _SCRATCH.get(f"J{slot}", (m, 8, width))
+    resid = _SCRATCH.get(f"resid{slot}", (m, width))
+    u = _SCRATCH.get(f"u{slot}", (m, width))
+    step = max(1, _BLOCK // width)
+    for lo in range(0, m, step):
+        hi = min(lo + step, m)
+        block = px.block(lo, hi)
+        r, _, uu = _evaluate(P[lo:hi].T[:, :, None], block, J=Jm[lo:hi].transpose(1, 0, 2))
+        np.multiply(r, block.mask, out=resid[lo:hi])
+        Jm[lo:hi, 4] *= block.mask
+        u[lo:hi] = uu
     return resid, Jm, u
 
 
@@ -656,7 +716,8 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     m = live.size
     P = np.zeros((m, 8))
     P[:, :3], P[:, 3], P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
-    resid, Jm, u = _evaluate_rows(P, px)
+    cur = 0  # the scratch slot of the current state (resid, Jm, u); the other takes trials
+    resid, Jm, u = _evaluate_rows(P, px, cur)
     ssr = np.einsum("ij,ij->i", resid, resid)
     A, b = _normal_equations(Jm, resid)
     lam = np.full(m, 1e-3)
@@ -724,7 +785,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         act, trial = act[~last], trial[~last]
         if not act.size:
             continue
-        r_t, J_t, u_t = _evaluate_rows(trial, px if act.size == m else px.rows(act))
+        r_t, J_t, u_t = _evaluate_rows(trial, px if act.size == m else px.rows(act), 1 - cur)
         ssr_t = np.einsum("ij,ij->i", r_t, r_t)
         better = ssr_t <= ssr[act]
         worse = act[~better]
@@ -737,11 +798,16 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             continue
         moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
         if acc.size == m:  # every marker stepped: the new arrays as they are
-            P, resid, Jm, u, ssr = trial, r_t, J_t, u_t, ssr_t
+            P, resid, Jm, u, ssr, cur = trial, r_t, J_t, u_t, ssr_t, 1 - cur
             A, b = _normal_equations(Jm, resid)
         else:
-            P[acc], resid[acc], Jm[acc], u[acc], ssr[acc] = trial, r_t[better], J_t[better], u_t[better], ssr_t[better]
-            A[acc], b[acc] = _normal_equations(J_t[better], r_t[better])
+            P[acc], ssr[acc] = trial, ssr_t[better]
+            # row by row into the current state's buffers: copies of the accepted
+            # rows (r_t[better]) would be fresh memory each iteration
+            for j, k in zip(np.flatnonzero(better), acc):
+                resid[k], Jm[k], u[k] = r_t[j], J_t[j], u_t[j]
+            A_t, b_t = _normal_equations(J_t, r_t)
+            A[acc], b[acc] = A_t[better], b_t[better]
         lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
         # fit_disc's examinations for an occluder: first once the centre has
         # settled, then once it has converged after each change of the pixels used
@@ -753,8 +819,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             first = due[cuts[due] == 0]
             clean = np.zeros(m, bool)
             if first.size:
-                sig = robust_sigma_rows(resid[first], px.n[first])
-                clean[first[(np.abs(resid[first]) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)]] = True
+                rows = resid if first.size == m else resid[first]  # no copy when all are due
+                sig = robust_sigma_rows(rows, px.n[first])
+                clean[first[(np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)]] = True
             final[clean] = True
             cuts[clean] = 1
             for k in due[~clean[due]]:
@@ -766,7 +833,10 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     unfit[list(failed)] = True
     good = np.flatnonzero(~unfit)
     sigma2 = ssr / np.maximum(px.n - 8, 1)
-    diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good] if good.size else u[:0], px.n[good])
+    if good.size == m:  # no copies of the rows (most fits: none failed)
+        diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n)
+    else:
+        diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good])
     try:
         covs = sigma2[good, None, None] * np.linalg.inv(A[good])
     except np.linalg.LinAlgError:
