@@ -33,7 +33,10 @@ import numpy as np
 from .errors import FitError
 from .numerics import numeric_jacobian
 
-__all__ = ["CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse"]
+__all__ = [
+    "CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse",
+    "centred_ellipse",
+]
 
 #: Largest condition number accepted for the normal equations of the ellipse's centre
 #: and semi-axes (normalised units). A full ellipse, even a near-circle, gives < 10²;
@@ -446,3 +449,26 @@ def fit_ellipse(x, y, *, weights=None, clip: float = 4.0) -> EllipseFit:
         residual_rms_px=float(np.sqrt(np.mean(res_all[inl] ** 2)) * s),
         inliers=inl,
     )
+
+
+def centred_ellipse(dx, dy):
+    """The ellipse centred on the origin closest to points at offsets (`dx`, `dy`) (px)
+    from it: (minor/major axis ratio, RMS radial distance of the points from it in px),
+    or None when the points lie on no such ellipse.
+
+    Notes
+    -----
+    An ellipse centred on the origin with semi-axes a ≥ b, the major one at angle θ,
+    is 1/r(ψ)² = A + B·cos 2ψ + C·sin 2ψ in polar coordinates, with
+    A = (1/a² + 1/b²)/2 and √(B² + C²) = (1/b² - 1/a²)/2: linear least squares in
+    (A, B, C). b/a = √((A - h)/(A + h)) with h = √(B² + C²).
+    """
+    r2 = dx * dx + dy * dy
+    design = np.stack([np.ones_like(r2), (dx * dx - dy * dy) / r2, 2.0 * dx * dy / r2], axis=1)
+    coef = np.linalg.lstsq(design, 1.0 / r2, rcond=None)[0]
+    h = float(np.hypot(coef[1], coef[2]))
+    inverse_r2 = design @ coef
+    if not coef[0] > h or not (inverse_r2 > 0).all():
+        return None
+    off = np.sqrt(r2) - 1.0 / np.sqrt(inverse_r2)
+    return float(np.sqrt((coef[0] - h) / (coef[0] + h))), float(np.sqrt(np.mean(off * off)))

@@ -98,7 +98,8 @@ class Marker:
     status : str
         ``ok`` or the failure mode.
     message : str
-        Why, when status is not ``ok``.
+        Why, when status is not ``ok``; for an ``ok`` marker seen obliquely (its
+        edge an ellipse), that and the ellipse's axis ratio.
     """
 
     x_px: float
@@ -419,11 +420,55 @@ def _not_round(cx, cy, r, circ) -> Marker:
     )
 
 
+#: A pixel fit judged not round is a disc seen obliquely when an ellipse centred on
+#: the fit's centre describes its per-sector edge points: their RMS distance from it
+#: is at most this share of their RMS distance from the circle (:func:`_oblique`).
+#: Rendered ellipses of axis ratio 0.5-0.75 (radius 6-25 px, 2 DN noise) leave
+#: 0.03-0.2; the tilted card of the UCL laparoscope frames (220 dots judged not
+#: round) at most 0.35, its edge points' own scatter; shapes that are not such
+#: ellipses leave more: a teardrop 0.6, a 30x24 px rectangle 0.75.
+_OBLIQUE_RESIDUAL_SHARE = 0.4
+#: Smallest axis ratio of such an ellipse (a disc seen 60° off-axis): beyond it the
+#: circle's ring of pixels no longer holds the whole edge (a 0.6 ellipse of 25 px did
+#: not converge).
+_OBLIQUE_MIN_AXIS_RATIO = 0.5
+
+
+def _oblique(f: DiscFit):
+    """(axis ratio, RMS distance in px) of the ellipse centred on the pixel fit's centre
+    through its per-sector edge points when it describes them (see
+    :data:`_OBLIQUE_RESIDUAL_SHARE`), else None.
+
+    The centre stays the disc model's: an ellipse is symmetric about its centre, and
+    so is the least-squares fit of the (symmetric) disc model to it, which lands on
+    that centre (0.01 px on rendered ellipses of axis ratio 0.7). An edge-point
+    ellipse fit's own centre gave no straighter rows (0.393 against 0.380 px on the
+    UCL frame's 668 triples). A shape whose centre the disc model misses (a
+    teardrop) is off any ellipse centred there."""
+    from .circlefit import centred_ellipse  # only for the few markers that need it
+
+    found = centred_ellipse(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    if found is None:
+        return None
+    ratio, rms = found
+    if ratio < _OBLIQUE_MIN_AXIS_RATIO or not rms <= _OBLIQUE_RESIDUAL_SHARE * f.residual_rms_px:
+        return None
+    return ratio, rms
+
+
 def _pixels_marker(f: DiscFit) -> Marker:
-    """A :class:`Marker` from the pixel-model fit (``fit="pixels"``)."""
+    """A :class:`Marker` from the pixel-model fit (``fit="pixels"``): ``not_round``
+    when its edge is neither a circle nor an ellipse (a disc seen obliquely,
+    :func:`_oblique`; then ``ok``, with the ellipse's residual and a message)."""
     circ = f.circularity
+    rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
     if circ < min_circularity(f.radius_px):
-        return _not_round(f.x_px, f.y_px, f.radius_px, circ)
+        oblique = _oblique(f)
+        if oblique is None:
+            return _not_round(f.x_px, f.y_px, f.radius_px, circ)
+        ratio, rms = oblique
+        message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
+                   f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
     return Marker(
         x_px=f.x_px,
         y_px=f.y_px,
@@ -432,11 +477,12 @@ def _pixels_marker(f: DiscFit) -> Marker:
         y_std_px=float(np.sqrt(f.cov[1, 1])),
         xy_cov_px2=float(f.cov[0, 1]),
         radius_std_px=float(np.sqrt(f.cov[2, 2])),
-        residual_rms_px=f.residual_rms_px,
-        n_edge_points=int(f.edge_x_px.size),
+        residual_rms_px=rms,
+        n_edge_points=n_edge,
         contrast_dn=f.foreground_dn - f.background_dn,
         circularity=circ,
         edge_width_px=f.edge_width_px,
+        message=message,
     )
 
 
