@@ -286,3 +286,25 @@ def test_an_edge_that_misfits_along_one_side_is_not_cut_as_an_occluder():
         assert f.n_pixels == plain.n_pixels  # nothing cut
         offsets.append(f.x_px - cx)
     assert np.ptp(offsets) < 0.03 and 0.6 < np.mean(offsets) < 0.8
+
+
+def test_an_edge_seen_on_too_short_an_arc_is_not_fitted():
+    """A fit needs information in a third of its ~1 px edge sectors (at least 12, or
+    half of them under 4 px): a dot fitted on 23 of its 94 sectors (its other side left
+    out as a neighbour's pixels) came out round, ok and 4 px off. Sector offsets from
+    pixels in 31 of 94 sectors are refused with the counts; in 32 they are given."""
+    from vision_torsion._ring import sector_edge_offsets, sectors_needed
+
+    assert [int(sectors_needed(n)) for n in (16, 24, 36, 94, 220)] == [8, 12, 12, 32, 74]
+    assert sectors_needed(np.array([16, 94])).tolist() == [8, 32]
+    rng = np.random.default_rng(3)
+    for seen, fails in ((31, True), (32, False)):
+        sector = np.repeat(np.arange(seen), 10)
+        g = rng.uniform(1.0, 2.0, sector.size)
+        psi = (sector + 0.5) * 2 * np.pi / 94 - np.pi
+        args = (sector, 94, g, rng.normal(0.0, 0.1, sector.size), g * np.cos(psi), g * np.sin(psi))
+        if fails:
+            with pytest.raises(FitError, match=r"only 31 edge sectors carry information \(need 32\)"):
+                sector_edge_offsets(*args)
+        else:
+            assert sector_edge_offsets(*args)[0].size == 32

@@ -63,6 +63,7 @@ from ._ring import (
     robust_sigma_rows,
     sector_edge_offsets,
     sector_index,
+    sectors_needed,
 )
 from .errors import FitError
 
@@ -640,7 +641,7 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n) -> list:
     median = np.where(count % 2 == 1, hi, 0.5 * (lo + hi))  # fast_median of the positive ones
     good = np.where(count[:, None] > 0, den > 0.1 * median[:, None], positive) & valid
     kept = good.sum(axis=1)
-    need = np.minimum(12, np.maximum(8, n_sec // 2))
+    need = sectors_needed(n_sec)
     delta = np.where(good, num / np.where(good, den, 1.0), 0.0)
     ang = np.arctan2(sn, cs)
     c, s = np.cos(ang), np.sin(ang)
