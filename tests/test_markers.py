@@ -332,3 +332,30 @@ def test_a_disc_seen_obliquely_is_found_and_a_non_round_blob_is_not():
     for cx, cy in ((100.3, 145.0), (250.2, 150.7)):
         near = rest[np.hypot(rest["x_px"] - cx, rest["y_px"] - cy) < 8.0]
         assert list(near["status"]) == ["not_round"], table
+
+
+def test_a_neighbour_whose_circle_holds_the_marker_takes_none_of_its_pixels():
+    """A large candidate's coarse circle can hold other markers: the dark surround of a
+    calibration card, cut by the image border, had a coarse circle of 114-166 px that
+    covered dots of the card, and their sides facing it were left out as its pixels
+    (dots 4 px off yet ok, or no start at all). Such a neighbour is no disc there, so
+    none of its pixels are left out: a dot of 12 px at a sub-pixel centre, 20 px
+    from a dark band along the border, given that band's coarse circle as a
+    neighbour, is fitted as without it. Truth: rendered 4x supersampled, blur σ 1 px,
+    noise σ 2 DN on 160 DN; σ of the centre ~0.005 px, hence 0.03 px."""
+    from vision_torsion.detect import Blob
+    from vision_torsion.markers import fit_marker
+
+    h, w, n = 120, 160, 4
+    centre = (70.37, 60.58)
+    ys, xs = (np.mgrid[0 : h * n, 0 : w * n] + 0.5) / n - 0.5
+    dark = (np.hypot(xs - centre[0], ys - centre[1]) < 12.0) | (xs < 38.0)
+    img = 200.0 - 160.0 * dark.reshape(h, n, w, n).mean(axis=(1, 3))
+    img = cv2.GaussianBlur(img, (0, 0), 1.0) + np.random.default_rng(4).normal(0.0, 2.0, img.shape)
+    img = img.astype(np.float32)
+    blob = Blob(x=70.0, y=61.0, radius=12.0, elongation=1.0, fill=1.0, touches_border=False)
+    alone = fit_marker(img, blob)
+    held = fit_marker(img, blob, neighbours=[(-40.0, 60.0, 120.0)])  # its circle reaches x = 80
+    assert alone.ok and held.ok, (alone, held)
+    assert (held.x_px, held.y_px) == pytest.approx(centre, abs=0.03)
+    assert (held.x_px, held.y_px) == pytest.approx((alone.x_px, alone.y_px), abs=1e-9)

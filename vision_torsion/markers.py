@@ -270,6 +270,13 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) ->
     inside = d2 < (reach**2)[:, None, None]
     large = np.flatnonzero(nb[:, 2] > 1.5 * own[2]) if own is not None else ()
     if len(large):
+        # a large neighbour whose coarse circle holds this marker's centre is no disc
+        # here (the dark surround of a card, cut by the border: its circle covered
+        # dots of the card, whose own sides were then left out): none of its pixels
+        held = np.hypot(nb[large, 0] - own[0], nb[large, 1] - own[1]) < nb[large, 2]
+        inside[large[held]] = False
+        large = large[~held]
+    if len(large):
         # of a large neighbour's flagged pixels, those nearer this marker's coarse edge stay
         k, y, x = np.nonzero(inside[large])
         k = large[k]
