@@ -430,10 +430,11 @@ def _not_round(cx, cy, r, circ) -> Marker:
 #: A pixel fit judged not round is a disc seen obliquely when an ellipse centred on
 #: the fit's centre describes its per-sector edge points: their RMS distance from it
 #: is at most this share of their RMS distance from the circle (:func:`_oblique`).
-#: Rendered ellipses of axis ratio 0.5-0.75 (radius 6-25 px, 2 DN noise) leave
-#: 0.03-0.2; the tilted card of the UCL laparoscope frames (220 dots judged not
-#: round) at most 0.35, its edge points' own scatter; shapes that are not such
-#: ellipses leave more: a teardrop 0.6, a 30x24 px rectangle 0.75.
+#: Rendered ellipses of axis ratio 0.6-0.75 (radius 6-25 px, blur 1 px, 2 DN noise)
+#: leave 0.05-0.11; the tilted card of the UCL laparoscope frames (214 dots judged
+#: not round) a median of 0.25 and 0.33 at the 95th percentile, its edge points' own
+#: scatter (two dots 0.57); shapes that are not such ellipses leave more: a teardrop
+#: 0.58, a 30x24 px rectangle 0.81.
 _OBLIQUE_RESIDUAL_SHARE = 0.4
 #: Smallest axis ratio of such an ellipse (a disc seen 60° off-axis): beyond it the
 #: circle's ring of pixels no longer holds the whole edge (a 0.6 ellipse of 25 px did
