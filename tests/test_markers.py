@@ -359,3 +359,23 @@ def test_a_neighbour_whose_circle_holds_the_marker_takes_none_of_its_pixels():
     assert alone.ok and held.ok, (alone, held)
     assert (held.x_px, held.y_px) == pytest.approx(centre, abs=0.03)
     assert (held.x_px, held.y_px) == pytest.approx((alone.x_px, alone.y_px), abs=1e-9)
+
+
+@pytest.mark.parametrize("seed, angle", [(0, -70.0), (1, 35.0), (2, 70.0)])
+def test_noise_specks_of_a_faint_scene_are_not_ok_markers(seed, angle):
+    # On the low-contrast scene the disc model, started on a speck of noise, could end
+    # at a negative radius with a standard deviation of 10-6000 px (and a circularity
+    # above 1), and such candidates were reported ok: 3-8 "markers" where the scene
+    # has 2. A radius must be positive and at least twice its standard deviation.
+    from vision_torsion.synthetic import marker_centres_image
+
+    scene = load_scene("low_contrast")
+    table = find_markers(render(scene, angle, seed=seed).image)
+    ok = table[table.status == "ok"]
+    truth = marker_centres_image(scene, angle)
+    assert len(ok) == len(truth) == 2
+    found = ok[["x_px", "y_px"]].to_numpy()
+    assert np.all(np.min(np.hypot(*(found[:, None, :] - truth[None, :, :]).transpose(2, 0, 1)), axis=0) < 0.5)
+    assert np.all(ok.radius_px > 2 * ok.radius_std_px)
+    faint = table[table.message.str.contains("is not a disc's", regex=False)]
+    assert len(faint) >= 2 and set(faint.status) == {"fit_failed"}

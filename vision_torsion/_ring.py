@@ -372,6 +372,22 @@ def check_contrast(contrast, sigma2) -> None:
         )
 
 
+def check_radius(radius, var_radius) -> None:
+    """Raise FitError unless the fitted radius (px) is positive and determined: at least
+    twice its standard deviation (``var_radius`` in px²).
+
+    The disc model takes a negative radius as well as a positive one (its edge term
+    depends on the distance from the edge), and a candidate with no disc in it (a
+    speck of noise on a faint background) can end there, with a radius of 0.05-13 px
+    of either sign and a standard deviation of 3-6000 px: a marker no one can place.
+    A real marker's radius is known to a small fraction of it (0.01 px of 10 px)."""
+    if not (radius > 0.0 and 4.0 * var_radius < radius * radius):
+        raise FitError(
+            f"the marker's fitted radius ({radius:.2f} ± {np.sqrt(max(var_radius, 0.0)):.2f} px) "
+            "is not a disc's (no marker edge in the ring)"
+        )
+
+
 def bounded_edge_width(new, old):
     """An updated edge width s (px) kept within [old/2, 2·old] and never below 0.3 px:
     an imaged edge is never sharper than the pixel's own width (s >= sqrt(1/12)).

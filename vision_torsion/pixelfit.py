@@ -54,6 +54,7 @@ from ._ring import (
     MarkerPatch,
     bounded_edge_width,
     check_contrast,
+    check_radius,
     cut_occluders,
     harmonic_circularity,
     lost_sectors,
@@ -482,6 +483,7 @@ def _fit_from(
     if not ok:
         raise FitError("the marker's edge model is degenerate (no edge in the ring)")
     cov = sigma2 * inverse
+    check_radius(p[2], cov[2, 2])
     ex, ey, rms, circularity = _edge_diagnostics(p, resid, J, u)
     return DiscFit(
         x_px=float(p[0]),
@@ -846,6 +848,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         try:
             check_contrast(P[k, 5] - P[k, 4], sigma2[k])
             cov = sigma2[k] * np.linalg.inv(A[k]) if covs is None else covs[j]
+            check_radius(P[k, 2], cov[2, 2])
             if isinstance(diagnostics[j], FitError):
                 raise diagnostics[j]
             ex, ey, rms, circularity = diagnostics[j]
