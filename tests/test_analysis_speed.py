@@ -173,10 +173,10 @@ def test_preisach_relay_pairs_are_the_loops(seed):
             np.testing.assert_array_equal(got, want)
 
 
-@pytest.mark.parametrize("enabled", [True, False])
-def test_analyze_command_gives_the_garbage_collector_back_as_it_found_it(tmp_path, capsys, enabled):
-    # The command runs with the cyclic collector off (a short batch job); a program that
-    # calls the command line in-process must get it back as it was, also after an error.
+def test_analyze_command_gives_the_garbage_collector_back_as_it_found_it(tmp_path, capsys):
+    # The command runs with higher collection thresholds; a program that calls the
+    # command line in-process gets its thresholds back, also after an error, and none
+    # of its objects frozen (only the process's own command line freezes, at its end).
     import gc
     import logging
 
@@ -185,12 +185,14 @@ def test_analyze_command_gives_the_garbage_collector_back_as_it_found_it(tmp_pat
     own = logging.getLogger("vision_torsion")
     level, handlers = own.level, list(own.handlers)
     (tmp_path / "bad.csv").write_text("image,angle_deg\na.png,1.0\n")
+    before, frozen = gc.get_threshold(), gc.get_freeze_count()
     try:
-        (gc.enable if enabled else gc.disable)()
+        gc.set_threshold(500, 7, 9)
         assert main(["analyze", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "out")]) == 2
-        assert gc.isenabled() is enabled
+        assert gc.get_threshold() == (500, 7, 9)
+        assert gc.get_freeze_count() == frozen
     finally:
-        gc.enable()
+        gc.set_threshold(*before)
         own.setLevel(level)
         for h in list(own.handlers):
             if h not in handlers:
@@ -226,3 +228,22 @@ def test_interp_rows_bisection_equals_counting(seed):
         xq = np.round(rng.normal(scale=1.5, size=(1 if rng.random() < 0.3 else n_rows, q)), 1)
         xq[0, 0] = np.nan if rng.random() < 0.2 else xq[0, 0]
         np.testing.assert_array_equal(interp_rows(xq, x, y, tol=0.1), _interp_rows_by_counting(xq, x, y, tol=0.1))
+
+
+def test_analyze_as_its_own_process_writes_and_prints_everything(tmp_path):
+    # The process's own command line freezes the collector's objects at its end (the
+    # interpreter's shutdown then skips walking them): every file and line is still there.
+    import json
+    import os
+    import subprocess
+    import sys
+
+    table = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), rng=np.random.default_rng(2))
+    table.to_csv(tmp_path / "m.csv", index=False)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    done = subprocess.run([sys.executable, "-m", "vision_torsion", "analyze", str(tmp_path / "m.csv"), "-o",
+                           str(tmp_path / "out")], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f"report: {tmp_path / 'out' / 'report.html'}" in done.stdout
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["counts"]["images"] == len(table)
+    assert (tmp_path / "out" / "report.html").read_text().rstrip().endswith("</html>")

@@ -29,19 +29,23 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+#: Cyclic-GC thresholds while the command runs (Python's default is (700, 10, 10)).
+GC_THRESHOLDS = (50_000, 20, 100)
+
+
 def run(args) -> int:
-    # A short batch command: the cyclic garbage collector would walk the ~130 000 objects
-    # of the libraries it imports over and over (0.13 s of the command's ~2.6 s CPU on
-    # the demo table, measured with gc.callbacks; benchmarks/bench_analyze.py) to find
-    # the few cycles it makes (matplotlib figures), which go with the process (peak
-    # memory on the demo 153 -> 156 MB). Reference counting frees everything else.
-    enabled = gc.isenabled()
-    gc.disable()
+    # The command keeps ~130 000 objects (most made while importing numpy, pandas, scipy
+    # and matplotlib) and makes few reference cycles (matplotlib figures). At Python's
+    # default thresholds the cyclic collector ran 358 times, walking those libraries'
+    # objects again and again: 0.13-0.15 s of the command's ~2.6 s CPU on the demo
+    # table; at these 0.05-0.06 s (gc.callbacks; benchmarks/bench_analyze.py), peak
+    # memory the same. Given back as found afterwards.
+    old = gc.get_threshold()
+    gc.set_threshold(*GC_THRESHOLDS)
     try:
         return _run(args)
     finally:
-        if enabled:
-            gc.enable()
+        gc.set_threshold(*old)
 
 
 def _run(args) -> int:
