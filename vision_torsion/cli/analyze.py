@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import gc
-
 from . import add_common_options
 from .options import add_output_option
 
@@ -26,29 +24,11 @@ def register(sub) -> None:
     p.add_argument("--session", metavar="FILE.toml", help="session.toml with the rig and the optional [gear]/[test]")
     add_output_option(p, "TABLE's folder/<TABLE stem>_analysis")
     add_common_options(p)
-    p.set_defaults(func=run)
-
-
-#: Cyclic-GC thresholds while the command runs (Python's default is (700, 10, 10)).
-GC_THRESHOLDS = (50_000, 20, 100)
+    # a short batch job: its own process runs it with the cyclic GC off (cli._ends_process)
+    p.set_defaults(func=run, gc_off=True)
 
 
 def run(args) -> int:
-    # The command keeps ~130 000 objects (most made while importing numpy, pandas, scipy
-    # and matplotlib) and makes few reference cycles (matplotlib figures). At Python's
-    # default thresholds the cyclic collector ran 358 times, walking those libraries'
-    # objects again and again: 0.13-0.15 s of the command's ~2.6 s CPU on the demo
-    # table; at these 0.05-0.06 s (gc.callbacks; benchmarks/bench_analyze.py), peak
-    # memory the same. Given back as found afterwards.
-    old = gc.get_threshold()
-    gc.set_threshold(*GC_THRESHOLDS)
-    try:
-        return _run(args)
-    finally:
-        gc.set_threshold(*old)
-
-
-def _run(args) -> int:
     from ..report.analyze import analyze_table, describe_withheld
 
     res = analyze_table(args.table, session=args.session, out_dir=args.out_dir)
