@@ -4,6 +4,9 @@
   way a camera sees the marker target rotated by a known angle.
 - :func:`make_session` plans a small session and renders every image of it with a
   known angle, returning the truth.
+- :func:`supersampled_grid`, :func:`ellipse_mask` and :func:`area_image` render
+  dark shapes (ellipses seen obliquely, teardrops) by area coverage, for the marker
+  tests that need shapes the synthetic renderer does not draw.
 - :class:`FakeCore` is a simple centroid measurer, passed to ``process_session`` as
   its ``measure`` function, so the bookkeeping of ``process`` (cache, resume,
   failures, output table) can be tested independently of the measurement core; it
@@ -129,3 +132,26 @@ class FakeCore:
         first, second = sorted(markers, key=lambda m: m.x_px)
         self.measured.append(name or str(image))
         return PairMeasurement(first=first, second=second)
+
+
+def supersampled_grid(height: int, width: int, n: int = 4):
+    """(xs, ys) of the centres of an image's sub-pixels, `n` x `n` per pixel, in
+    image pixels (origin at the centre of the top-left pixel)."""
+    return (np.mgrid[0 : height * n, 0 : width * n][::-1] + 0.5) / n - 0.5
+
+
+def ellipse_mask(xs, ys, centre, radius, axis_ratio=1.0, angle_deg=0.0):
+    """Sub-pixels inside an ellipse of geometric-mean radius `radius` (px), minor over
+    major axis `axis_ratio`, its major axis at `angle_deg` from the x axis."""
+    t = np.deg2rad(angle_deg)
+    u = (xs - centre[0]) * np.cos(t) + (ys - centre[1]) * np.sin(t)
+    v = (ys - centre[1]) * np.cos(t) - (xs - centre[0]) * np.sin(t)
+    q = np.sqrt(axis_ratio)
+    return (u * q / radius) ** 2 + (v / (q * radius)) ** 2 < 1.0
+
+
+def area_image(dark, n: int = 4, *, background=200.0, depth=160.0):
+    """An image (float64) of sub-pixel flags `dark` (`n` x `n` per pixel): each
+    pixel `background` less `depth` times the share of it covered."""
+    h, w = dark.shape[0] // n, dark.shape[1] // n
+    return background - depth * dark.reshape(h, n, w, n).mean(axis=(1, 3))

@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
+from helpers import area_image, ellipse_mask, supersampled_grid
 from scipy.special import ndtr
 
-from vision_torsion._ring import fast_median, marker_patch, normal_cdf, robust_sigma
+from vision_torsion._ring import fast_median, marker_patch, normal_cdf, occluder_group, robust_sigma
 from vision_torsion.errors import FitError
 from vision_torsion.pixelfit import _clean, _damped, _solve, fit_disc
 from vision_torsion.synthetic import render
@@ -133,6 +134,58 @@ def test_a_wire_across_the_edge_does_not_move_the_centre(small_scene):
     b = fit_disc(wired.image, x + 0.3, y, 20.0)
     assert np.hypot(b.x_px - a.x_px, b.y_px - a.y_px) < 0.01
     assert b.n_pixels < a.n_pixels  # the wire's pixels were cut
+
+
+def test_lone_outlying_pixels_are_noise_not_an_occluder():
+    """JPEG's heavy tails put single pixels and pairs beyond 4.5 robust σ in most rings
+    of a compressed photo. Cut as occluders (grown by 2 px, their sectors' edge
+    pixels dropped) they took a wedge out of a small dot's edge, and as such a dot's
+    edge is never exactly the model's (here an ellipse of axis ratio 0.85, still
+    judged round) the fit walked off: 0.23 px RMS, 0.6 px at worst over these
+    renders. An occluder is a group of at least π·s² outlying pixels; lone ones stay.
+    Truth: 40 renders of a dark ellipse (mean radius 5.5 px, 100 DN on 120 DN, blur σ
+    2.2 px) at sub-pixel centres, noise σ 4 DN and 0.3 % of the pixels ±50 DN. The
+    same renders without those pixels give 0.044 px RMS, and their variance adds ~20 %
+    to the noise's: RMS below 0.08 px and every centre within 0.2 px."""
+    import cv2
+
+    rng = np.random.default_rng(2026)
+    xs, ys = supersampled_grid(48, 52)
+    errors = []
+    for _ in range(40):
+        cx, cy = 25.3 + rng.uniform(-0.5, 0.5), 23.7 + rng.uniform(-0.5, 0.5)
+        img = area_image(ellipse_mask(xs, ys, (cx, cy), 5.5, 0.85, 29.0), background=120.0, depth=100.0)
+        img = cv2.GaussianBlur(img, (0, 0), 2.2) + rng.normal(0.0, 4.0, img.shape)
+        hit = rng.random(img.shape) < 0.003
+        img[hit] += rng.choice([-50.0, 50.0], int(hit.sum()))
+        f = fit_disc(img, cx + 0.4, cy - 0.3, 5.5, edge_width=2.0)
+        errors.append(np.hypot(f.x_px - cx, f.y_px - cy))
+    errors = np.array(errors)
+    assert np.sqrt(np.mean(errors**2)) < 0.08 and errors.max() < 0.2, errors
+
+
+def test_an_occluder_is_a_group_as_wide_as_the_blur():
+    """occluder_group: π·s² pixels at edge width s (px), and never fewer than 3."""
+    assert occluder_group(2.0) == pytest.approx(4.0 * np.pi)
+    assert occluder_group(0.5) == 3.0
+
+
+def test_a_displaced_block_across_the_edge_is_cut_as_an_occluder(standard_scene):
+    """A 16x16 block across a marker's edge shifted 3 px sideways (a damaged JPEG
+    block) is a compact group of outlying pixels: cut, the centre stays within 0.01 px
+    of the undamaged image's. With the noise's lone outlying pixels cut as well (and
+    grown along the edge) the cut looked like the edge's own misfit and nothing was
+    cut: 0.30 px off."""
+    from vision_torsion.pair import measure_pair
+
+    image = render(standard_scene, 3.0, seed=3).image
+    clean = measure_pair(image).first
+    x0, y0 = int(clean.x_px + clean.radius_px - 8), int(clean.y_px - 8)
+    damaged = np.array(image, dtype=np.float64)
+    damaged[y0 : y0 + 16, x0 : x0 + 16] = np.roll(damaged[y0 : y0 + 16, x0 : x0 + 16], 3, axis=1)
+    m = measure_pair(np.clip(np.rint(damaged), 0, 255).astype(np.uint8)).first
+    assert np.hypot(m.x_px - clean.x_px, m.y_px - clean.y_px) < 0.01
+    assert m.n_edge_points < clean.n_edge_points  # the block's sectors were dropped
 
 
 def test_diagnostics_of_a_round_marker(small_scene):

@@ -252,26 +252,62 @@ def robust_sigma_rows(resid, n):
 OCCLUDER_SIGMAS = 4.5
 
 
-def cut_occluders(resid, edge_zone, resolve, ring_idx, shape):
+def occluder_group(edge_width) -> float:
+    """Fewest pixels (a float) of a connected group of outlying pixels that
+    :func:`cut_occluders` takes for an occluder, at edge width `edge_width` (px): the
+    area of a disc of one edge width's radius, π·s², and at least 3 pixels.
+
+    Anything in front of the target is seen through the same optics as the marker,
+    so its outlying pixels form a patch at least about as wide as the blur. A
+    smaller group is the tail of the pixel noise: JPEG's blocks and ringing put
+    single pixels and pairs beyond 4.5 robust σ in most rings of a compressed
+    photo (on the full discorpy 06 frame, s ≈ 2.3 px: 1000 lone pixels and 230
+    pairs over its 1900 rings), and cutting one, grown by 2 px with its sectors'
+    edge pixels dropped, took a quarter of a 5 px dot's edge away: the fit then
+    walked off by up to 1.8 px (60 dots moved over 0.3 px). The rendered dust specks
+    (radius 1.2-2.8 px, blur σ 1 px) leave groups of 10 pixels and more."""
+    return max(np.pi * float(edge_width) ** 2, 3.0)
+
+
+def _drop_small_groups(keep, ring_idx, shape, least):
+    """`keep` with the outlying pixels (False) of connected groups (8-connected, on
+    the patch of `shape`) of fewer than `least` pixels kept after all."""
+    out = np.zeros(shape, np.uint8)
+    flat = out.reshape(-1)  # a view
+    flat[ring_idx[~keep]] = 1
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(out, connectivity=8)
+    small = stats[:, cv2.CC_STAT_AREA] < least
+    small[0] = False  # the background label
+    if not small.any():
+        return keep
+    return keep | small[labels.reshape(-1)[ring_idx]]
+
+
+def cut_occluders(resid, edge_zone, resolve, ring_idx, shape, *, least=3.0):
     """Flags of the ring pixels to keep, or None when nothing is to be cut.
 
-    Pixels more than 4.5 robust σ off the model are a wire or a speck in the ring.
-    The levels behind `resid` were pulled by the occluder, so that first cut also
-    chose ordinary pixels by their values (a truncation bias): ``resolve(keep)``
-    gives the residuals with the levels solved without it, the cut is made again
-    against them and grown by 2 px (:func:`grow_cut`). A quarter of the edge zone
-    (`edge_zone`, flags) cut at first is the model not fitting the edge yet (a first
-    iteration, a sharp or odd edge profile), not an occluder: None; so is half of
-    it cut once grown (a wire lying along the edge for 60° of arc loses ~30 %).
+    Pixels more than 4.5 robust σ off the model, in connected groups of at least
+    `least` pixels (:func:`occluder_group`: smaller groups are the noise's tail), are
+    a wire or a speck in the ring. The levels behind `resid` were pulled by the
+    occluder, so that first cut also chose ordinary pixels by their values (a
+    truncation bias): ``resolve(keep)`` gives the residuals with the levels solved
+    without it, the cut is made again against them (groups as before) and grown by
+    2 px (:func:`grow_cut`). A quarter of the edge zone (`edge_zone`, flags) cut at
+    first is the model not fitting the edge yet (a first iteration, a sharp or odd
+    edge profile), not an occluder: None; so is half of it cut once grown (a wire
+    lying along the edge for 60° of arc loses ~30 %).
     """
     keep = np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)
+    if not keep.all():
+        keep = _drop_small_groups(keep, ring_idx, shape, least)
     # shares of the edge zone kept by counts (ndarray.mean's Python overhead was a
     # tenth of an examination; the same value: whole numbers over whole numbers)
     zone_n = max(np.count_nonzero(edge_zone), 1)  # none: nothing kept in it, None as before
     if keep.all() or np.count_nonzero(keep & edge_zone) / zone_n <= 0.75:
         return None
     resid = resolve(keep)
-    keep = grow_cut(np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid[keep]), ring_idx, shape)
+    keep = np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid[keep])
+    keep = grow_cut(_drop_small_groups(keep, ring_idx, shape, least), ring_idx, shape)
     return keep if np.count_nonzero(keep & edge_zone) / zone_n > 0.5 else None
 
 

@@ -56,6 +56,7 @@ from ._ring import (
     lost_sectors,
     marker_patch,
     normal_cdf,
+    occluder_group,
     sector_edge_offsets,
     sector_index,
 )
@@ -185,6 +186,7 @@ def edge_points(
         lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1],
         ring_idx,
         patch.shape,
+        least=occluder_group(s),
     )
     if keep is None:
         keep = np.ones(vals.size, bool)

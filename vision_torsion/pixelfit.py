@@ -26,7 +26,8 @@ edge. It is chosen once, around the start, 0.5 px wider each side for the start'
 error.
 
 Robustness: once the centre has settled (a step under 0.05 px), pixels more than
-4.5 robust σ off the model (a wire or a speck crossing the ring) are cut. As in
+4.5 robust σ off the model in connected groups as wide as the blur (π·s² pixels: a
+wire or a speck crossing the ring; lone pixels are the noise's tail) are cut. As in
 :mod:`.edges`, the cut is made twice (the second time against grey levels solved
 without the first cut, so that the occluder's pull does not select ordinary pixels
 by their values), grown by 2 px over the occluder's blurred flanks, and the edge
@@ -60,6 +61,7 @@ from ._ring import (
     lost_sectors,
     marker_patch,
     normal_cdf,
+    occluder_group,
     robust_sigma,
     robust_sigma_rows,
     sector_edge_offsets,
@@ -269,7 +271,7 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
     edge_zone = np.abs(u) < 3.0
     try:
-        keep = cut_occluders(resid, edge_zone, resolve, px.index, patch.shape)
+        keep = cut_occluders(resid, edge_zone, resolve, px.index, patch.shape, least=occluder_group(p[3]))
     except np.linalg.LinAlgError:
         return None
     if keep is None:
