@@ -147,6 +147,14 @@ class DiscFit:
     circularity : float
         1 - 2·|second radial harmonic of those edge points|/R: the minor/major axis
         ratio of a near-circle.
+    edge_noise_px : float
+        RMS standard deviation of those edge points from the pixel noise alone (px):
+        √(mean σ²/Σg²) over the sectors, Σg² a sector's information and σ² the
+        residual variance of the ring's pixels away from the edge (more than 3s from
+        it), which a marker's shape leaves alone (all the ring's, if fewer than 30).
+        About what `residual_rms_px` would be for an edge the model fits exactly
+        (1.2-1.8 times it on the round dots of the discorpy photos: JPEG, printing);
+        the rest is the edge's shape.
     """
 
     x_px: float
@@ -162,6 +170,7 @@ class DiscFit:
     edge_y_px: np.ndarray
     residual_rms_px: float
     circularity: float
+    edge_noise_px: float = float("nan")
 
 
 class _Pixels:
@@ -299,10 +308,12 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     return keep
 
 
-def _edge_diagnostics(p, resid, J, u):
+def _edge_diagnostics(p, resid, J, u, sigma2):
     """Per-sector edge points (:func:`~vision_torsion._ring.sector_edge_offsets`),
-    their RMS distance from the circle (px) and the circularity they give
-    (:func:`~vision_torsion._ring.harmonic_circularity`)."""
+    their RMS distance from the circle (px), the circularity they give
+    (:func:`~vision_torsion._ring.harmonic_circularity`) and their RMS standard
+    deviation from the pixel noise alone (px; :func:`_away_variance`, `sigma2` the
+    ring's residual variance in DN²)."""
     cx, cy, R = p[0], p[1], p[2]
     band = np.flatnonzero(np.abs(u) < 3.0)
     # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
@@ -312,7 +323,7 @@ def _edge_diagnostics(p, resid, J, u):
     if p[5] < p[4]:
         psi += np.pi
     k, n_sec = sector_index(psi, R)
-    delta, ang, _ = sector_edge_offsets(k, n_sec, g, resid.take(band), g_cos, g_sin)
+    delta, ang, info = sector_edge_offsets(k, n_sec, g, resid.take(band), g_cos, g_sin)
     c, s = np.cos(ang), np.sin(ang)
     r = R + delta
     return (
@@ -320,7 +331,18 @@ def _edge_diagnostics(p, resid, J, u):
         cy + r * s,
         float(np.sqrt(np.dot(delta, delta) / delta.size)),
         harmonic_circularity(delta, c, s, R),
+        float(np.sqrt(_away_variance(resid, u, sigma2) * np.mean(1.0 / info))),
     )
+
+
+def _away_variance(resid, u, sigma2) -> float:
+    """Residual variance (DN²) of the pixels more than 3s from the edge (|u| >= 3),
+    or `sigma2` when fewer than 30: the pixel noise, without the misfit of an edge
+    that is not the model's circle (an ellipse's, which inflates the ring's whole
+    variance by 2-15x on rendered ones)."""
+    away = np.abs(u) >= 3.0
+    n = np.count_nonzero(away)
+    return float(np.dot(resid[away], resid[away]) / n) if n >= 30 else sigma2
 
 
 def fit_disc(
@@ -486,7 +508,7 @@ def _fit_from(
         raise FitError("the marker's edge model is degenerate (no edge in the ring)")
     cov = sigma2 * inverse
     check_radius(p[2], cov[2, 2])
-    ex, ey, rms, circularity = _edge_diagnostics(p, resid, J, u)
+    ex, ey, rms, circularity, noise = _edge_diagnostics(p, resid, J, u, sigma2)
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -501,6 +523,7 @@ def _fit_from(
         edge_y_px=ey,
         residual_rms_px=rms,
         circularity=circularity,
+        edge_noise_px=noise,
     )
 
 
@@ -610,11 +633,12 @@ def _normal_equations(Jm, resid):
     return Jm @ Jm.transpose(0, 2, 1), (Jm @ resid[:, :, None])[:, :, 0]
 
 
-def _edge_diagnostics_rows(P, resid, Jm, u, n) -> list:
+def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
     """:func:`_edge_diagnostics` of rows of markers (parameters `P`, M x 8; the
-    model's residuals, Jacobian and u of their padded rings, of `n` pixels each) in
-    one set of array operations: per row the edge points (x, y), their RMS and
-    circularity, or the FitError of too few sectors (:func:`sector_edge_offsets`'s)."""
+    model's residuals, Jacobian and u of their padded rings, of `n` pixels each;
+    their residual variances `sigma2`) in one set of array operations: per row the
+    edge points (x, y), their RMS, circularity and RMS standard deviation from the
+    noise, or the FitError of too few sectors (:func:`sector_edge_offsets`'s)."""
     m = len(P)
     if not m:
         return []
@@ -656,12 +680,17 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n) -> list:
     a2 = (2.0 / per) * (delta * (c * c - s * s)).sum(axis=1)
     b2 = (2.0 / per) * (delta * (2.0 * c * s)).sum(axis=1)
     circularity = 1.0 - 2.0 * np.hypot(a2, b2) / P[:, 2]
+    # :func:`_away_variance` of each row (the padding's u is inf: masked by n)
+    away = (np.abs(u) >= 3.0) & (np.arange(u.shape[1]) < n[:, None])
+    na = away.sum(axis=1)
+    var_away = np.where(na >= 30, (np.where(away, resid, 0.0) ** 2).sum(axis=1) / np.maximum(na, 1), sigma2)
+    noise = np.sqrt(var_away * (np.where(good, 1.0 / np.where(good, den, 1.0), 0.0)).sum(axis=1) / per)
     out = []
     for k in rows:
         if kept[k] < need[k]:
             out.append(FitError(f"only {int(kept[k])} edge sectors carry information (need {int(need[k])})"))
         else:
-            out.append((ex[k, good[k]], ey[k, good[k]], float(rms[k]), float(circularity[k])))
+            out.append((ex[k, good[k]], ey[k, good[k]], float(rms[k]), float(circularity[k]), float(noise[k])))
     return out
 
 
@@ -839,9 +868,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     good = np.flatnonzero(~unfit)
     sigma2 = ssr / np.maximum(px.n - 8, 1)
     if good.size == m:  # no copies of the rows (most fits: none failed)
-        diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n)
+        diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
     else:
-        diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good])
+        diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
     try:
         covs = sigma2[good, None, None] * np.linalg.inv(A[good])
     except np.linalg.LinAlgError:
@@ -853,7 +882,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             check_radius(P[k, 2], cov[2, 2])
             if isinstance(diagnostics[j], FitError):
                 raise diagnostics[j]
-            ex, ey, rms, circularity = diagnostics[j]
+            ex, ey, rms, circularity, noise = diagnostics[j]
         except np.linalg.LinAlgError:
             failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
             continue
@@ -874,6 +903,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             edge_y_px=ey,
             residual_rms_px=rms,
             circularity=circularity,
+            edge_noise_px=noise,
         )
     for k, exc in failed.items():
         out[live[k]] = exc
