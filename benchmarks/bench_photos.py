@@ -3,8 +3,9 @@
 Run (one command; about a minute on one core)::
 
     python benchmarks/bench_photos.py                  # the photos of tests/data/photos
-    python benchmarks/bench_photos.py --extra DIR      # also every image in DIR (full-size
-                                                       # originals, see tests/data/photos/README.md)
+    python benchmarks/bench_photos.py --extra DIR      # also every image in DIR: the full-size
+                                                       # originals, which fetch_photos.py writes
+                                                       # (tests/data/photos/README.md)
 
 Each photo is a public photograph of a dot target (calibration plate or circle grid;
 provenance and licence in ``tests/data/photos/README.md``). There is no ground truth,

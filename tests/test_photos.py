@@ -8,6 +8,7 @@ which any camera homography keeps. Kept fast: four small crops.
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,14 +22,16 @@ ROOT = Path(__file__).resolve().parents[1]
 PHOTOS = ROOT / "tests" / "data" / "photos"
 
 
-def _grid():
-    spec = importlib.util.spec_from_file_location("photo_grid", ROOT / "benchmarks" / "photo_grid.py")
+def _bench_module(name):
+    """A module of benchmarks/ (not a package) by its name."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # its dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
 
 
-grid = _grid()
+grid = _bench_module("photo_grid")
 
 #: Largest RMS distance (px) of a dot's centre from the line through its two grid
 #: neighbours, per photo: the benchmark's value (benchmarks/results/photos.md, the
@@ -109,3 +112,44 @@ def test_line_curve_scatter_takes_out_lens_bending_and_measures_centre_noise():
     assert grid.off_curve(bent, lines)[0] < 0.2 * 0.05  # the bending alone: taken out
     bending = np.sqrt(np.mean(grid.off_line(bent, grid.grid_triples(bent)) ** 2))
     assert bending > 0.05 * np.sqrt(1.5)  # the triples: more bending than noise
+
+
+def _git(repo, *args) -> str:
+    import subprocess
+
+    return subprocess.run(["git", "-C", str(repo), *args], capture_output=True, text=True, check=True).stdout.strip()
+
+
+def test_fetch_photos_writes_the_originals_checked_by_their_git_blob_ids(tmp_path, monkeypatch):
+    """benchmarks/fetch_photos.py writes each original from the first source that has
+    it: a repository holding the commit (a clone or a bare mirror: git show), then a
+    folder of downloaded files; a file whose git blob id is not the original's is
+    refused with the reason, and what no source has is reported, exit code 1. The
+    originals' ids are those of the repositories (README of tests/data/photos); here
+    a small repository stands in for them."""
+    fetch_photos = _bench_module("fetch_photos")
+    repo = tmp_path / "repo"
+    (repo / "data").mkdir(parents=True)
+    content = b"\x89PNG not really, but bytes"
+    (repo / "data" / "dot.png").write_bytes(content)
+    _git(repo, "init", "-q")
+    _git(repo, "add", ".")
+    _git(repo, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "-m", "dots")
+    commit = _git(repo, "rev-parse", "HEAD")
+    blob = _git(repo, "rev-parse", f"{commit}:data/dot.png")
+    assert fetch_photos.blob_id(content) == blob
+    originals = (fetch_photos.Original("dot_full.png", "o/n", commit, "data/dot.png", blob),
+                 fetch_photos.Original("gone_full.png", "o/n", commit, "data/gone.png", "0" * 40))
+    monkeypatch.setattr(fetch_photos, "ORIGINALS", originals)
+    folder = tmp_path / "downloads"
+    folder.mkdir()
+    (folder / "dot.png").write_bytes(content + b"!")  # damaged
+    out = tmp_path / "out"
+    result = fetch_photos.fetch(out, folder=folder)
+    assert result["dot_full.png"].startswith(f"not found: o/n {commit[:12]} data/dot.png (--from {folder}: "
+                                             "not the original (git blob ")
+    assert not (out / "dot_full.png").exists()
+    assert fetch_photos.main([str(out), "--repo", str(tmp_path), "--repo", str(repo), "--from", str(folder)]) == 1
+    assert (out / "dot_full.png").read_bytes() == content
+    assert result["gone_full.png"] == f"not found: o/n {commit[:12]} data/gone.png (in none of the sources given)"
+    assert sorted(p.name for p in out.iterdir()) == ["dot_full.png"]
