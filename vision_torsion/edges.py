@@ -180,17 +180,18 @@ def edge_points(
     # the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
     u = (R - d) / s
     coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, np.ones_like(vals))
-    keep = cut_occluders(
+    found = cut_occluders(
         resid,
-        np.abs(u) < 3.0,
+        u,
         lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1],
         ring_idx,
         patch.shape,
         least=occluder_group(s),
     )
-    if keep is None:
+    if found is None:
         keep = np.ones(vals.size, bool)
     else:
+        keep = found[0]
         coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64))
     pdf = np.exp(-0.5 * u * u) * INV_SQRT_2PI
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny

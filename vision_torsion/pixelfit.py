@@ -27,7 +27,9 @@ error.
 
 Robustness: once the centre has settled (a step under 0.05 px), pixels more than
 4.5 robust σ off the model in connected groups as wide as the blur (π·s² pixels: a
-wire or a speck crossing the ring; lone pixels are the noise's tail) are cut. As in
+wire or a speck crossing the ring; lone pixels are the noise's tail) that the edge
+moved or widened there does not account for (a band along the edge is the edge's
+own shape: interlace, sharpening, ringing) are cut. As in
 :mod:`.edges`, the cut is made twice (the second time against grey levels solved
 without the first cut, so that the occluder's pull does not select ordinary pixels
 by their values), grown by 2 px over the occluder's blurred flanks, and the edge
@@ -271,31 +273,35 @@ def _sectors(xs, ys, cx, cy, R):
 def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the pixels to keep, or None: the occluder cut of
     :func:`~vision_torsion._ring.cut_occluders`, and the edge pixels of the sectors
-    it touched. `resid`, `J`, `u` are the model at `p`."""
+    it touched; None when the outlying pixels it saw lie along much of the edge
+    (the edge's own misfit). `resid`, `J`, `u` are the model at `p`."""
 
     def resolve(keep):
         # a Gauss-Newton step of the levels alone, without the cut pixels
         lev = J[4:8, keep]
         return resid - np.linalg.solve(lev @ lev.T, lev @ resid[keep]) @ J[4:8]
 
-    edge_zone = np.abs(u) < 3.0
     try:
-        keep = cut_occluders(resid, edge_zone, resolve, px.index, patch.shape, least=occluder_group(p[3]))
+        found = cut_occluders(resid, u, resolve, px.index, patch.shape, least=occluder_group(p[3]))
     except np.linalg.LinAlgError:
         return None
-    if keep is None:
+    if found is None:
         return None
+    keep, seen = found
     # sectors of the edge zone's pixels only: the rest of the ring has none
-    zone = np.flatnonzero(edge_zone)
+    zone = np.flatnonzero(np.abs(u) < 3.0)
     sector, n_sec = _sectors(px.xs[zone], px.ys[zone], p[0], p[1], p[2])
-    cut_edge = ~keep[zone]
+    seen_edge = ~seen[zone]
     # distinct sectors counted with bincount: np.unique imports numpy.ma (0.1-0.2 s) on first use
     if (
-        np.count_nonzero(cut_edge) >= _MISFIT_EDGE_SHARE * np.count_nonzero(~keep)
-        and np.count_nonzero(np.bincount(sector[cut_edge], minlength=n_sec)) > _MISFIT_ARC * n_sec
+        np.count_nonzero(seen_edge) >= _MISFIT_EDGE_SHARE * np.count_nonzero(~seen)
+        and np.count_nonzero(np.bincount(sector[seen_edge], minlength=n_sec)) > _MISFIT_ARC * n_sec
     ):
-        # the edge's own misfit along much of its length, not an occluder: keep all
+        # the edge's own misfit along much of its length (judged on every group it
+        # showed, those the edge moved there accounts for too), not an occluder:
+        # keep all
         return None
+    cut_edge = ~keep[zone]
     # the cut was made against a settled fit, so even a wire lying along the edge
     # for 90° of arc (~40 % of the sectors with their neighbours) is occlusion
     lost = lost_sectors(sector[cut_edge], n_sec, most=0.5)
