@@ -1,6 +1,7 @@
 """Are the figures right, or do they say why not? (issue 14)
 
     python benchmarks/bench_figures.py [--reps 50] [--jobs 2] [--cases ...] [--first-rep 0] [--out FILE]
+    python benchmarks/bench_figures.py --merge RUN1.json RUN2.json [--out FILE]   # runs on other seeds, added up
 
 Sessions from the benchmark's own generator (``truth_tables.py``: exact truth,
 no code shared with the analysis), analysed by ``analyze_session`` with the rig's
@@ -9,7 +10,11 @@ that has a truth, a result is **ok** when it is within its u95 of the truth, or 
 withheld (null with a reason) or flagged with a reason; a **miss** is a shown,
 unflagged figure off by more than its u95. The session means of the report's budget
 table are checked too, as figures ``mean:<figure>``, against the gear's value (the
-loop model at each orientation's stiffness, without the cycle-to-cycle draw). Per
+loop model at each orientation's stiffness, without the cycle-to-cycle draw), and so
+are each orientation's means over its cycles (``per_orientation``, the report's metrics
+table), as ``orientation_mean:<figure>`` pooled over the orientations, against the
+gear's value at that orientation (rated per figure; the case's totals count the loop
+figures and session means). Per
 case: the worst figure's rate with its Clopper–Pearson 95 % interval, and how many
 figures fall below 93 % and how many of them significantly so (the interval counts
 sessions, not loops: a session's 2–18 loops share its weight pieces and move together). Prints a table and writes
@@ -83,8 +88,7 @@ def run_one(task):
     from vision_torsion.analysis import analyze_session
 
     kind, opts = CASES[case]
-    rng = np.random.default_rng([zlib.crc32(case.encode()), int(noise * 1e5), rep])
-    df, truth = T.session_table(kind, angle_std_deg=noise, rng=rng, **opts)
+    df, truth = T.session_table(kind, angle_std_deg=noise, rng=_session_rng(case, noise, rep), **opts)
     kw = dict(rig=RIG, max_torque_nm=T.T_MAX, n_draws=40, seed=rep)
     if case in ORIENTATION_CASES:
         kw.update(n_draws=10, fit_breaks=False)
@@ -134,6 +138,24 @@ def run_one(task):
     return case, noise, rep, res
 
 
+def _session_rng(case, noise, rep):
+    """The generator of one session (its seed: the case, the noise level and the session's number)."""
+    return np.random.default_rng([zlib.crc32(case.encode()), int(noise * 1e5), rep])
+
+
+def _tip_draws_inside(case, noise, ranges):
+    """Of the sessions (seed ranges ``[lo, hi)``), the fractions whose weight error at the +Tmax and at the
+    −Tmax tip lies within ±1.96σ: what an analysis that knew σ exactly would cover of a figure that rests on
+    that tip's weights alone. The session's one draw of its pieces moves every such figure of the session
+    together, so this is the sample's own luck, independent of the analysis."""
+    inside = []
+    for lo, hi in ranges:
+        for rep in range(lo, hi):
+            d_top, d_bottom = T.tip_errors_nm(T.piece_masses(_session_rng(case, noise, rep)))
+            inside.append((abs(d_top) <= 1.96 * T.TIP_STD_NM, abs(d_bottom) <= 1.96 * T.TIP_STD_NM))
+    return [float(v) for v in np.mean(inside, axis=0)] if inside else None
+
+
 def _check_means(res, a, kind, opts):
     """Session means (the report's budget table) as figures ``mean:<figure>``: ok when within their u95 of
     the gear's value over the loops' orientations (no cycle-to-cycle scatter), or withheld or flagged."""
@@ -167,6 +189,23 @@ def _check_means(res, a, kind, opts):
         res["ok" if ok else "miss"] += 1
         b["ok"] += ok
         b["miss"] += not ok
+    # each orientation's mean over its cycles (summary.json's per_orientation, the report's metrics table), as
+    # ``orientation_mean:<figure>`` pooled over the orientations, against the gear's value at that orientation;
+    # ok when within its u95, or withheld or flagged (a mean of one cycle is flagged)
+    for r in a.per_orientation.itertuples(index=False):
+        o = r.orientation_deg
+        if o not in gear:
+            gear[o] = T.loop_truth(kind, T.make_model(kind, 1.0 + effect * math.cos(math.radians(o))))
+        t = gear[o].get(r.figure)
+        if t is None:
+            continue
+        # counted per figure only (the case's totals are the loop figures and session means, as in earlier runs)
+        b = res["by_figure"].setdefault("orientation_mean:" + r.figure, {"ok": 0, "n": 0, "miss": 0})
+        b["n"] += 1
+        withheld = not (math.isfinite(r.mean) and math.isfinite(r.u95))
+        ok = withheld or bool(r.flag) or abs(r.mean - t) <= r.u95
+        b["ok"] += ok
+        b["miss"] += not ok
 
 
 def time_analyze(tmp: Path) -> float:
@@ -193,11 +232,21 @@ def main(argv=None):
         "--first-rep", type=int, default=0, help="seed of the first session (default 0; another value: fresh sessions)"
     )
     p.add_argument("--out", type=Path, default=None, help="results file (default benchmarks/results/figures.json)")
+    p.add_argument(
+        "--merge",
+        type=Path,
+        nargs="+",
+        default=None,
+        metavar="FILE",
+        help="run nothing: add up the results files of earlier runs (other seeds, the same analysis) into --out",
+    )
     args = p.parse_args(argv)
     t0 = time.time()
     agg = {}
     out = args.out or Path(__file__).resolve().parent / "results" / "figures.json"
     out.parent.mkdir(parents=True, exist_ok=True)
+    if args.merge:
+        return _merge(args.merge, out)
     from multiprocessing import Pool
 
     pool = Pool(args.jobs) if args.jobs > 1 else None
@@ -217,36 +266,68 @@ def main(argv=None):
     _write(agg, args, wall, out, cpu, rows, show=True)
 
 
+def _merge(paths, out):
+    """Add up results files of runs on other seeds into one table (their seed ranges must not overlap)."""
+    agg, seeds, parts = {}, {}, []
+    for path in paths:
+        d = json.loads(path.read_text())
+        first, reps = d.get("first_rep", 0), d["reps"]
+        if first is None:
+            raise SystemExit(f"{path}: already added up from {len(d.get('parts') or [])} runs; give those runs instead")
+        parts.append(f"{path.name}: seeds {first}–{first + reps - 1}, run {d['date']}")
+        for c in d["cases"]:
+            key = (c["case"], c["noise_deg"])
+            for lo, hi in seeds.get(key, []):
+                if first < hi and lo < first + reps:
+                    both = f"{max(lo, first)}–{min(hi, first + reps) - 1}"
+                    raise SystemExit(f"{path}: {key[0]} at {key[1]:g}° repeats seeds {both}")
+            seeds.setdefault(key, []).append((first, first + reps))
+            if c.get("k_within_1pct") is not None and c.get("k_fits") is None:
+                raise SystemExit(f"{path}: {key[0]} has a K1–K3 rate but no counts (k_fits); it cannot be added up")
+            n_k, ok_k = c.get("k_fits") or 0, c.get("k_fits_within_1pct") or 0
+            a = agg.setdefault(key, _empty())
+            for k in _COUNTS:
+                a[k] += c[k]
+            a["k_ok"] += [True] * ok_k + [False] * (n_k - ok_k)
+            for k, v in c["orient"].items():
+                a["orient"][k] += v
+            for fig, v in c["by_figure"].items():
+                b = a["by_figure"].setdefault(fig, {"ok": 0, "n": 0, "sessions": 0})
+                b["ok"] += v["ok"]
+                b["n"] += v["n"]
+                # runs before the count was kept had the figure in every session (the means of one loop were
+                # flagged, not left out)
+                b["sessions"] += v.get("sessions", c["sessions"])
+    sessions = sorted({a["sessions"] for a in agg.values()})
+    args = argparse.Namespace(
+        reps=sessions[0] if len(sessions) == 1 else sessions, first_rep=None, parts=parts, seeds=seeds
+    )
+    _write(agg, args, None, out, None, None, show=True)
+
+
+#: Counts per case that add up over sessions.
+_COUNTS = ("sessions", "ok", "miss", "shown", "covered", "withheld", "flagged", "misfit_shown", "sessions_ok")
+
+
+def _empty():
+    return {**{k: 0 for k in _COUNTS}, "k_ok": [], "orient": {k: 0 for k in ORIENT_FIGURES}, "by_figure": {}}
+
+
 def _aggregate(agg, results):
     for case, noise, rep, res in results:
-        a = agg.setdefault(
-            (case, noise),
-            {
-                "sessions": 0,
-                "ok": 0,
-                "miss": 0,
-                "shown": 0,
-                "covered": 0,
-                "withheld": 0,
-                "flagged": 0,
-                "misfit_shown": 0,
-                "sessions_ok": 0,
-                "k_ok": [],
-                "orient": {k: 0 for k in ORIENT_FIGURES},
-                "by_figure": {},
-            },
-        )
+        a = agg.setdefault((case, noise), _empty())
         a["sessions"] += 1
-        for k in ("ok", "miss", "shown", "covered", "withheld", "flagged", "misfit_shown"):
+        for k in _COUNTS[1:-1]:
             a[k] += res[k]
         a["sessions_ok"] += res["miss"] == 0
         a["k_ok"] += res["k_within_1pct"]
         for k, v in res["orientation"].items():
             a["orient"][k] += bool(v)
         for fig, v in res["by_figure"].items():
-            b = a["by_figure"].setdefault(fig, {"ok": 0, "n": 0})
+            b = a["by_figure"].setdefault(fig, {"ok": 0, "n": 0, "sessions": 0})
             b["ok"] += v["ok"]
             b["n"] += v["n"]
+            b["sessions"] += 1
 
 
 def _binomial_interval(k, n, level=0.95):
@@ -265,26 +346,52 @@ def _session_interval(v, sessions):
     """Interval of a figure's rate counting sessions, not loops: the loops of a session share its weight
     pieces (the dominant error at 0.0005°), so they are not independent trials. Exact when they move together,
     conservative when they do not."""
-    n = min(v["n"], sessions)
+    n = min(v["n"], v.get("sessions", sessions))
     return _binomial_interval(round(v["ok"] / v["n"] * n) if v["n"] else 0, n)
+
+
+def _commit():
+    """The checkout's commit (None outside a git checkout)."""
+    import subprocess
+
+    try:
+        r = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return r.stdout.strip() or None
 
 
 def _write(agg, args, wall, path, cpu, rows, show=False):
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    if args.first_rep is None:  # a merge
+        head = [f"bench_figures: {args.reps} sessions per case and noise, added up {when} from:"]
+        head += [f"- {part}" for part in args.parts]
+    else:
+        head = [
+            f"bench_figures: {args.reps} sessions per case and noise (seeds {args.first_rep}–"
+            f"{args.first_rep + args.reps - 1}), {when}, wall {wall:.0f} s, load {os.getloadavg()[0]:.1f}"
+        ]
     lines = [
-        f"bench_figures: {args.reps} sessions per case and noise (seeds {args.first_rep}–"
-        f"{args.first_rep + args.reps - 1}), {when}, wall {wall:.0f} s, "
-        f"load {os.getloadavg()[0]:.1f}",
+        *head,
         "",
         "| case | noise (°) | sessions | figures ok (covered/withheld/flagged of all) | sessions with no miss "
         "| worst figure: ok [95 % binomial interval] | figures below 93 % (of them: interval below 93 %) "
         "| shown unflagged: within u95 | misfit shown unflagged "
-        "| orientation 'significant' (k_pu / hyst / k_nl secant) | K1–K3 within 1 % |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| orientation 'significant' (k_pu / hyst / k_nl secant) | K1–K3 within 1 % "
+        "| sessions whose tip weight error is within ±1.96σ (+Tmax / −Tmax) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     out = []
     for (case, noise), a in agg.items():
         n_fig = a["ok"] + a["miss"]
+        ranges = args.seeds[(case, noise)] if args.first_rep is None else [(args.first_rep, args.first_rep + args.reps)]
+        tips = _tip_draws_inside(case, noise, ranges)
         worst = min(((v["ok"] / v["n"]), fig) for fig, v in a["by_figure"].items()) if a["by_figure"] else (1.0, "-")
         lo, hi = _session_interval(a["by_figure"].get(worst[1], {"ok": 0, "n": 0}), a["sessions"])
         below = [v for v in a["by_figure"].values() if v["ok"] < 0.93 * v["n"]]
@@ -295,9 +402,9 @@ def _write(agg, args, wall, path, cpu, rows, show=False):
         lines.append(
             f"| {case} | {noise:g} | {a['sessions']} | {100 * a['ok'] / max(n_fig, 1):.1f} % "
             f"({a['covered']}/{a['withheld']}/{a['flagged']} of {n_fig}) | "
-            f"{100 * a['sessions_ok'] / a['sessions']:.0f} % | {100 * worst[0]:.0f} % [{100 * lo:.0f}–{100 * hi:.0f}] "
+            f"{100 * a['sessions_ok'] / a['sessions']:.0f} % | {100 * worst[0]:.1f} % [{100 * lo:.1f}–{100 * hi:.1f}] "
             f"{worst[1]} | {len(below)} of {len(a['by_figure'])} ({len(sig)}) | "
-            f"{cov} | {a['misfit_shown']} | {orient} | {k_ok} |"
+            f"{cov} | {a['misfit_shown']} | {orient} | {k_ok} | {100 * tips[0]:.1f} % / {100 * tips[1]:.1f} % |"
         )
         out.append(
             {
@@ -305,6 +412,9 @@ def _write(agg, args, wall, path, cpu, rows, show=False):
                 "noise_deg": noise,
                 **{k: v for k, v in a.items() if k != "k_ok"},
                 "k_within_1pct": float(np.mean(a["k_ok"])) if a["k_ok"] else None,
+                "k_fits": len(a["k_ok"]),
+                "k_fits_within_1pct": int(np.sum(a["k_ok"])),
+                "tip_draws_within_1p96_sigma": tips,
             }
         )
     if cpu is not None:
@@ -315,7 +425,17 @@ def _write(agg, args, wall, path, cpu, rows, show=False):
     path.with_suffix(".md").write_text(text + "\n")
     path.write_text(
         json.dumps(
-            {"date": when, "reps": args.reps, "wall_s": wall, "analyze_cpu_s": cpu, "rows": rows, "cases": out},
+            {
+                "date": when,
+                "reps": args.reps,
+                "first_rep": args.first_rep,
+                "parts": getattr(args, "parts", None),
+                "commit": _commit(),
+                "wall_s": wall,
+                "analyze_cpu_s": cpu,
+                "rows": rows,
+                "cases": out,
+            },
             indent=1,
             default=lambda o: o.item() if hasattr(o, "item") else str(o),
         )

@@ -138,6 +138,23 @@ def protocol(cycles):
     return rows
 
 
+def piece_masses(rng):
+    """The session's true piece masses (kg), ``(4, N_STEPS)``: pans +A, +B, −A, −B; the
+    first draw of :func:`session_table` from its ``rng``."""
+    return STEP_MASS_KG + rng.uniform(-MASS_TOL_KG, MASS_TOL_KG, (4, N_STEPS))
+
+
+#: 1σ of a loop tip's torque (N·m): the 2·N_STEPS pieces of one sign's pans.
+TIP_STD_NM = G * R_M * math.sqrt(2 * N_STEPS) * MASS_STD_KG
+
+
+def tip_errors_nm(pieces):
+    """True minus nominal torque (N·m) at the +Tmax and −Tmax tips (magnitudes) from
+    :func:`piece_masses`: the weight error every figure of a session shares."""
+    nominal = 2 * N_STEPS * STEP_MASS_KG
+    return G * R_M * (float(pieces[:2].sum()) - nominal), G * R_M * (float(pieces[2:].sum()) - nominal)
+
+
 def session_table(
     kind,
     *,
@@ -160,8 +177,7 @@ def session_table(
         ``{(orientation, cycle): {figure: value}}`` from the noise-free model on the
         nominal path, with the loop's own stiffness scale.
     """
-    # true piece masses: 4 pans (+A, +B, −A, −B) × N_STEPS pieces, drawn once for the session
-    pieces = STEP_MASS_KG + rng.uniform(-MASS_TOL_KG, MASS_TOL_KG, (4, N_STEPS))
+    pieces = piece_masses(rng)
     rows, truth = [], {}
     proto = protocol(cycles)
     for o in orientations:
