@@ -17,8 +17,10 @@ gear's value at that orientation (rated per figure; the case's totals count the 
 figures and session means). Per
 case: the worst figure's rate with its Clopper–Pearson 95 % interval, and how many
 figures fall below 93 % and how many of them significantly so (the interval counts
-sessions, not loops: a session's 2–18 loops share its weight pieces and move together). Prints a table and writes
-``benchmarks/results/figures.json``.
+sessions, not loops: a session's 2–18 loops share its weight pieces and move together). Its last column
+is the sample's own luck, from the generator alone: the share of sessions whose weight error at each
+loop tip is within ±1.96σ, the most any analysis that knew σ could cover of a figure resting on that
+tip's weights. Prints a table and writes ``benchmarks/results/figures.json``.
 
 Cases: bilinear; three-segment stiffening loop (catalogue T1/T2 given); smooth
 Masing loop; no orientation effect (1 and 3 cycles, 2 % cycle-to-cycle
