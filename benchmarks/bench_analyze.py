@@ -41,7 +41,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import compile_package  # noqa: E402
+from common import compile_package, git_commit  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "analyze.json"
 _SCRIPT = Path(sys.executable).parent / "vision-torsion"  # the installed command, as a user runs it
@@ -65,16 +65,6 @@ def _demo(folder: Path | None) -> Path:
 
 def _one_core() -> list[str]:
     return ["taskset", "-c", "0"] if shutil.which("taskset") else []
-
-
-def _commit() -> str | None:
-    """The code's git commit (None outside a git checkout)."""
-    try:
-        out = subprocess.run(["git", "-C", str(Path(__file__).resolve().parent), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, check=True)
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return out.stdout.strip() or None
 
 
 def _run(cmd) -> tuple[float, float]:
@@ -125,7 +115,7 @@ def main(argv=None) -> int:
     if not args.no_write:
         RESULTS.parent.mkdir(parents=True, exist_ok=True)
         RESULTS.write_text(json.dumps({
-            "date": when, "commit": _commit(), "rows": rows, "one_core": bool(pin), "command": cmd, "runs": runs,
+            "date": when, "commit": git_commit(), "rows": rows, "one_core": bool(pin), "command": cmd, "runs": runs,
             "python": platform.python_version(), "machine": platform.machine(),
         }, indent=2) + "\n", encoding="utf-8")
     return 0

@@ -50,6 +50,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import truth_tables as T  # noqa: E402
+from common import git_commit  # noqa: E402
 
 NOISES = (0.0005, 0.005)
 RIG = dict(step_mass_kg=T.STEP_MASS_KG, mass_std_kg=T.MASS_STD_KG, gravity_m_per_s2=T.G, arm_radius_m=T.R_M)
@@ -352,23 +353,6 @@ def _session_interval(v, sessions):
     return _binomial_interval(round(v["ok"] / v["n"] * n) if v["n"] else 0, n)
 
 
-def _commit():
-    """The checkout's commit (None outside a git checkout)."""
-    import subprocess
-
-    try:
-        r = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-    except (OSError, subprocess.CalledProcessError):
-        return None
-    return r.stdout.strip() or None
-
-
 def _write(agg, args, wall, path, cpu, rows, show=False):
     when = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     if args.first_rep is None:  # a merge
@@ -432,7 +416,7 @@ def _write(agg, args, wall, path, cpu, rows, show=False):
                 "reps": args.reps,
                 "first_rep": args.first_rep,
                 "parts": getattr(args, "parts", None),
-                "commit": _commit(),
+                "commit": git_commit(),
                 "wall_s": wall,
                 "analyze_cpu_s": cpu,
                 "rows": rows,

@@ -1,10 +1,12 @@
-"""Helpers shared by the peer and stage benchmarks: one core per process, the machine."""
+"""Helpers shared by the benchmarks: one core per process, the machine, the commit."""
 
 from __future__ import annotations
 
 import datetime as _dt
 import os
 import platform
+import subprocess
+from pathlib import Path
 
 #: Thread-pool variables of the numerical libraries; set before NumPy is imported so
 #: that every process uses exactly one core and "ms per image on one core" means that.
@@ -80,3 +82,17 @@ def machine_info() -> dict:
         "opencv": cv2.__version__,
         "scikit_image": skimage.__version__,
     }
+
+
+def git_commit() -> str | None:
+    """The benchmarks' checkout's short git commit (None outside a git checkout)."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(Path(__file__).resolve().parent), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return out.stdout.strip() or None
