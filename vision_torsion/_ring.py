@@ -246,6 +246,17 @@ def robust_sigma_rows(resid, n):
     return np.where(sig > 0, sig, 1e-6)
 
 
+#: Half-width of a marker's edge zone, in edge widths s: the pixels whose edge
+#: coordinate u = (R - d)/s lies within ±3, where the blurred edge carries the
+#: centre's and radius' information (Φ(u) is 0.13 % from its levels beyond it).
+EDGE_ZONE = 3.0
+
+
+def in_edge_zone(u):
+    """Flags of the pixels (edge coordinates `u` = (R - d)/s) in the edge zone, |u| < :data:`EDGE_ZONE`."""
+    return np.abs(u) < EDGE_ZONE
+
+
 #: Pixels this many robust σ (:func:`robust_sigma`) off the model are an occluder's
 #: (a wire or a speck in the ring), by :func:`cut_occluders` and the fits' quick
 #: "nothing to cut" tests before it.
@@ -319,7 +330,7 @@ def _edge_misfit(label, resid, u, sigma, n):
     move, widen = np.where(solvable, (bb * ar - ab * br) / det, 0.0), np.where(solvable, (aa * br - ab * ar) / det, 0.0)
     left = np.abs(resid - move[label] * phi - widen[label] * phu)
     worst = np.zeros(n)
-    np.maximum.at(worst, label, np.where(np.abs(u) < 3.0, left, np.inf))
+    np.maximum.at(worst, label, np.where(in_edge_zone(u), left, np.inf))
     return solvable & (worst < OCCLUDER_SIGMAS * sigma)
 
 
@@ -347,7 +358,7 @@ def cut_occluders(resid, u, resolve, ring_idx, shape, *, least=3.0):
     keep = np.abs(resid) < OCCLUDER_SIGMAS * sigma
     if not keep.all():
         keep = _occluder_groups(keep, resid, sigma, u, ring_idx, shape, least)[0]
-    edge_zone = np.abs(u) < 3.0
+    edge_zone = in_edge_zone(u)
     # shares of the edge zone kept by counts (ndarray.mean's Python overhead was a
     # tenth of an examination; the same value: whole numbers over whole numbers)
     zone_n = max(np.count_nonzero(edge_zone), 1)  # none: nothing kept in it, None as before

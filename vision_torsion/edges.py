@@ -53,6 +53,7 @@ from ._ring import (
     bounded_edge_width,
     check_contrast,
     cut_occluders,
+    in_edge_zone,
     lost_sectors,
     marker_patch,
     normal_cdf,
@@ -195,7 +196,7 @@ def edge_points(
         coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64))
     pdf = np.exp(-0.5 * u * u) * INV_SQRT_2PI
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
-    band = keep & (np.abs(u) < 3.0)
+    band = keep & in_edge_zone(u)
     gs = -(FB * pdf / s) * u
     den_s = float(np.sum(gs[band] ** 2))
     if den_s > 0:
@@ -207,7 +208,7 @@ def edge_points(
     coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64), kappa=kappa)
     FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
     g = FB * (np.exp(-0.5 * u * u) * INV_SQRT_2PI) / s  # dI/dR
-    band = keep & (np.abs(u) < 3.0)
+    band = keep & in_edge_zone(u)
     contrast = coef[3] - coef[0]
     dof = max(int(keep.sum()) - 7, 1)
     sigma2 = float(np.sum(resid[keep] ** 2) / dof)
@@ -216,7 +217,7 @@ def edge_points(
     # A sector that lost pixels to the outlier cut (a wire or speck on the edge) is
     # biased by what remains of the occluder's blurred flank: drop it and its two
     # neighbours on each side rather than let it pull the circle.
-    lost = lost_sectors(sector[~keep & (np.abs(u) < 3.0)], n_sec)
+    lost = lost_sectors(sector[~keep & in_edge_zone(u)], n_sec)
     gb, pb = g[band], psi[band]
     delta, ang, info = sector_edge_offsets(
         sector[band], n_sec, gb, resid[band], gb * np.cos(pb), gb * np.sin(pb), drop=lost

@@ -60,6 +60,7 @@ from ._ring import (
     check_radius,
     cut_occluders,
     harmonic_circularity,
+    in_edge_zone,
     lost_sectors,
     marker_patch,
     normal_cdf,
@@ -289,7 +290,7 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
         return None
     keep, seen = found
     # sectors of the edge zone's pixels only: the rest of the ring has none
-    zone = np.flatnonzero(np.abs(u) < 3.0)
+    zone = np.flatnonzero(in_edge_zone(u))
     sector, n_sec = _sectors(px.xs[zone], px.ys[zone], p[0], p[1], p[2])
     seen_edge = ~seen[zone]
     # distinct sectors counted with bincount: np.unique imports numpy.ma (0.1-0.2 s) on first use
@@ -321,7 +322,7 @@ def _edge_diagnostics(p, resid, J, u, sigma2):
     deviation from the pixel noise alone (px; :func:`_away_variance`, `sigma2` the
     ring's residual variance in DN²)."""
     cx, cy, R = p[0], p[1], p[2]
-    band = np.flatnonzero(np.abs(u) < 3.0)
+    band = np.flatnonzero(in_edge_zone(u))
     # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
     # directions need no coordinates (half a turn off when g < 0, a dark marker)
     g_cos, g_sin, g = J[:3].take(band, axis=1)
@@ -346,7 +347,7 @@ def _away_variance(resid, u, sigma2) -> float:
     or `sigma2` when fewer than 30: the pixel noise, without the misfit of an edge
     that is not the model's circle (an ellipse's, which inflates the ring's whole
     variance by 2-15x on rendered ones)."""
-    away = np.abs(u) >= 3.0
+    away = ~in_edge_zone(u)
     n = np.count_nonzero(away)
     return float(np.dot(resid[away], resid[away]) / n) if n >= 30 else sigma2
 
@@ -649,7 +650,7 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
     if not m:
         return []
     # the edge zone's pixels only (row by row, in order), as flat arrays
-    zr, zc = np.nonzero((np.abs(u) < 3.0) & (np.arange(u.shape[1]) < n[:, None]))
+    zr, zc = np.nonzero(in_edge_zone(u) & (np.arange(u.shape[1]) < n[:, None]))
     g_cos, g_sin, gb = Jm[zr, 0, zc], Jm[zr, 1, zc], Jm[zr, 2, zc]
     psi = np.arctan2(g_sin, g_cos)
     psi[(P[:, 5] < P[:, 4])[zr]] += np.pi  # a dark marker: g < 0 turns the direction round
@@ -687,7 +688,7 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
     b2 = (2.0 / per) * (delta * (2.0 * c * s)).sum(axis=1)
     circularity = 1.0 - 2.0 * np.hypot(a2, b2) / P[:, 2]
     # :func:`_away_variance` of each row (the padding's u is inf: masked by n)
-    away = (np.abs(u) >= 3.0) & (np.arange(u.shape[1]) < n[:, None])
+    away = ~in_edge_zone(u) & (np.arange(u.shape[1]) < n[:, None])
     na = away.sum(axis=1)
     var_away = np.where(na >= 30, (np.where(away, resid, 0.0) ** 2).sum(axis=1) / np.maximum(na, 1), sigma2)
     noise = np.sqrt(var_away * (np.where(good, 1.0 / np.where(good, den, 1.0), 0.0)).sum(axis=1) / per)
