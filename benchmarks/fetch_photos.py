@@ -57,24 +57,40 @@ UCL_FRAMES = "tests/data/calib-ucl-circles/13_22_20/calib.right.images"
 
 
 @dataclass(frozen=True)
+class Crop:
+    """Where a committed crop of ``tests/data/photos`` lies in its original: its file
+    name, its top-left pixel (row, column) and its size (rows, columns), as in the
+    crop table of ``tests/data/photos/README.md``."""
+
+    name: str
+    top: int
+    left: int
+    rows: int
+    cols: int
+
+
+@dataclass(frozen=True)
 class Original:
-    """One original: the name it is written under, where it is, and its git blob id."""
+    """One original: the name it is written under, where it is, its git blob id, and
+    the committed crop taken from it (None: none is)."""
 
     name: str
     repo: str
     commit: str
     path: str
     blob: str
+    crop: Crop | None = None
 
 
 ORIGINALS = (
     Original("discorpy_dot_pattern_02_full.jpg", *DISCORPY, "data/dot_pattern_02.jpg",
-             "45c07258e211f2391797b54c13588c03e583f3f1"),
+             "45c07258e211f2391797b54c13588c03e583f3f1", Crop("discorpy_dot_pattern_02.png", 930, 1080, 300, 400)),
     Original("discorpy_dot_pattern_05_full.jpg", *DISCORPY, "data/dot_pattern_05.jpg",
-             "d9a0e1edbb8a5117955528e341055fe92f5d6ed6"),
+             "d9a0e1edbb8a5117955528e341055fe92f5d6ed6", Crop("discorpy_dot_pattern_05.png", 280, 480, 240, 320)),
     Original("discorpy_dot_pattern_06_full.jpg", *DISCORPY, "data/dot_pattern_06.jpg",
-             "74e900c4a0f4af9fccd96f1bc2e5c8337d8559f3"),
-    Original("ucl_circles_right3_full.png", *UCL, f"{UCL_FRAMES}.3.png", "7bc736facf724fa8e54f8a043b850b9033d5bfa7"),
+             "74e900c4a0f4af9fccd96f1bc2e5c8337d8559f3", Crop("discorpy_dot_pattern_06.png", 1082, 1440, 300, 400)),
+    Original("ucl_circles_right3_full.png", *UCL, f"{UCL_FRAMES}.3.png", "7bc736facf724fa8e54f8a043b850b9033d5bfa7",
+             Crop("ucl_circles_right3.png", 390, 760, 300, 400)),
     Original("ucl_circles_right0_full.png", *UCL, f"{UCL_FRAMES}.0.png", "96857564424a0d8a641a7b15803e98199061c374"),
 )
 

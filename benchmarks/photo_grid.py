@@ -11,7 +11,16 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["reference_dots", "grid_triples", "off_line", "grid_lines", "off_curve", "SYMMETRY", "CURVE_ORDER"]
+__all__ = [
+    "reference_dots",
+    "whole_in",
+    "grid_triples",
+    "off_line",
+    "grid_lines",
+    "off_curve",
+    "SYMMETRY",
+    "CURVE_ORDER",
+]
 
 #: A triple's outer dots must be symmetric about the middle one within this fraction
 #: of their spacing to count as grid neighbours on one row.
@@ -36,9 +45,17 @@ def reference_dots(img: np.ndarray) -> np.ndarray:
     dots = np.array([(k.pt[0], k.pt[1], k.size / 2) for k in kps])
     med = np.median(dots[:, 2])
     keep = (dots[:, 2] > 0.6 * med) & (dots[:, 2] < 1.6 * med)
-    x, y, r = dots[:, 0], dots[:, 1], dots[:, 2]
-    keep &= (x - r - 2 >= -0.5) & (y - r - 2 >= -0.5) & (x + r + 2 <= w - 0.5) & (y + r + 2 <= h - 0.5)
+    keep &= whole_in(dots, h, w)
     return dots[keep]
+
+
+def whole_in(dots: np.ndarray, rows: int, cols: int, *, top: int = 0, left: int = 0) -> np.ndarray:
+    """Flags of the dots (rows of x, y, r in px) whose disc, 2 px wider, lies inside
+    the window of `rows` x `cols` pixels whose top-left pixel is (`top`, `left`)
+    (pixels span -0.5 .. size - 0.5): a whole dot of an image that size. A dot cut
+    by the border is reported ``border`` by us, and has no whole edge to fit for anyone."""
+    x, y, r = dots[:, 0] - left, dots[:, 1] - top, dots[:, 2] + 2.0
+    return (x - r >= -0.5) & (y - r >= -0.5) & (x + r <= cols - 0.5) & (y + r <= rows - 0.5)
 
 
 def grid_triples(xy: np.ndarray) -> np.ndarray:

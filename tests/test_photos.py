@@ -114,6 +114,34 @@ def test_line_curve_scatter_takes_out_lens_bending_and_measures_centre_noise():
     assert bending > 0.05 * np.sqrt(1.5)  # the triples: more bending than noise
 
 
+def test_window_ranking_scores_crop_sized_windows_of_a_full_frame():
+    """A 20 x 10 grid (spacing 40 px) in a 400 x 1200 frame, cut into 200 x 400
+    windows: the four over the grid are scored, the two beyond it (no dots) are not.
+    Off-line distances made per window: ours 0.10 px everywhere, peer "a" 0.05 px in
+    the top-left window and 0.20 elsewhere, peer "b" 0.30: "a" is lowest in one
+    window (ours 0.05 px above it there, an interval that excludes 0: the values
+    are constant), ours in three (0.10 below "a"). The committed crop's window is
+    scored on exactly the triples whose dots lie whole inside it."""
+    ranking = _bench_module("photo_ranking")
+    fetch_photos = _bench_module("fetch_photos")
+    ys, xs = np.mgrid[0:10, 0:20]
+    dots = np.column_stack([20.0 + 40.0 * xs.ravel(), 20.0 + 40.0 * ys.ravel(), np.full(200, 5.0)])
+    used = grid.grid_triples(dots[:, :2])
+    middle = dots[used[:, 1]]
+    top_left = (middle[:, 0] < 400) & (middle[:, 1] < 200)
+    offs = {"ours": np.full(len(used), 0.10), "a": np.where(top_left, 0.05, 0.20), "b": np.full(len(used), 0.30)}
+    crop = fetch_photos.Crop("crop.png", top=100, left=200, rows=200, cols=400)
+    result = ranking.window_ranking(dots, used, offs, (400, 1200), crop)
+    assert (result["windows"], result["scored"]) == (6, 4)
+    assert result["lowest"] == {"ours": 3, "a": 1, "b": 0}
+    assert (result["ours_significantly_above"], result["ours_significantly_below"]) == (1, 3)
+    first = result["per_window"][0]
+    assert (first["top"], first["left"], first["best_peer"]) == (0, 0, "a")
+    assert np.allclose(first["difference_px"], 0.05)
+    inside = grid.whole_in(dots, 200, 400, top=100, left=200)
+    assert result["crop_window"]["triples"] == int(inside[used].all(axis=1).sum()) >= ranking.WINDOW_TRIPLES
+
+
 def _git(repo, *args) -> str:
     import subprocess
 
