@@ -6,7 +6,10 @@ morphological closing (dark markers) or opening (bright markers) with a square
 window wider than the largest marker, which removes the markers but keeps lighting
 gradients and vignetting. Blobs are the connected regions of the background-flattened
 image above an Otsu threshold (never below five times the noise); each gets a
-centre, an equivalent radius, an elongation and a flag for touching the border.
+centre, an equivalent radius, an elongation and a flag for touching the border. A
+region that is no disc, too large for one or cut by the border is looked into at
+higher levels: a marker merged at the threshold with a surround as dark as itself
+(a card's edge, a shadow) or with a touching neighbour stands free higher up.
 Every blob is returned: judging it (round? big enough?) is the caller's job, so that
 rejected candidates are reported rather than silently dropped.
 
@@ -123,6 +126,105 @@ def _background(small: np.ndarray, r_max_small: float, polarity: str) -> np.ndar
     return bg
 
 
+#: Coarse shape limits of a candidate (second moments of its thresholded pixels) that
+#: can be a disc: only gross non-discs fail them (two touching discs have an axis
+#: ratio of 0.45, a wire far less); roundness is judged on the fitted edge.
+COARSE_MIN_AXIS_RATIO = 0.55
+COARSE_FILL_RANGE = (0.7, 1.3)
+#: Levels, as multiples of the detection level, at which a region that is no disc is
+#: looked into for discs: a marker merged at the detection level with a surround as
+#: dark (bright) as itself, such as a card's edge or a shadow, or with a touching
+#: neighbour stands free higher up (the UCL laparoscope frames' edge dots: at 1.4-2x).
+_SPLIT_LEVELS = (1.4, 2.0, 2.8, 4.0)
+#: Largest share of a border-cut disc's area that a disc found inside it may have
+#: to count as a marker of its own: more is the cut disc's own core.
+_CORE_SHARE = 0.5
+
+
+def is_coarse_disc(blob: Blob, *, min_axis_ratio: float = COARSE_MIN_AXIS_RATIO) -> bool:
+    """True when `blob`'s shape can be a disc's: axis ratio at least `min_axis_ratio`
+    and fill within :data:`COARSE_FILL_RANGE`."""
+    return blob.elongation >= min_axis_ratio and COARSE_FILL_RANGE[0] <= blob.fill <= COARSE_FILL_RANGE[1]
+
+
+def _region(contour):
+    """The pixels of an outer contour filled (a hole, such as a highlight, filled):
+    (0/1 mask of its bounding box, x0, y0 of the box).
+
+    Outer contours filled back give the blobs' pixels; connectedComponentsWithStats
+    gives the same but costs a third of a millisecond more per image."""
+    x0, y0, bw, bh = cv2.boundingRect(contour)
+    sub = np.zeros((bh, bw), np.uint8)
+    cv2.drawContours(sub, [contour], -1, 1, thickness=cv2.FILLED, offset=(-x0, -y0))
+    return sub, x0, y0
+
+
+def _blob(sub, x0, y0, f, shape) -> tuple[Blob | None, float]:
+    """The :class:`Blob` of the region `sub` (a 0/1 mask) whose top-left pixel is
+    (x0, y0) in the image reduced `f` times (of `shape`), and its area (reduced px²);
+    (None, 0.0) for an empty mask."""
+    m = cv2.moments(sub, binaryImage=True)
+    area = m["m00"]
+    if not area > 0:
+        return None, 0.0
+    cx, cy = m["m10"] / m["m00"], m["m01"] / m["m00"]
+    # pixels as unit squares (each adds 1/12 px² of its own): a 2x2 blob is a disc
+    # of fill 0.95, not 1.27 as points
+    mu20, mu02, mu11 = m["mu20"] / m["m00"] + 1 / 12, m["mu02"] / m["m00"] + 1 / 12, m["mu11"] / m["m00"]
+    common = np.sqrt(max((mu20 - mu02) ** 2 + 4 * mu11**2, 0.0))
+    l1, l2 = (mu20 + mu02 + common) / 2, (mu20 + mu02 - common) / 2
+    elong = float(np.sqrt(max(l2, 0) / l1)) if l1 > 0 else 0.0
+    ellipse_area = 4 * np.pi * np.sqrt(max(l1 * l2, 1e-12))
+    bh, bw = sub.shape
+    sh, sw = shape
+    touches = x0 == 0 or y0 == 0 or x0 + bw >= sw or y0 + bh >= sh
+    # reduced pixel i covers full pixels [f·i, f·i + f - 1]: its centre is f·i + (f-1)/2
+    blob = Blob(
+        x=float((x0 + cx) * f + (f - 1) / 2),
+        y=float((y0 + cy) * f + (f - 1) / 2),
+        radius=float(np.sqrt(area / np.pi) * f),
+        elongation=elong,
+        fill=float(area / ellipse_area),
+        touches_border=bool(touches),
+    )
+    return blob, float(area)
+
+
+def _clear_of_border(blob: Blob, shape, f) -> bool:
+    """True when `blob`'s disc, 1 px wider, lies inside the image (`shape` of the
+    image reduced `f` times): a disc found inside a region cut by the border is then
+    a marker of its own, not the cut part of the region."""
+    h, w = shape[0] * f, shape[1] * f
+    r = blob.radius + 1.0
+    return blob.x - r >= -0.5 and blob.y - r >= -0.5 and blob.x + r <= w - 0.5 and blob.y + r <= h - 0.5
+
+
+def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[Blob]:
+    """Discs inside a region that is no disc (`sub`, its 0/1 mask at (x0, y0) of the
+    reduced image; `diff` the background-flattened image, `level` its detection
+    level): the regions at the higher :data:`_SPLIT_LEVELS` that are whole discs
+    (:func:`is_coarse_disc`, within the area `limits`, clear of the image border:
+    :func:`_clear_of_border`), each taken at the lowest level where it is one and
+    not again higher up."""
+    bh, bw = sub.shape
+    box = diff[y0 : y0 + bh, x0 : x0 + bw]
+    peak = float(box[sub > 0].max())
+    found: list[Blob] = []
+    for k in _SPLIT_LEVELS:
+        if k * level >= peak:
+            break
+        inner = cv2.compare(box, k * level, cv2.CMP_GT) & (sub * 255)
+        for contour in cv2.findContours(inner, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
+            part, px, py = _region(contour)
+            blob, area = _blob(part, x0 + px, y0 + py, f, shape)
+            if not limits[0] <= area <= limits[1] or not is_coarse_disc(blob) or not _clear_of_border(blob, shape, f):
+                continue
+            if any(np.hypot(blob.x - b.x, blob.y - b.y) < b.radius + blob.radius for b in found):
+                continue
+            found.append(blob)
+    return found
+
+
 def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None) -> list[Blob]:
     """Find marker candidates of one polarity.
 
@@ -134,7 +236,8 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         Markers darker or brighter than their surroundings.
     radius_range : tuple of float, optional
         (smallest, largest) radius in px; blobs far outside it are dropped (under
-        half the smallest area or over twice the largest).
+        half the smallest area or over twice the largest), after a region too large
+        is looked into for discs.
 
     Returns
     -------
@@ -168,44 +271,28 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         # cut thin lines (a wire) away from the markers they cross (a marker of
         # 1.5 reduced px in radius keeps its core through the 3x3 opening)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
-    # outer contours, each filled back into its bounding box: the blob's pixels (a
-    # hole, such as a highlight, filled). connectedComponentsWithStats gives the same
-    # but costs a third of a millisecond more per image.
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    a_min = 0.5 * np.pi * (r_min / f) ** 2
-    a_max = 2.0 * np.pi * (r_max / f) ** 2
-    sh, sw = small.shape
+    a_min, a_max = max(0.5 * np.pi * (r_min / f) ** 2, 4), 2.0 * np.pi * (r_max / f) ** 2
     blobs = []
     for contour in contours:
-        x0, y0, bw, bh = cv2.boundingRect(contour)
-        if bw * bh < max(a_min, 4) or cv2.contourArea(contour) > a_max:
-            continue  # too small even to fill its box, or too large inside its outline
-        sub = np.zeros((bh, bw), np.uint8)
-        cv2.drawContours(sub, [contour], -1, 1, thickness=cv2.FILLED, offset=(-x0, -y0))
-        m = cv2.moments(sub, binaryImage=True)
-        area = m["m00"]
-        if area < max(a_min, 4) or area > a_max:
+        _, _, bw, bh = cv2.boundingRect(contour)
+        if bw * bh < a_min:
+            continue  # too small even to fill its box
+        region = _region(contour)
+        blob, area = _blob(*region, f, small.shape)
+        most = a_max
+        if a_min <= area <= a_max:
+            blobs.append(blob)
+            if is_coarse_disc(blob):
+                if not blob.touches_border:
+                    continue
+                # a disc cut by the border: its own core higher up is no other marker
+                most = min(a_max, _CORE_SHARE * area)
+        elif area < a_min:
             continue
-        cx, cy = m["m10"] / m["m00"], m["m01"] / m["m00"]
-        # pixels as unit squares (each adds 1/12 px² of its own): a 2x2 blob is a disc
-        # of fill 0.95, not 1.27 as points
-        mu20, mu02, mu11 = m["mu20"] / m["m00"] + 1 / 12, m["mu02"] / m["m00"] + 1 / 12, m["mu11"] / m["m00"]
-        common = np.sqrt(max((mu20 - mu02) ** 2 + 4 * mu11**2, 0.0))
-        l1, l2 = (mu20 + mu02 + common) / 2, (mu20 + mu02 - common) / 2
-        elong = float(np.sqrt(max(l2, 0) / l1)) if l1 > 0 else 0.0
-        ellipse_area = 4 * np.pi * np.sqrt(max(l1 * l2, 1e-12))
-        touches = x0 == 0 or y0 == 0 or x0 + bw >= sw or y0 + bh >= sh
-        # reduced pixel i covers full pixels [f·i, f·i + f - 1]: its centre is f·i + (f-1)/2
-        blobs.append(
-            Blob(
-                x=float((x0 + cx) * f + (f - 1) / 2),
-                y=float((y0 + cy) * f + (f - 1) / 2),
-                radius=float(np.sqrt(area / np.pi) * f),
-                elongation=elong,
-                fill=float(area / ellipse_area),
-                touches_border=bool(touches),
-            )
-        )
+        # no disc, too large for one, or cut by the border: a marker merged at this
+        # level with its surround or a neighbour is looked for higher up
+        blobs += _discs_within(diff, *region, level, f, small.shape, (a_min, most))
     if not blobs:
         logger.info("no marker candidates: no %s blob of radius %g-%g px stands out from the background "
                     "by more than %.3g (5x the noise %.3g)", polarity, r_min, r_max, level, noise)

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
-from .detect import Blob, default_radius_range, detect_blobs
+from .detect import COARSE_MIN_AXIS_RATIO, Blob, default_radius_range, detect_blobs, is_coarse_disc
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
@@ -149,12 +149,11 @@ def _rejected(blob: Blob, status: str, message: str) -> Marker:
     return Marker(x_px=blob.x, y_px=blob.y, radius_px=blob.radius, status=status, message=message)
 
 
-#: Coarse shape limits of a candidate (moments of its thresholded pixels): only gross
-#: non-discs are rejected here (two touching discs have an axis ratio of 0.45, a wire
-#: far less); roundness is judged on the fitted edge (:func:`min_circularity`).
+#: Coarse axis ratio a candidate needs with the ellipse fit (oblique views); the
+#: others need :data:`~vision_torsion.detect.COARSE_MIN_AXIS_RATIO` (with the fill,
+#: :func:`~vision_torsion.detect.is_coarse_disc`): only gross non-discs are rejected
+#: here, roundness is judged on the fitted edge (:func:`min_circularity`).
 _MIN_AXIS_RATIO = {"ellipse": 0.4}
-_MIN_AXIS_RATIO_CIRCLE = 0.55
-_FILL_RANGE = (0.7, 1.3)
 #: Margin (px) the fitted disc must keep inside the image to count as whole.
 _BORDER_MARGIN_PX = 1.0
 
@@ -186,8 +185,7 @@ def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
         return _rejected(blob, "too_small", f"radius {blob.radius:.1f} px is below the smallest {r_min:g} px")
     if blob.radius > 1.2 * r_max:
         return _rejected(blob, "too_large", f"radius {blob.radius:.1f} px is above the largest {r_max:g} px")
-    min_elong = _MIN_AXIS_RATIO.get(fit, _MIN_AXIS_RATIO_CIRCLE)
-    if blob.elongation < min_elong or not _FILL_RANGE[0] <= blob.fill <= _FILL_RANGE[1]:
+    if not is_coarse_disc(blob, min_axis_ratio=_MIN_AXIS_RATIO.get(fit, COARSE_MIN_AXIS_RATIO)):
         return _rejected(
             blob,
             "not_round",
