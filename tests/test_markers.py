@@ -436,3 +436,58 @@ def test_noise_specks_of_a_faint_scene_are_not_ok_markers(seed, angle):
     assert np.all(ok.radius_px > 2 * ok.radius_std_px)
     faint = table[table.message.str.contains("is not a disc's", regex=False)]
     assert len(faint) >= 2 and set(faint.status) == {"fit_failed"}
+
+
+def _excluded_per_marker(patch, neighbours, edge_width, own):
+    """The neighbour exclusion as it was written for one marker: every neighbour's
+    distances over the whole patch (the simple version the box search replaces)."""
+    from vision_torsion.markers import _neighbour_reach
+
+    rows, cols = patch.shape
+    nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
+    reach = _neighbour_reach(nb[:, 2], edge_width)
+    dx = np.arange(cols) + (patch.x0 - nb[:, :1])
+    dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
+    d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
+    inside = d2 < (reach**2)[:, None, None]
+    large = np.flatnonzero(nb[:, 2] > 1.5 * own[2])
+    held = np.hypot(nb[large, 0] - own[0], nb[large, 1] - own[1]) < nb[large, 2]
+    inside[large[held]] = False
+    large = large[~held]
+    k, y, x = np.nonzero(inside[large])
+    k = large[k]
+    ours = np.hypot(x + (patch.x0 - own[0]), y + (patch.y0 - own[1])) - own[2] <= np.sqrt(d2[k, y, x]) - nb[k, 2]
+    inside[k[ours], y[ours], x[ours]] = False
+    return inside.any(axis=0).ravel()
+
+
+def test_neighbour_exclusion_of_many_patches_is_the_per_marker_one():
+    """The box search over many patches at once (_excluding_neighbours) flags the
+    same pixels as every neighbour's distances over the whole patch, marker by
+    marker: dense grids, large neighbours (with and without the marker's centre in
+    their circle), patches cut by the border, centres near the image origin (where
+    the patch origin's offset from a neighbour is rounded)."""
+    from vision_torsion.detect import Blob
+    from vision_torsion.markers import _excluding_neighbours, _near, _patch
+
+    rng = np.random.default_rng(2024)
+    image = np.zeros((240, 320), np.uint8)
+    for trial in range(60):
+        n = int(rng.integers(2, 40))
+        spread = (40.0, 30.0) if trial % 3 == 0 else (320.0, 240.0)  # near the origin, or anywhere
+        circles = np.column_stack([rng.uniform(0.0, spread[0], n), rng.uniform(0.0, spread[1], n),
+                                   rng.uniform(1.5, 6.0, n)])
+        big = rng.random(n) < 0.15
+        circles[big, 2] = rng.uniform(10.0, 60.0, big.sum())
+        circles[:, :2] += rng.random((n, 2)) * 1e-9  # bits far below the pixel
+        width = float(rng.choice([0.4, 1.0, 1.7, 3.2]))
+        rows = np.arange(n)
+        patches = [_patch(image, Blob(x=x, y=y, radius=r, elongation=1.0, fill=1.0, touches_border=False), width)
+                   for x, y, r in circles]
+        owner, near = np.nonzero(_near(circles, rows, width))
+        got = _excluding_neighbours(patches, owner, circles[near], width, circles)
+        for i in rows:
+            want = _excluded_per_marker(patches[i], circles[near[owner == i]], width, circles[i])
+            flags = got[i].excluded
+            np.testing.assert_array_equal(np.zeros(want.size, bool) if flags is None else flags, want)
+            assert (flags is None) == (not want.any())
