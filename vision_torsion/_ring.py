@@ -117,10 +117,13 @@ class MarkerPatch:
         return np.add.outer(dy * dy, dx * dx).ravel()
 
     def centroid(self, weights) -> tuple[float, float, float]:
-        """Sum of `weights` (flat like `values`) and their weighted mean (x, y) in px."""
+        """Sum of `weights` (flat like `values`, not negative) and their weighted mean
+        (x, y) in px; (0, 0, 0) when they sum to 0."""
         rows, cols = self.shape
         w = weights.reshape(rows, cols)
         total = float(w.sum())
+        if not total > 0:
+            return 0.0, 0.0, 0.0
         x = self.x0 + float(w.sum(axis=0) @ np.arange(cols)) / total
         y = self.y0 + float(w.sum(axis=1) @ np.arange(rows)) / total
         return total, x, y

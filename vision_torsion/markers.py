@@ -221,9 +221,12 @@ def _start(patch: MarkerPatch, blob: Blob):
         raise FitError("the marker has no contrast", reason="low_contrast")
     w = patch.values - B
     w *= 1.0 / (F - B)
-    np.clip(w, 0.0, 1.0, out=w)
-    w[beyond] = 0.0
-    area, x, y = patch.centroid(w) if w.any() else (0.0, 0.0, 0.0)
+    # np.clip's values by two ufuncs, the zeros put by `where`, and no separate
+    # w.any() (centroid checks the sum): on a few thousand pixels each call's
+    # overhead is what counts (0.6 of the 11 ms of discorpy 05's 315 starts)
+    np.minimum(np.maximum(w, 0.0, out=w), 1.0, out=w)
+    np.copyto(w, 0.0, where=beyond)
+    area, x, y = patch.centroid(w)
     if not area > 0:
         raise FitError("the marker has no contrast", reason="low_contrast")
     return x, y, np.sqrt(area / np.pi), (B, F)
