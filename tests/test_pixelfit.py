@@ -425,3 +425,64 @@ def test_a_band_of_misfit_along_the_edge_is_not_cut_but_a_speck_on_it_is():
         specked = fit_disc(drawn(disc | (np.hypot(xs - sx, ys - sy) < 2.5)), cx + 0.3, cy - 0.2, 13.0)
         assert specked.n_pixels < plain.n_pixels
         assert np.hypot(specked.x_px - plain.x_px, specked.y_px - plain.y_px) < 0.05
+
+
+def _plain_occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
+    """_occluder_groups written out group by group: areas from OpenCV's statistics,
+    each group's edge moved and widened by its own 2x2 least squares."""
+    import cv2
+
+    from vision_torsion._ring import OCCLUDER_SIGMAS
+
+    out = np.zeros(shape, np.uint8)
+    out.reshape(-1)[ring_idx[~keep]] = 1
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(out, connectivity=8)
+    label = np.zeros(keep.size, np.int64)
+    label[~keep] = labels.reshape(-1)[ring_idx[~keep]]
+    groups, occluders = keep.copy(), keep.copy()
+    for g in range(1, n):
+        member = label == g
+        if stats[g, cv2.CC_STAT_AREA] < least:
+            groups[member] = occluders[member] = True
+            continue
+        phi = np.exp(-0.5 * u[member] ** 2)
+        basis = np.stack([phi, phi * u[member]])
+        normal = basis @ basis.T
+        det = normal[0, 0] * normal[1, 1] - normal[0, 1] ** 2
+        if not (np.abs(u[member]) < 3.0).all() or not det > 1e-9 * normal[0, 0] * normal[1, 1]:
+            continue
+        left = resid[member] - np.linalg.solve(normal, basis @ resid[member]) @ basis
+        if np.abs(left).max() < OCCLUDER_SIGMAS * sigma:
+            occluders[member] = True  # the edge's own misfit
+    return occluders, groups
+
+
+def test_occluder_groups_are_the_plain_group_by_group_ones():
+    """_ring._occluder_groups (areas by counting, the least-squares fit skipped when
+    every group reaches past the edge zone) against the plain version: specks, a
+    lone pixel, a band along the edge that moving it explains, one it does not,
+    and a group reaching past the edge zone, on random rings of a 40 x 50 patch."""
+    from vision_torsion._ring import _occluder_groups
+
+    rng = np.random.default_rng(23)
+    shape = (40, 50)
+    yy, xx = np.divmod(np.arange(shape[0] * shape[1]), shape[1])
+    d = np.hypot(xx - 24.6, yy - 19.3)
+    for trial in range(40):
+        ring_idx = np.flatnonzero((d < 18.0) & (rng.random(d.size) < 0.95))
+        u = (10.0 - d[ring_idx]) / 1.5
+        resid = rng.normal(0.0, 1.0, ring_idx.size)
+        angle = np.arctan2(yy - 19.3, xx - 24.6)[ring_idx]
+        for _ in range(rng.integers(1, 4)):
+            centre, width = rng.uniform(-np.pi, np.pi), rng.uniform(0.1, 0.8)
+            on = (np.abs(np.angle(np.exp(1j * (angle - centre)))) < width) & (np.abs(u) < rng.uniform(1.0, 5.0))
+            if trial % 2:  # the edge moved there: a misfit the fit explains
+                resid[on] += rng.uniform(5.0, 9.0) * np.exp(-0.5 * u[on] ** 2)
+            else:
+                resid[on] += rng.choice([-1.0, 1.0]) * rng.uniform(5.0, 40.0)
+        resid[rng.integers(ring_idx.size)] += 20.0  # a lone pixel: the noise's tail
+        keep = np.abs(resid) < 4.5
+        got = _occluder_groups(keep, resid, 1.0, u, ring_idx, shape, 4.5)
+        expected = _plain_occluder_groups(keep, resid, 1.0, u, ring_idx, shape, 4.5)
+        np.testing.assert_array_equal(got[0], expected[0])
+        np.testing.assert_array_equal(got[1], expected[1])

@@ -293,9 +293,11 @@ def _occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
     out = np.zeros(shape, np.uint8)
     outlying = np.flatnonzero(~keep)
     out.reshape(-1)[ring_idx[outlying]] = 1  # a view
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(out, connectivity=8)
+    n, labels = cv2.connectedComponents(out, connectivity=8)
     label = labels.reshape(-1)[ring_idx[outlying]]
-    small = stats[:, cv2.CC_STAT_AREA] < least
+    # a group's area is the count of its pixels, every one of them an outlying ring
+    # pixel (connectedComponentsWithStats' statistics cost three times the labelling)
+    small = np.bincount(label, minlength=n) < least
     small[0] = False  # the background label
     groups = keep.copy()
     groups[outlying[small[label]]] = True
@@ -323,6 +325,15 @@ def _edge_misfit(label, resid, u, sigma, n):
     neighbouring dot, a displaced block leave 11-43σ once the edge is moved
     (rendered scenes, UCL). Cut, the bands took a wedge of edge where the profile
     was merely off, and the centres moved by up to 1 px either way."""
+    zone = in_edge_zone(u)
+    wholly = np.ones(n, bool)  # groups with all their pixels in the edge zone
+    wholly[label[~zone]] = False
+    wholly[0] = False  # the background label, which has no pixels
+    if not wholly.any():
+        # a pixel beyond the zone leaves its group's worst at inf below: no group is
+        # the edge's misfit, and the least-squares fit is not needed (a dense grid's
+        # occluders are neighbouring dots' flanks, which reach past the zone)
+        return wholly
     phi = np.exp(-0.5 * u * u)
     phu = phi * u
     sums = [np.bincount(label, w, minlength=n) for w in (phi * phi, phi * phu, phu * phu, phi * resid, phu * resid)]
@@ -333,7 +344,7 @@ def _edge_misfit(label, resid, u, sigma, n):
     move, widen = np.where(solvable, (bb * ar - ab * br) / det, 0.0), np.where(solvable, (aa * br - ab * ar) / det, 0.0)
     left = np.abs(resid - move[label] * phi - widen[label] * phu)
     worst = np.zeros(n)
-    np.maximum.at(worst, label, np.where(in_edge_zone(u), left, np.inf))
+    np.maximum.at(worst, label, np.where(zone, left, np.inf))
     return solvable & (worst < OCCLUDER_SIGMAS * sigma)
 
 
