@@ -283,7 +283,7 @@ def occluder_group(edge_width) -> float:
     return max(np.pi * float(edge_width) ** 2, 3.0)
 
 
-def _occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
+def occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
     """`keep` with the outlying pixels (False) of connected groups (8-connected, on
     the patch of `shape`) of fewer than `least` pixels kept after all (the noise's
     tail), and, of the groups left, those the edge itself accounts for, moved and
@@ -371,7 +371,7 @@ def cut_occluders(resid, u, resolve, ring_idx, shape, *, least=3.0):
     sigma = robust_sigma(resid)
     keep = np.abs(resid) < OCCLUDER_SIGMAS * sigma
     if not keep.all():
-        keep = _occluder_groups(keep, resid, sigma, u, ring_idx, shape, least)[0]
+        keep = occluder_groups(keep, resid, sigma, u, ring_idx, shape, least)[0]
     edge_zone = in_edge_zone(u)
     # shares of the edge zone kept by counts (ndarray.mean's Python overhead was a
     # tenth of an examination; the same value: whole numbers over whole numbers)
@@ -380,7 +380,7 @@ def cut_occluders(resid, u, resolve, ring_idx, shape, *, least=3.0):
         return None
     resid = resolve(keep)
     sigma = robust_sigma(resid[keep])
-    keep, seen = _occluder_groups(np.abs(resid) < OCCLUDER_SIGMAS * sigma, resid, sigma, u, ring_idx, shape, least)
+    keep, seen = occluder_groups(np.abs(resid) < OCCLUDER_SIGMAS * sigma, resid, sigma, u, ring_idx, shape, least)
     if keep.all():
         return None
     seen = grow_cut(seen, ring_idx, shape)

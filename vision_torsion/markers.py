@@ -99,7 +99,8 @@ class Marker:
         ``ok`` or the failure mode.
     message : str
         Why, when status is not ``ok``; for an ``ok`` marker seen obliquely (its
-        edge an ellipse), that and the ellipse's axis ratio.
+        edge an ellipse), that and the ellipse's axis ratio; for one whose ring held
+        a region as dark (bright) as itself, :data:`STEEP_CUT_MESSAGE`.
     """
 
     x_px: float
@@ -609,6 +610,15 @@ def _oblique(f: DiscFit):
     return ratio, rms
 
 
+#: The message of an ``ok`` marker whose ring held a surround as dark as itself
+#: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`): the centre is flagged, not
+#: withheld, as such a marker may be the only one there is.
+STEEP_CUT_MESSAGE = (
+    "a region beside the marker as dark (bright) as it, such as an edge or a shadow, was cut from its ring: "
+    "the centre may be off by 0.1-0.3 px, more than its std says"
+)
+
+
 def _pixels_marker(f: DiscFit) -> Marker:
     """A :class:`Marker` from the pixel-model fit (``fit="pixels"``): ``not_round``
     when its edge is neither a circle nor an ellipse (a disc seen obliquely,
@@ -622,6 +632,8 @@ def _pixels_marker(f: DiscFit) -> Marker:
         ratio, rms = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
                    f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
+    if f.steep_cut:
+        message = "; ".join(m for m in (message, STEEP_CUT_MESSAGE) if m)
     return Marker(
         x_px=f.x_px,
         y_px=f.y_px,
