@@ -657,6 +657,25 @@ def test_clean_sequences_of_every_ready_scene_raise_no_flag():
         assert residual_flags(pairs) == [""] * 4, name
 
 
+def test_a_target_marker_beside_a_dark_surround_makes_its_image_suspect():
+    """A marker whose ring held a region as dark as itself (Marker.steep_cut: its centre
+    good to 0.1-0.3 px, not to its std) makes its image suspect, even in a sequence
+    too short to have a typical residual; the other images stay clean."""
+    from dataclasses import replace
+
+    from vision_torsion.markers import Marker
+    from vision_torsion.pair import PairMeasurement
+    from vision_torsion.quality import residual_flags
+
+    m = Marker(x_px=10.0, y_px=10.0, radius_px=5.0, residual_rms_px=0.1)
+    clean = PairMeasurement(first=m, second=replace(m, x_px=50.0))
+    beside = PairMeasurement(first=m, second=replace(m, x_px=50.0, steep_cut=True))
+    flags = residual_flags([clean, beside, None])
+    assert flags[0] == "" and flags[2] == ""
+    assert flags[1].startswith("suspect: marker 2 lies beside a region as dark (bright) as itself")
+    assert residual_flags([clean, clean, clean, beside])[3] == flags[1]  # with a typical residual too
+
+
 def test_the_pandas_free_csv_writer_writes_what_pandas_writes(tmp_path):
     columns = ["image", "mass_kg", "torque_nm", "angle_deg", "status", "message"]
     records = [

@@ -66,6 +66,7 @@ MARKER_COLUMNS = [
     "contrast_dn",
     "circularity",
     "edge_width_px",
+    "steep_cut",
     "status",
     "message",
 ]
@@ -95,6 +96,11 @@ class Marker:
         Minor over major axis of the edge (1 for a perfect circle).
     edge_width_px : float
         Fitted edge width s (px): blur and pixel size combined.
+    steep_cut : bool
+        A region as dark (bright) as the marker, such as an edge or a shadow, lay
+        within its ring and was cut (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`):
+        the centre is good to 0.1-0.3 px, not to its std. An image with such a
+        target marker is ``suspect`` (:mod:`vision_torsion.quality`).
     status : str
         ``ok`` or the failure mode.
     message : str
@@ -115,6 +121,7 @@ class Marker:
     contrast_dn: float = np.nan
     circularity: float = np.nan
     edge_width_px: float = np.nan
+    steep_cut: bool = False
     status: str = "ok"
     message: str = ""
 
@@ -647,6 +654,7 @@ def _pixels_marker(f: DiscFit) -> Marker:
         contrast_dn=f.foreground_dn - f.background_dn,
         circularity=circ,
         edge_width_px=f.edge_width_px,
+        steep_cut=f.steep_cut,
         message=message,
     )
 

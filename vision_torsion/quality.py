@@ -12,6 +12,11 @@ times the others'), a speck or a smear on a marker, motion blur.
 
 Threshold: :data:`SUSPECT_RESIDUAL_RATIO` (2). Over the seven ready scenes (12
 renders each, clean), the largest ratio was 1.20.
+
+An image is also suspect when one of its target markers lay beside a region as dark
+(bright) as itself, which was cut from its ring (:attr:`Marker.steep_cut
+<vision_torsion.markers.Marker.steep_cut>`): its centre is then good to 0.1-0.3 px,
+more than the angle's std allows for.
 """
 
 from __future__ import annotations
@@ -38,6 +43,16 @@ def _residuals(pair) -> list[float] | None:
     return out
 
 
+def _steep_cut(pair) -> str:
+    """"" or why `pair`'s image is suspect for a marker fitted beside a dark surround."""
+    for k, marker in enumerate((getattr(pair, "first", None), getattr(pair, "second", None)), start=1):
+        if getattr(marker, "steep_cut", False):
+            return (f"suspect: marker {k} lies beside a region as dark (bright) as itself, such as an edge or "
+                    "a shadow, cut from its fit: its centre may be off by 0.1-0.3 px, more than the angle's std "
+                    "allows for")
+    return ""
+
+
 def residual_flags(pairs) -> list[str]:
     """Per pair: "" or why its image is suspect (see the module docstring).
 
@@ -51,20 +66,22 @@ def residual_flags(pairs) -> list[str]:
     -------
     list of str
         ``"suspect: marker K's edge residual R px is N times the sequence's typical
-        T px (a damaged or corrupt image, or something on the marker?)"`` or "".
+        T px (a damaged or corrupt image, or something on the marker?)"``, or that
+        marker K lies beside a dark surround (whatever the number of pairs), or "".
     """
+    steep = [_steep_cut(p) for p in pairs]
     residuals = [None if p is None else _residuals(p) for p in pairs]
     levels = [sum(r) / 2 for r in residuals if r is not None]
     if len(levels) < 3:
-        return [""] * len(pairs)
+        return steep
     # numpy's median, the same value as statistics.median (the middle one, or the
     # mean of the two): importing statistics (fractions, decimal) cost every
     # process run 3 ms of start-up
     typical = float(np.median(levels))
     flags = []
-    for r in residuals:
-        if r is None or not max(r) > SUSPECT_RESIDUAL_RATIO * typical:
-            flags.append("")
+    for r, surround in zip(residuals, steep):
+        if surround or r is None or not max(r) > SUSPECT_RESIDUAL_RATIO * typical:
+            flags.append(surround)
             continue
         k = 1 if r[0] >= r[1] else 2
         flags.append(f"suspect: marker {k}'s edge residual {max(r):.3g} px is {max(r) / typical:.1f} "
