@@ -521,6 +521,24 @@ def test_a_darker_surround_beside_the_edge_is_cut_and_flagged(gap):
     assert not f.steep_cut and abs(f.x_px - x) < 3.0 * np.sqrt(f.cov[0, 0])
 
 
+def test_markers_beside_a_surround_fitted_together_are_fitted_as_one_by_one():
+    """fit_discs takes the same steep-light path as fit_disc: the same centres (to
+    rounding) and the same flag, for dots 2, 4 and 12 px from a darker surround."""
+    from vision_torsion.pixelfit import fit_discs, patch_extent
+
+    patches, starts, singles = [], [], []
+    for gap in (2.0, 4.0, 12.0):
+        img, x = _dot_beside_a_step(gap, 3)
+        patch = marker_patch(img, x + 0.5, 150.3, patch_extent(10.5, 1.2) + 1.0)
+        patches.append(patch)
+        starts.append((x + 0.5, 150.3, 10.5, 200.0, 30.0))
+        singles.append(fit_disc(None, x + 0.5, 150.3, 10.5, edge_width=1.2, levels=(200.0, 30.0), patch=patch))
+    for one, many in zip(singles, fit_discs(patches, starts, edge_width=1.2)):
+        assert many.steep_cut == one.steep_cut
+        assert (many.x_px, many.y_px) == pytest.approx((one.x_px, one.y_px), abs=1e-9)
+    assert [f.steep_cut for f in singles] == [True, True, False]
+
+
 def test_robust_levels_see_a_surround_the_gradient_took_up():
     """The residuals against levels solved robustly show the step's pixels as the
     outliers they are (σ near the 2 DN noise, not the least-squares 21 DN)."""
