@@ -181,9 +181,9 @@ class DiscFit:
         Pixels were cut from the ring under a steep lighting gradient
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
         shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
-        not to its covariance (a 90 DN step 0-7 px off a 10 px dot: 0.09 px at most
-        in 53 of 54 renders, 0.25 px in one, at a reported σ of 0.01-0.05 px; it was
-        0.31 px before the cut, at 0.05 px).
+        not to its covariance (a 90 DN step 0-7 px off a 10 px dot, 6 renders each:
+        within 0.1 px in 42 of 48, 0.13-0.25 px with the step 1 px off, at a reported
+        σ of 0.01-0.05 px; up to 0.31 px before the cut, at 0.05 px).
     """
 
     x_px: float
