@@ -508,7 +508,7 @@ def test_a_darker_surround_beside_the_edge_is_cut_and_flagged(gap):
     """Within a few px of the edge a 90 DN step is taken up by the lighting gradient,
     which spreads its misfit over the ring (robust σ 21 DN at 2 DN of noise): nothing
     looked outlying and the centre was 0.22-0.31 px off at a reported 0.05 px. Cut
-    from robustly solved levels, it leaves the centre within 0.1 px (0.004-0.08 px
+    from robustly solved levels, it leaves the centre within 0.1 px (0.006-0.09 px
     here), and the fit says so (steep_cut: good to ~0.1 px, not to its σ). Far from
     the edge (12 px) the step is an ordinary occluder: no flag, centre to its σ."""
     for seed in (0, 1):
