@@ -622,7 +622,7 @@ def _oblique(f: DiscFit):
 #: withheld, as such a marker may be the only one there is.
 STEEP_CUT_MESSAGE = (
     "a region beside the marker as dark (bright) as it, such as an edge or a shadow, was cut from its ring: "
-    "the centre may be off by 0.1-0.3 px, more than its std says"
+    "the centre may be off by up to 0.3 px, more than its std says"
 )
 
 

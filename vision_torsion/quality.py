@@ -48,7 +48,7 @@ def _steep_cut(pair) -> str:
     for k, marker in enumerate((getattr(pair, "first", None), getattr(pair, "second", None)), start=1):
         if getattr(marker, "steep_cut", False):
             return (f"suspect: marker {k} lies beside a region as dark (bright) as itself, such as an edge or "
-                    "a shadow, cut from its fit: its centre may be off by 0.1-0.3 px, more than the angle's std "
+                    "a shadow, cut from its fit: its centre may be off by up to 0.3 px, more than the angle's std "
                     "allows for")
     return ""
 
