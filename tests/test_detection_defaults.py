@@ -160,6 +160,19 @@ def test_a_disc_cut_by_the_border_is_reported_once():
     assert sorted(table["status"]) == ["border", "ok"]
 
 
+def test_a_disc_whose_blur_reaches_the_border_is_one_row_border():
+    """A whole disc 2 px from the border, blurred 2.5 px: its blurred edge is cut, and
+    at the detection level it touches the border. Its core higher up is the same disc
+    (fitted, it came out 0.2 px off): one row, border, not a second row fitted ok."""
+    import cv2
+
+    centres = [(300.0 - 0.5 - 12.0, 100.0), (150.0, 100.0)]
+    img = cv2.GaussianBlur(_discs((200, 300), centres)[0], (0, 0), 2.5)
+    img = np.clip(img + np.random.default_rng(1).normal(0.0, 2.0, img.shape), 0, 255).astype(np.uint8)
+    table = find_markers(img)
+    assert sorted(table["status"]) == ["border", "ok"]
+
+
 def test_colour_array_is_measured_like_its_grey_image():
     r = render(_ring_scene(5.0, 1.0, 0, n=4), 3.0, seed=1)
     colour = np.dstack([r.image] * 3)

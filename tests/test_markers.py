@@ -440,7 +440,8 @@ def test_noise_specks_of_a_faint_scene_are_not_ok_markers(seed, angle):
 
 def _excluded_per_marker(patch, neighbours, edge_width, own):
     """The neighbour exclusion as it was written for one marker: every neighbour's
-    distances over the whole patch (the simple version the box search replaces)."""
+    distances over the whole patch (the simple version the box search replaces), none
+    of a candidate whose circle holds the marker's centre."""
     from vision_torsion.markers import _neighbour_reach
 
     rows, cols = patch.shape
@@ -450,10 +451,10 @@ def _excluded_per_marker(patch, neighbours, edge_width, own):
     dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
     d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
     inside = d2 < (reach**2)[:, None, None]
-    large = np.flatnonzero(nb[:, 2] > 1.5 * own[2])
-    held = np.hypot(nb[large, 0] - own[0], nb[large, 1] - own[1]) < nb[large, 2]
-    inside[large[held]] = False
-    large = large[~held]
+    # a candidate whose circle holds the marker's centre (its region) is no neighbour
+    held = np.hypot(nb[:, 0] - own[0], nb[:, 1] - own[1]) < nb[:, 2]
+    inside[held] = False
+    large = np.flatnonzero((nb[:, 2] > 1.5 * own[2]) & ~held)
     k, y, x = np.nonzero(inside[large])
     k = large[k]
     ours = np.hypot(x + (patch.x0 - own[0]), y + (patch.y0 - own[1])) - own[2] <= np.sqrt(d2[k, y, x]) - nb[k, 2]

@@ -20,6 +20,7 @@ top-left pixel.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -136,8 +137,11 @@ COARSE_FILL_RANGE = (0.7, 1.3)
 #: dark (bright) as itself, such as a card's edge or a shadow, or with a touching
 #: neighbour stands free higher up (the UCL laparoscope frames' edge dots: at 1.4-2x).
 _SPLIT_LEVELS = (1.4, 2.0, 2.8, 4.0)
-#: Largest share of a border-cut disc's area that a disc found inside it may have
-#: to count as a marker of its own: more is the cut disc's own core.
+#: A disc found inside a border-cut disc is that disc's own core, not another
+#: marker, when it holds more than this share of its area, or more than a quarter
+#: of it about its centre (within half its radius): a UCL laparoscope dot 2.5 px from
+#: the frame's border, whose blur reached the border at the detection level, held
+#: 0.498 of it 1.4 px off centre, and was reported twice (border, and fit_failed).
 _CORE_SHARE = 0.5
 
 
@@ -199,17 +203,28 @@ def _clear_of_border(blob: Blob, shape, f) -> bool:
     return blob.x - r >= -0.5 and blob.y - r >= -0.5 and blob.x + r <= w - 0.5 and blob.y + r <= h - 0.5
 
 
-def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[Blob]:
+def _own_core(blob: Blob, area: float, cut_disc) -> bool:
+    """True when `blob` (of `area`, reduced px²) found inside the border-cut disc
+    `cut_disc` ((Blob, area), or None) is that disc's own core (:data:`_CORE_SHARE`)."""
+    if cut_disc is None:
+        return False
+    disc, disc_area = cut_disc
+    if area > _CORE_SHARE * disc_area:
+        return True
+    return area > 0.25 * disc_area and math.hypot(blob.x - disc.x, blob.y - disc.y) < 0.5 * disc.radius
+
+
+def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[tuple[Blob, float]]:
     """Discs inside a region that is no disc (`sub`, its 0/1 mask at (x0, y0) of the
     reduced image; `diff` the background-flattened image, `level` its detection
     level): the regions at the higher :data:`_SPLIT_LEVELS` that are whole discs
     (:func:`is_coarse_disc`, within the area `limits`, clear of the image border:
     :func:`_clear_of_border`), each taken at the lowest level where it is one and
-    not again higher up."""
+    not again higher up, with its area (reduced px²)."""
     bh, bw = sub.shape
     box = diff[y0 : y0 + bh, x0 : x0 + bw]
     peak = float(box[sub > 0].max())
-    found: list[Blob] = []
+    found: list[tuple[Blob, float]] = []
     for k in _SPLIT_LEVELS:
         if k * level >= peak:
             break
@@ -219,9 +234,9 @@ def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[Blob]:
             blob, area = _blob(part, x0 + px, y0 + py, f, shape)
             if not limits[0] <= area <= limits[1] or not is_coarse_disc(blob) or not _clear_of_border(blob, shape, f):
                 continue
-            if any(np.hypot(blob.x - b.x, blob.y - b.y) < b.radius + blob.radius for b in found):
+            if any(np.hypot(blob.x - b.x, blob.y - b.y) < b.radius + blob.radius for b, _ in found):
                 continue
-            found.append(blob)
+            found.append((blob, area))
     return found
 
 
@@ -280,19 +295,23 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
             continue  # too small even to fill its box
         region = _region(contour)
         blob, area = _blob(*region, f, small.shape)
-        most = a_max
+        cut_disc = None
         if a_min <= area <= a_max:
             blobs.append(blob)
             if is_coarse_disc(blob):
                 if not blob.touches_border:
                     continue
-                # a disc cut by the border: its own core higher up is no other marker
-                most = min(a_max, _CORE_SHARE * area)
+                cut_disc = (blob, area)  # its own core higher up is no other marker
         elif area < a_min:
             continue
         # no disc, too large for one, or cut by the border: a marker merged at this
         # level with its surround or a neighbour is looked for higher up
-        blobs += _discs_within(diff, *region, level, f, small.shape, (a_min, most))
+        for inner, inner_area in _discs_within(diff, *region, level, f, small.shape, (a_min, a_max)):
+            # the core of a disc cut by the border is that disc, whose blurred edge the
+            # border cuts (fitted, a 10 px dot blurred 2.5 px and 2 px from the border
+            # came out 0.2 px off): it stays one row, border
+            if not _own_core(inner, inner_area, cut_disc):
+                blobs.append(inner)
     if not blobs:
         logger.info("no marker candidates: no %s blob of radius %g-%g px stands out from the background "
                     "by more than %.3g (5x the noise %.3g)", polarity, r_min, r_max, level, noise)

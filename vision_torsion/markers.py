@@ -359,10 +359,20 @@ def _excluding_neighbours(patches, owner, nb, edge_width, owns=None) -> list[Mar
     neighbour (9 px on a 60 px disc, 25 px on a dark surround of radius 165 px) would
     take the marker's own edge on that side, which moves the fit of a marker seen at
     an angle (an ellipse) by up to several px. Between alike markers of a dense grid
-    the whole margin stays left out (the pixels between carry both blurred edges)."""
+    the whole margin stays left out (the pixels between carry both blurred edges).
+    A candidate whose coarse circle holds the marker's centre is no neighbour: it is
+    the region the marker was found in (:func:`~vision_torsion.detect.detect_blobs`)."""
     nb = np.asarray(nb, dtype=np.float64).reshape(-1, 3)
     large = np.zeros(len(nb), bool) if owns is None else nb[:, 2] > 1.5 * np.asarray(owns)[owner, 2]
-    flags = _neighbour_cover(patches, owner[~large], nb[~large], edge_width)
+    plain = ~large
+    if owns is not None:
+        # a candidate whose coarse circle holds this marker's centre is the region
+        # the marker was found inside (detect looks into regions that are no disc: a
+        # dot and the dark surround it merged with), not a neighbour: none of its
+        # pixels (as a large one's, below)
+        own = np.asarray(owns)[owner]
+        plain &= np.hypot(nb[:, 0] - own[:, 0], nb[:, 1] - own[:, 1]) >= nb[:, 2]
+    flags = _neighbour_cover(patches, owner[plain], nb[plain], edge_width)
     large_of: dict[int, list[int]] = {}
     for p in np.flatnonzero(large).tolist():
         large_of.setdefault(int(owner[p]), []).append(p)
