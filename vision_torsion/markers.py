@@ -326,20 +326,16 @@ def _box_axis(offset, reach, length, size):
 
 def _large_neighbour_cover(patch: MarkerPatch, nb, edge_width, own) -> np.ndarray:
     """Flags (flat like the patch) of the pixels left out for neighbours `nb` ((k, 3)
-    coarse circles, px) more than 1.5 times the marker's `own` radius: those within
-    reach (:func:`_neighbour_reach`) and nearer to that neighbour's coarse edge than
-    to the marker's own, none of a neighbour whose circle holds the marker's centre
-    (see :func:`_exclude_neighbours`)."""
+    coarse circles, px, none holding the marker's centre) more than 1.5 times the
+    marker's `own` radius: those within reach (:func:`_neighbour_reach`) and nearer
+    to that neighbour's coarse edge than to the marker's own (see
+    :func:`_excluding_neighbours`)."""
     rows, cols = patch.shape
     reach = _neighbour_reach(nb[:, 2], edge_width)
     dx = np.arange(cols) + (patch.x0 - nb[:, :1])
     dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
     d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
     inside = d2 < (reach**2)[:, None, None]
-    # a large neighbour whose coarse circle holds this marker's centre is no disc
-    # here (the dark surround of a card, cut by the border: its circle covered
-    # dots of the card, whose own sides were then left out): none of its pixels
-    inside[np.hypot(nb[:, 0] - own[0], nb[:, 1] - own[1]) < nb[:, 2]] = False
     # of a large neighbour's flagged pixels, those nearer this marker's coarse edge stay
     k, y, x = np.nonzero(inside)
     ox, oy, r_own = own
@@ -363,15 +359,18 @@ def _excluding_neighbours(patches, owner, nb, edge_width, owns=None) -> list[Mar
     A candidate whose coarse circle holds the marker's centre is no neighbour: it is
     the region the marker was found in (:func:`~vision_torsion.detect.detect_blobs`)."""
     nb = np.asarray(nb, dtype=np.float64).reshape(-1, 3)
-    large = np.zeros(len(nb), bool) if owns is None else nb[:, 2] > 1.5 * np.asarray(owns)[owner, 2]
-    plain = ~large
+    large = np.zeros(len(nb), bool)
+    plain = np.ones(len(nb), bool)
     if owns is not None:
-        # a candidate whose coarse circle holds this marker's centre is the region
-        # the marker was found inside (detect looks into regions that are no disc: a
-        # dot and the dark surround it merged with), not a neighbour: none of its
-        # pixels (as a large one's, below)
         own = np.asarray(owns)[owner]
-        plain &= np.hypot(nb[:, 0] - own[:, 0], nb[:, 1] - own[:, 1]) >= nb[:, 2]
+        # a candidate whose coarse circle holds this marker's centre is the region
+        # the marker was found inside, not a neighbour (detect looks into regions
+        # that are no disc: a dot and the dark surround it merged with; a card's
+        # dark surround cut by the border, whose circle covered dots of the card):
+        # none of its pixels
+        held = np.hypot(nb[:, 0] - own[:, 0], nb[:, 1] - own[:, 1]) < nb[:, 2]
+        large = (nb[:, 2] > 1.5 * own[:, 2]) & ~held
+        plain = ~large & ~held
     flags = _neighbour_cover(patches, owner[plain], nb[plain], edge_width)
     large_of: dict[int, list[int]] = {}
     for p in np.flatnonzero(large).tolist():

@@ -298,9 +298,10 @@ def _sectors(xs, ys, cx, cy, R):
     return sector_index(np.arctan2(ys - cy, xs - cx), R)
 
 
-def _steep(p) -> bool:
-    """True when the lighting gradient of the parameters `p` exceeds :data:`_STEEP_LIGHT`."""
-    return math.hypot(p[6], p[7]) > _STEEP_LIGHT
+def _steep(p):
+    """True when the lighting gradient of the parameters `p` (8, or rows of them:
+    flags per row) exceeds :data:`_STEEP_LIGHT`."""
+    return np.hypot(p[..., 6], p[..., 7]) > _STEEP_LIGHT
 
 
 def _robust_level_residuals(p, resid, J, u):
@@ -571,8 +572,9 @@ def _fit_from(
             full = (resid, J, u) if keep is None else _evaluate(p, ring)
             # a clean ring (nothing beyond 4.5 robust σ: most) needs no examination
             # (_cut_outliers' own first test, without its edge zone and sectors)
-            new_keep = None if _clean(full[0]) and not _steep(p) else _cut_outliers(p, ring, patch, *full)
-            steep_cut = steep_cut or (new_keep is not None and _steep(p))
+            steep = bool(_steep(p))
+            new_keep = None if _clean(full[0]) and not steep else _cut_outliers(p, ring, patch, *full)
+            steep_cut = steep_cut or (new_keep is not None and steep)
             cuts += 1
             if (
                 cuts == 3
@@ -864,7 +866,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         keep, n = keeps.get(k), px.n[k]
         full = (resid[k, :n], Jm[k, :, :n], u[k, :n]) if keep is None else _evaluate(P[k], rings[k])
         new_keep = _cut_outliers(P[k], rings[k], patches[live[k]], *full)
-        steep_cut[k] |= new_keep is not None and _steep(P[k])
+        steep_cut[k] |= new_keep is not None and bool(_steep(P[k]))
         cuts[k] += 1
         if (
             cuts[k] == 3
@@ -953,7 +955,7 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
                 rows = resid if first.size == m else resid[first]  # no copy when all are due
                 sig = robust_sigma_rows(rows, px.n[first])
                 quiet = (np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)
-                quiet &= np.hypot(P[first, 6], P[first, 7]) <= _STEEP_LIGHT  # _steep, row by row
+                quiet &= ~_steep(P[first])
                 clean[first[quiet]] = True
             final[clean] = True
             cuts[clean] = 1
