@@ -160,7 +160,7 @@ def measure_photo(path: Path, repeats: int = 1, crop=None) -> dict:
     """Every method on the photo at `path`: recall, row straightness, line-curve
     scatter and CPU times (`repeats` rounds), as one row of the results; with the
     :class:`fetch_photos.Crop` taken from it (`crop`, a full frame), also
-    :func:`window_ranking` under ``windows``."""
+    :func:`window_ranking` under ``windows``, with :func:`crop_matches`."""
     grey = load_image(path, keep_integers=True)
     img = grey.data
     dots = reference_dots(img)
@@ -226,16 +226,17 @@ def measure_photo(path: Path, repeats: int = 1, crop=None) -> dict:
         }
     if crop is not None:
         row["windows"] = window_ranking(dots, used, offs, img.shape, crop)
+        row["windows"]["crop_is_this_window"] = crop_matches(img, crop)
     return row
 
 
-def crop_matches(original: Path, crop) -> bool | None:
+def crop_matches(full: np.ndarray, crop) -> bool | None:
     """True when the committed crop (:class:`fetch_photos.Crop`) holds exactly the
-    pixels of its window of the `original` file; None when the crop is not here."""
+    pixels of its window of the original (`full`, as :func:`measure_photo` loaded
+    it); None when the crop is not here."""
     path = PHOTO_DIR / crop.name
     if not path.is_file():
         return None
-    full = load_image(original, keep_integers=True).data
     part = load_image(path, keep_integers=True).data
     window = full[crop.top : crop.top + crop.rows, crop.left : crop.left + crop.cols]
     return bool(window.shape == part.shape and np.array_equal(window, part))
@@ -345,9 +346,6 @@ def main(argv=None) -> int:
     if paths:  # warm-up, untimed: imports and first-call costs of every method
         measure_photo(paths[0])
     rows = [measure_photo(p, max(args.repeats, 1), crops.get(p.name)) for p in paths]
-    for path, row in zip(paths, rows):
-        if "windows" in row:
-            row["windows"]["crop_is_this_window"] = crop_matches(path, crops[path.name])
     info = machine_info()
     command = "python benchmarks/bench_photos.py" + (f" --extra {args.extra}" if args.extra else "")
     command += f" --repeats {args.repeats}" if args.repeats != 5 else ""
