@@ -194,13 +194,22 @@ def _blob(sub, x0, y0, f, shape) -> tuple[Blob | None, float]:
     return blob, float(area)
 
 
+#: Margin (px) a disc must keep inside the image to count as whole.
+BORDER_MARGIN_PX = 1.0
+
+
+def disc_inside(shape, x, y, r, margin=BORDER_MARGIN_PX) -> bool:
+    """True when the disc of radius `r` (px) at (x, y), widened by `margin` px, lies
+    within the image of `shape` (rows, cols; its pixels span -0.5 .. size - 0.5)."""
+    h, w = shape
+    return x - r - margin >= -0.5 and y - r - margin >= -0.5 and x + r + margin <= w - 0.5 and y + r + margin <= h - 0.5
+
+
 def _clear_of_border(blob: Blob, shape, f) -> bool:
-    """True when `blob`'s disc, 1 px wider, lies inside the image (`shape` of the
-    image reduced `f` times): a disc found inside a region cut by the border is then
-    a marker of its own, not the cut part of the region."""
-    h, w = shape[0] * f, shape[1] * f
-    r = blob.radius + 1.0
-    return blob.x - r >= -0.5 and blob.y - r >= -0.5 and blob.x + r <= w - 0.5 and blob.y + r <= h - 0.5
+    """True when `blob`'s disc lies whole inside the image (:func:`disc_inside`;
+    `shape` of the image reduced `f` times): a disc found inside a region cut by the
+    border is then a marker of its own, not the cut part of the region."""
+    return disc_inside((shape[0] * f, shape[1] * f), blob.x, blob.y, blob.radius)
 
 
 def _own_core(blob: Blob, area: float, cut_disc) -> bool:

@@ -31,7 +31,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
-from .detect import COARSE_MIN_AXIS_RATIO, Blob, default_radius_range, detect_blobs, is_coarse_disc
+from .detect import (
+    COARSE_MIN_AXIS_RATIO,
+    Blob,
+    default_radius_range,
+    detect_blobs,
+    disc_inside,
+    is_coarse_disc,
+)
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
@@ -162,8 +169,6 @@ def _rejected(blob: Blob, status: str, message: str) -> Marker:
 #: :func:`~vision_torsion.detect.is_coarse_disc`): only gross non-discs are rejected
 #: here, roundness is judged on the fitted edge (:func:`min_circularity`).
 _MIN_AXIS_RATIO = {"ellipse": 0.4}
-#: Margin (px) the fitted disc must keep inside the image to count as whole.
-_BORDER_MARGIN_PX = 1.0
 
 
 def min_circularity(radius: float) -> float:
@@ -179,15 +184,8 @@ def min_circularity(radius: float) -> float:
     return 1.0 - max(0.2, 1.0 / max(float(radius), 1e-9))
 
 
-def _inside(shape, x, y, r, margin=_BORDER_MARGIN_PX) -> bool:
-    """True when the disc of radius `r` (px) at (x, y), widened by `margin` px, lies
-    within the image (whose pixels span -0.5 .. size - 0.5)."""
-    h, w = shape
-    return x - r - margin >= -0.5 and y - r - margin >= -0.5 and x + r + margin <= w - 0.5 and y + r + margin <= h - 0.5
-
-
 def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
-    if blob.touches_border or not _inside(shape, blob.x, blob.y, blob.radius):
+    if blob.touches_border or not disc_inside(shape, blob.x, blob.y, blob.radius):
         return _rejected(blob, "border", "cut by the image border")
     if blob.radius < 0.8 * r_min:
         return _rejected(blob, "too_small", f"radius {blob.radius:.1f} px is below the smallest {r_min:g} px")
@@ -549,7 +547,7 @@ def fit_marker(
 
 def _whole(marker: Marker, shape) -> Marker:
     """`marker`, or status ``border`` when its fitted disc is not whole in the image."""
-    if marker.ok and not _inside(shape, marker.x_px, marker.y_px, marker.radius_px):
+    if marker.ok and not disc_inside(shape, marker.x_px, marker.y_px, marker.radius_px):
         return Marker(
             x_px=marker.x_px,
             y_px=marker.y_px,
