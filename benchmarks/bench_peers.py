@@ -40,7 +40,7 @@ For our default the honesty check is printed too: the mean reported
 ``angle_std_deg`` over the empirical RMS (target 0.7-1.3).
 
 Results: ``benchmarks/results/peers.json`` (every number, the date and the machine)
-and ``benchmarks/results/peers.md`` (the tables, ready for the README).
+and ``benchmarks/results/peers.md`` (the tables, ready for docs/benchmarks.md).
 """
 
 from __future__ import annotations

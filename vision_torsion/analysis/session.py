@@ -215,7 +215,7 @@ class SessionAnalysis:
     checks: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """JSON-ready dict (the content of summary.json); keys documented in the README.
+        """JSON-ready dict (the content of summary.json); keys documented in docs/analysis.md.
 
         Top-level keys: ``schema``, ``settings``, ``counts``, ``uncertainty``,
         ``summary``, ``per_orientation``, ``loops``, ``phases``, ``issues``,

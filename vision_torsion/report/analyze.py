@@ -4,7 +4,7 @@ The one path from a table to a report: ``vision-torsion analyze TABLE.csv`` and
 ``vision-torsion report SESSION_DIR`` (after processing) both come here.
 
 The table is a ``measurements.csv`` or one from another rig with the same columns
-(the README lists them: ``image, orientation_deg, cycle, phase, step, mass_kg,
+(docs/analysis.md lists them: ``image, orientation_deg, cycle, phase, step, mass_kg,
 torque_nm, torque_std_nm, angle_deg, angle_std_deg, status, message``, optional
 ``torque_common_std_nm``). A ``session.toml`` is optional: with it the torque
 uncertainty follows the weight pieces (its ``[rig]``), lost motion refers to the

@@ -3,7 +3,7 @@
 A session folder holds ``session.toml`` (rig, markers, protocol, angle sign),
 ``manifest.csv`` (one row per image) and the images; ``process`` writes
 ``measurements.csv`` into its output folder (``results/`` by default) and nothing
-else into the session folder. See the README section "Session folders".
+else into the session folder. See docs/sessions.md.
 """
 
 from .._lazy import attach

@@ -585,7 +585,7 @@ def plan_session(
         folder / CONFIG_NAME,
         planned,
         header="vision-torsion session (written by `vision-torsion plan`).\n"
-        "Units are in the key names; see the README for the format.",
+        "Units are in the key names; see docs/sessions.md for the format.",
     )
     atomic_write_text(folder / MANIFEST_NAME, manifest_text(REQUIRED_COLUMNS, plan.rows))
     atomic_write_text(folder / CAPTURE_SHEET_NAME, _capture_sheet(plan))
