@@ -36,6 +36,7 @@ __all__ = [
     "RecordError",
     "OutputError",
     "MeasurementsError",
+    "CampaignError",
 ]
 
 
@@ -142,3 +143,11 @@ class MeasurementsError(AnalysisError, RecordError):
     """
 
     reason = "bad_measurements"
+
+
+class CampaignError(VisionTorsionError):
+    """A campaign database or a report to be added to it is unusable: not a report,
+    a report of another schema version, a file that is not a campaign database, a
+    database that cannot be written. The message names the file."""
+
+    reason = "bad_campaign"

@@ -15,7 +15,9 @@ import math
 import numpy as np
 import pandas as pd
 
-from .html import _img, _table, fmt_value
+from .page import fmt_value
+from .page import image_tag as _img
+from .page import table_html as _table
 from .tables import figure_rows
 
 __all__ = ["analysis_sections", "HEADLINE_FIGURES"]

@@ -119,7 +119,8 @@ def _stiffness_section(measurements: pd.DataFrame):
     from ..errors import VisionTorsionError
     from ..stiffness.report import stiffness_section
     from .figures import svg_bytes
-    from .html import _img, _table
+    from .page import image_tag as _img
+    from .page import table_html as _table
 
     try:
         section = stiffness_section(measurements)
