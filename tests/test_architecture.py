@@ -32,7 +32,8 @@ LAYERS = [
     (7, "stiffness", ["vision_torsion.stiffness"]),
     (8, "synthetic", ["vision_torsion.synthetic"]),
     (9, "report", ["vision_torsion.report"]),
-    (10, "cli", ["vision_torsion.cli", "vision_torsion.__main__"]),
+    (10, "campaign", ["vision_torsion.campaign"]),
+    (11, "cli", ["vision_torsion.cli", "vision_torsion.__main__"]),
 ]
 
 

@@ -58,6 +58,7 @@ _COMMAND_MODULES = [
     "check_accuracy",
     "calibrate",
     "stiffness",
+    "campaign",
 ]
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from .. import __version__
 from ..errors import AnalysisError
 from ..fileio import atomic_write_bytes, atomic_write_text, write_csv, write_json
 from . import figures as _fig
@@ -101,6 +102,7 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     fig_paths = tuple(atomic_write_bytes(out / "figures" / name, data) for name, data in svgs.items())
 
     summary = analysis.to_dict()
+    summary["software"] = {"name": "vision-torsion", "version": __version__}
     summary["conditions"] = dict(conditions)
     summary["metadata"] = {k: v for k, v in (metadata or {}).items() if v is not None}
     summary["counts"]["images"] = int(len(measurements_df))

@@ -1,0 +1,169 @@
+"""The campaign report: one HTML page over every gear of a campaign — the batch
+table, control charts of the headline figures, conformity and capability."""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import CampaignError
+from .stats import capability, control_limits
+from .store import CampaignDB
+from .views import HEADLINE_FIGURES
+
+__all__ = ["CampaignReport", "write_campaign_report", "REPORT_NAME"]
+
+REPORT_NAME = "campaign_report.html"
+# direction of each headline figure's catalogue limit: stiffness a minimum, the rest a maximum
+_LIMIT_SIDE = {"k1": "lower", "k2": "lower", "k3": "lower", "lost_motion_3pct": "upper",
+               "lost_motion_4pct": "upper", "hysteresis_loss": "upper", "loop_energy": "upper"}
+
+
+@dataclass(frozen=True)
+class CampaignReport:
+    """The written page and what it holds."""
+
+    path: Path
+    n_reports: int
+    figures: tuple[str, ...]
+
+
+def _limits_from_spec(spec: dict | None) -> dict:
+    """figure -> (lower, upper) from ``{figure: {"min": x} | {"max": y}}``."""
+    out = {}
+    for name, entry in (spec or {}).items():
+        if isinstance(entry, dict):
+            lower, upper = entry.get("min"), entry.get("max")
+            out[name] = (float(lower) if lower is not None else None, float(upper) if upper is not None else None)
+    return out
+
+
+def _limit_text(lower, upper) -> str:
+    parts = ([f"≥ {lower:g}"] if lower is not None else []) + ([f"≤ {upper:g}"] if upper is not None else [])
+    return ", ".join(parts) or "—"
+
+
+def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
+    from ..plotting import fixed_figure, svg_bytes
+
+    fig = fixed_figure(7.0, 2.4, left=0.9, bottom=0.45, top=0.15)
+    ax = fig.add_subplot()
+    x = list(range(1, len(points) + 1))
+    ax.errorbar(x, points["value"], yerr=points["u95"].fillna(0.0), fmt="o", ms=3, lw=0.8, color="#1f4e79",
+                ecolor="#9db4cc", label="report (± U95)")
+    if limits.centre is not None:
+        ax.axhline(limits.centre, color="#444", lw=0.9, label="centre")
+        for level in (limits.lower, limits.upper):
+            ax.axhline(level, color="#b42318", lw=0.9, ls="--")
+        out = [i for i in limits.out_of_control]
+        if out:
+            ax.plot([x[i] for i in out], points["value"].to_numpy()[out], "s", mfc="none", mec="#b42318", ms=8,
+                    label="beyond the control limits")
+    for level in spec_limits:
+        if level is not None:
+            ax.axhline(level, color="#1a7f37", lw=1.2, ls=":", label="specification")
+    ax.set_xlabel("report, in test order")
+    ax.set_ylabel(f"{name} ({unit})")
+    ax.legend(loc="best", fontsize=7, frameon=False)
+    return svg_bytes(fig)
+
+
+def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HEADLINE_FIGURES) -> CampaignReport:
+    """Write ``campaign_report.html`` for the newest version of every report.
+
+    Parameters
+    ----------
+    db_path : str or Path
+        The campaign database.
+    out_dir : str or Path
+        Output folder (created).
+    model : str, optional
+        Only this gear model.
+    spec : dict, optional
+        ``{figure: {"min": value} | {"max": value}}`` in the figures' stored units;
+        without it the page shows conformity as the reports' own verdicts.
+
+    Notes
+    -----
+    Control charts are Shewhart individuals charts in test order (ISO 7870-2:
+    centre ± 3 σ̂, σ̂ = mean moving range / 1.128), withheld below
+    :data:`~vision_torsion.campaign.stats.MIN_CONTROL_POINTS` reports; capability is
+    Ppk against the specification with its 95 % lower bound
+    (:func:`~vision_torsion.campaign.stats.capability`).
+    """
+    import pandas as pd
+
+    from ..fileio import atomic_write_text, check_output_dir
+    from ..report.page import fmt_value, image_tag, page_html, table_html
+
+    out_dir = check_output_dir(out_dir)
+    with CampaignDB(db_path) as db:
+        reports = db.reports(model=model, latest_only=True)
+        if reports.empty:
+            raise CampaignError(f"{db_path}: no report{' of model ' + model if model else ''} in the campaign",
+                                reason="not_found")
+        long = db.figures(reports["id"].tolist(), figure=list(figures))
+    limits_by_figure = _limits_from_spec(spec)
+    order = {rid: i for i, rid in enumerate(reports["id"])}
+    long = long.assign(order=long["report_id"].map(order)).sort_values("order")
+
+    batch = reports[["serial", "model", "test_date", "version", "verdict"]].copy()
+    charts, capability_rows, conformity_rows = [], [], []
+    present = [f for f in figures if (long["figure"] == f).any()]
+    for name in present:
+        part = long[long["figure"] == name]
+        values = part.set_index("report_id")
+        batch[name] = [fmt_value(values["value"].get(r), values["u95"].get(r)) for r in reports["id"]]
+        unit = str(part["unit"].iloc[0])
+        usable = part[~part["withheld"]]
+        limits = control_limits(usable["value"].tolist())
+        lower, upper = limits_by_figure.get(name, (None, None))
+        cap = capability(usable["value"].tolist(), lower=lower, upper=upper)
+        caption = f"{name}: {len(usable)} report(s)"
+        if limits.centre is None:
+            caption += f" — control limits withheld: {limits.reason}"
+        elif limits.out_of_control:
+            caption += f"; {len(limits.out_of_control)} beyond the control limits"
+        chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
+        charts.append(f"<figure>{image_tag(chart, name)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+        capability_rows.append({
+            "figure": name, "unit": unit, "n": cap.n,
+            "limit": _limit_text(lower, upper),
+            "mean": cap.mean if cap.mean is not None else float(usable["value"].mean()) if len(usable) else None,
+            "sd": cap.sd, "Ppk": cap.ppk, "Ppk 95 % lower bound": cap.ppk_lower95,
+            "within limits": "—" if cap.conforming is None else f"{100 * cap.conforming:.1f} %",
+            "note": cap.reason,
+        })
+        verdicts = part["verdict"].dropna()
+        if len(verdicts):
+            counts = verdicts.value_counts()
+            conformity_rows.append({"figure": name, "reports with a verdict": int(len(verdicts)),
+                                    **{k: int(counts.get(k, 0)) for k in ("pass", "fail", "undecided")}})
+    verdict_counts = reports["verdict"].fillna("no [spec]").value_counts()
+    n = len(reports)
+    parts = [
+        f"<h1>Campaign{' — ' + html.escape(model) if model else ''}</h1>",
+        f'<p class="muted">{html.escape(str(Path(db_path).name))}: {n} report(s) (newest version of each test), '
+        f"{reports['serial'].nunique()} serial(s), tests {html.escape(str(reports['test_date'].min()))} to "
+        f"{html.escape(str(reports['test_date'].max()))}.</p>",
+        "<h2>Verdicts</h2>",
+        table_html(pd.DataFrame({"verdict": verdict_counts.index, "reports": verdict_counts.to_numpy()}),
+                   left=("verdict",)),
+        "<h2>Conformity per figure</h2>",
+        table_html(pd.DataFrame(conformity_rows), left=("figure",)) if conformity_rows
+        else '<p class="muted">No report carries a conformity verdict (no [spec] in their session.toml).</p>',
+        "<h2>Capability</h2>",
+        '<p class="muted">Ppk = min(USL − mean, mean − LSL) / 3s over the newest report of each test, with its '
+        "one-sided 95 % lower bound; withheld with the reason when there are too few reports or no limit.</p>",
+        table_html(pd.DataFrame(capability_rows), left=("figure", "unit", "limit", "note")),
+        "<h2>Control charts</h2>",
+        '<p class="muted">Individuals charts in test order: centre line and ±3σ̂ limits (σ̂ from the mean '
+        "moving range); bars are each report's U95; dotted: the specification.</p>",
+        "".join(charts),
+        "<h2>Batch</h2>",
+        table_html(batch.rename(columns={"test_date": "test date"}), left=("serial", "model", "test date", "verdict")),
+    ]
+    path = out_dir / REPORT_NAME
+    atomic_write_text(path, page_html("Campaign report", parts))
+    return CampaignReport(path, n, tuple(present))
