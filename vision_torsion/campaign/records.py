@@ -196,10 +196,10 @@ def _load_summary(folder: Path) -> tuple[bytes, dict]:
     return data, summary
 
 
-def _inputs(folder: Path, summary: dict) -> dict:
+def _inputs(folder: Path, summary: dict, summary_bytes: bytes) -> dict:
     """sha256 of summary.json and of each input found: measurements.csv beside it,
     session.toml and manifest.csv of the session folder (None where absent)."""
-    inputs = {SUMMARY_NAME: _sha256(folder / SUMMARY_NAME)}
+    inputs = {SUMMARY_NAME: hashlib.sha256(summary_bytes).hexdigest()}
     for name in _INPUT_NAMES:
         path = folder / name
         inputs[name] = _sha256(path) if path.is_file() else None
@@ -248,7 +248,7 @@ def read_report(folder, *, test_hours: float | None = None) -> ReportRecord:
     if test_hours is None:
         test_hours = _number(test.get("test_hours")) if isinstance(test, dict) else None
     test_date, date_source = _test_date(summary, folder)
-    inputs = _inputs(folder, summary)
+    inputs = _inputs(folder, summary, data)
     content = hashlib.sha256(json.dumps({"inputs": inputs, "test_hours": test_hours},
                                         sort_keys=True).encode("ascii")).hexdigest()
     software = summary.get("software")

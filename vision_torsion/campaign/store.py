@@ -301,7 +301,7 @@ class CampaignDB:
                      record.test_date, record.date_source, record.test_hours,
                      datetime.now(timezone.utc).isoformat(timespec="seconds"), record.software_version,
                      __version__, record.summary_schema, record.source, record.verdict,
-                     json.dumps(record.inputs, sort_keys=True), zlib.compress(record.summary_bytes, 6)),
+                     json.dumps(record.inputs, sort_keys=True), zlib.compress(record.summary_bytes, 1)),
                 )
                 report_id = cursor.lastrowid
                 conn.executemany(
