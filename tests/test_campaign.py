@@ -334,7 +334,10 @@ def test_campaign_report_page(tmp_path, folders):
     for heading in ("Verdicts", "Capability", "Control charts", "Batch"):
         assert f"<h2>{heading}</h2>" in page
     assert "≥ 0.28" in page and "≤ 3" in page
-    assert page.count("<img") == len(rep.figures)
+    with CampaignDB(db) as c:
+        charted = c.figures(figure=list(rep.figures)).query("not withheld")["figure"].nunique()
+    assert page.count("<img") == charted == len(rep.figures) - 1  # k3 is withheld in every report
+    assert "k3: withheld in every report, nothing to chart." in page
 
 
 def test_markup_in_a_serial_is_escaped(tmp_path, base):

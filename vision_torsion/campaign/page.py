@@ -15,6 +15,8 @@ from .views import HEADLINE_FIGURES
 __all__ = ["CampaignReport", "write_campaign_report", "REPORT_NAME"]
 
 REPORT_NAME = "campaign_report.html"
+# the figures of the batch table (all of them are charted)
+_BATCH_COLUMNS = ("k1", "k2", "lost_motion_4pct", "hysteresis_loss")
 # direction of each headline figure's catalogue limit: stiffness a minimum, the rest a maximum
 _LIMIT_SIDE = {"k1": "lower", "k2": "lower", "k3": "lower", "lost_motion_3pct": "upper",
                "lost_motion_4pct": "upper", "hysteresis_loss": "upper", "loop_energy": "upper"}
@@ -46,8 +48,9 @@ def _limit_text(lower, upper) -> str:
 
 def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
     from ..plotting import fixed_figure, svg_bytes
+    from ..report.page import unit_words
 
-    fig = fixed_figure(7.0, 2.4, left=0.9, bottom=0.45, top=0.15)
+    fig = fixed_figure(5.0, 2.4, left=0.8, bottom=0.45, top=0.15)
     ax = fig.add_subplot()
     x = list(range(1, len(points) + 1))
     ax.errorbar(x, points["value"], yerr=points["u95"].fillna(0.0), fmt="o", ms=3, lw=0.8, color="#1f4e79",
@@ -64,7 +67,7 @@ def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
         if level is not None:
             ax.axhline(level, color="#1a7f37", lw=1.2, ls=":", label="specification")
     ax.set_xlabel("report, in test order")
-    ax.set_ylabel(f"{name} ({unit})")
+    ax.set_ylabel(f"{name} ({unit_words(unit)})")
     ax.legend(loc="best", fontsize=7, frameon=False)
     return svg_bytes(fig)
 
@@ -95,7 +98,7 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
     import pandas as pd
 
     from ..fileio import atomic_write_text, check_output_dir
-    from ..report.page import fmt_value, image_tag, page_html, table_html
+    from ..report.page import fmt_value, image_tag, page_html, table_html, unit_words
 
     out_dir = check_output_dir(out_dir)
     with CampaignDB(db_path) as db:
@@ -108,13 +111,15 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
     order = {rid: i for i, rid in enumerate(reports["id"])}
     long = long.assign(order=long["report_id"].map(order)).sort_values("order")
 
-    batch = reports[["serial", "model", "test_date", "version", "verdict"]].copy()
+    batch = reports[["serial", "test_date", "version", "verdict"]].copy()
     charts, capability_rows, conformity_rows = [], [], []
     present = [f for f in figures if (long["figure"] == f).any()]
     for name in present:
         part = long[long["figure"] == name]
         values = part.set_index("report_id")
-        batch[name] = [fmt_value(values["value"].get(r), values["u95"].get(r)) for r in reports["id"]]
+        if name in _BATCH_COLUMNS:
+            batch[f"{name} ({unit_words(part['unit'].iloc[0])})"] = [
+                fmt_value(values["value"].get(r), values["u95"].get(r)) for r in reports["id"]]
         unit = str(part["unit"].iloc[0])
         usable = part[~part["withheld"]]
         limits = control_limits(usable["value"].tolist())
@@ -125,10 +130,13 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
             caption += f" — control limits withheld: {limits.reason}"
         elif limits.out_of_control:
             caption += f"; {len(limits.out_of_control)} beyond the control limits"
-        chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
-        charts.append(f"<figure>{image_tag(chart, name)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+        if usable.empty:
+            charts.append(f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>')
+        else:
+            chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
+            charts.append(f"<figure>{image_tag(chart, name)}<figcaption>{html.escape(caption)}</figcaption></figure>")
         capability_rows.append({
-            "figure": name, "unit": unit, "n": cap.n,
+            "figure": name, "unit": unit_words(unit), "n": cap.n,
             "limit": _limit_text(lower, upper),
             "mean": cap.mean if cap.mean is not None else float(usable["value"].mean()) if len(usable) else None,
             "sd": cap.sd, "Ppk": cap.ppk, "Ppk 95 % lower bound": cap.ppk_lower95,
@@ -160,9 +168,10 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
         "<h2>Control charts</h2>",
         '<p class="muted">Individuals charts in test order: centre line and ±3σ̂ limits (σ̂ from the mean '
         "moving range); bars are each report's U95; dotted: the specification.</p>",
-        "".join(charts),
+        f'<div class="grid">{"".join(charts)}</div>',
         "<h2>Batch</h2>",
-        table_html(batch.rename(columns={"test_date": "test date"}), left=("serial", "model", "test date", "verdict")),
+        '<p class="muted">One row per test (its newest version): each figure ± its U95.</p>',
+        table_html(batch.rename(columns={"test_date": "test date"}), left=("serial", "test date", "verdict")),
     ]
     path = out_dir / REPORT_NAME
     atomic_write_text(path, page_html("Campaign report", parts))

@@ -22,6 +22,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from ..plotting import fixed_figure, svg_bytes
+from .page import unit_words
 
 __all__ = ["svg_bytes", "safe_svg", "loops_overlay", "loop_detail", "fit_residuals", "phase_stiffness_chart",
            "orientation_chart", "value_scale"]
@@ -260,7 +261,6 @@ def phase_stiffness_chart(analysis) -> Figure:
 
 
 #: The analysis's unit codes as a reader writes them.
-_UNIT_WORDS = {"nm_per_rad": "N·m/rad", "nm": "N·m", "j": "J", "deg": "deg", "per_nm": "1/(N·m)", "1": ""}
 
 _FIGURE_WORDS = {
     "hysteresis": "Hysteresis, largest loop width",
@@ -283,7 +283,7 @@ def orientation_chart(analysis, figures=("hysteresis", "loop_energy", "bilinear_
         sub = po[po["figure"] == name]
         s = analysis.summary.get(name, {})
         words = _FIGURE_WORDS.get(name, name.replace("_", " "))
-        unit = _UNIT_WORDS.get(str(s.get("unit", "")), str(s.get("unit", "")))
+        unit = unit_words(s.get("unit", ""))
         mean = s.get("mean")
         values = sub["mean"].to_numpy(dtype=float)
         if sub.empty or not np.isfinite(values).any() or mean is None or not mean:

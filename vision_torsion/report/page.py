@@ -15,7 +15,10 @@ import math
 
 import pandas as pd
 
-__all__ = ["PAGE_CSS", "fmt_value", "image_tag", "table_html", "page_html"]
+__all__ = ["PAGE_CSS", "fmt_value", "image_tag", "table_html", "page_html", "unit_words"]
+
+# the unit codes of summary.json's figures, as a reader writes them
+_UNIT_WORDS = {"nm_per_rad": "N·m/rad", "nm": "N·m", "j": "J", "deg": "deg", "per_nm": "1/(N·m)", "1": ""}
 
 PAGE_CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:0;color:#1d2430;background:#f6f7f9}
@@ -98,3 +101,9 @@ def page_html(title: str, parts) -> str:
         + "\n".join(parts)
         + "</main></body></html>\n"
     )
+
+
+def unit_words(unit) -> str:
+    """A figure's unit code (``"nm_per_rad"``) as a reader writes it (``"N·m/rad"``);
+    an unknown code as it is."""
+    return _UNIT_WORDS.get(str(unit), str(unit))
