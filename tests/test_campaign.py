@@ -395,3 +395,16 @@ def test_cli_round_trip(tmp_path, folders, capsys):
     assert (tmp_path / "out" / "campaign_report.html").is_file()
     assert _cli("campaign", "list", tmp_path / "none.db") == 2
     assert "no such campaign database" in capsys.readouterr().err
+
+
+def test_analyze_adds_its_report_to_a_campaign(tmp_path, capsys):
+    from vision_torsion.analysis import simulate_measurements
+
+    table = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, angle_std_deg=0.001, mass_std_kg=5e-5,
+                                  rng=np.random.default_rng(2), n_cycles=1, torque_model="pieces")
+    table.to_csv(tmp_path / "m.csv", index=False)
+    db = tmp_path / "c.db"
+    assert _cli("analyze", tmp_path / "m.csv", "-o", tmp_path / "out", "--campaign", db) == 0
+    assert f"campaign {db}: added as version 1 (record 1)" in capsys.readouterr().out
+    assert _cli("analyze", tmp_path / "m.csv", "-o", tmp_path / "out", "--campaign", db) == 0
+    assert f"campaign {db}: already there (record 1)" in capsys.readouterr().out

@@ -23,6 +23,7 @@ def register(sub) -> None:
     p.add_argument("table", metavar="TABLE.csv")
     p.add_argument("--session", metavar="FILE.toml", help="session.toml with the rig and the optional [gear]/[test]")
     add_output_option(p, "TABLE's folder/<TABLE stem>_analysis")
+    p.add_argument("--campaign", metavar="DB", help="also add the report to this campaign database")
     add_common_options(p)
     # a short batch job: its own process runs it with the cyclic GC off (cli._ends_process)
     p.set_defaults(func=run, gc_off=True)
@@ -38,5 +39,9 @@ def run(args) -> int:
     if res.angle_sign_advice:
         print(res.angle_sign_advice)
     print(f"report: {res.files.report_html}")
+    if args.campaign:
+        from .report import add_to_campaign
+
+        add_to_campaign(args.campaign, res.files.out_dir)
     return 1 if res.n_failed else 0
 

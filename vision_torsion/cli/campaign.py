@@ -76,14 +76,19 @@ def run_add(args) -> int:
             print(f"{done}/{total} report folders read", file=sys.stderr, flush=True)
 
     outcome = add_reports(args.db, args.folders, test_hours=args.test_hours, progress=progress)
-    for result in outcome.results:
-        if len(outcome.results) <= 20:
-            what = f"added as version {result.version}" if result.status == "added" else "already there"
-            print(f"{result.source}: {what} (record {result.report_id})")
+    if len(outcome.results) <= 20:
+        for result in outcome.results:
+            print(f"{result.source}: {describe_added(result)}")
     for folder, message in outcome.failures:
         print(f"failed: {message}", file=sys.stderr)
     print(f"{outcome.added} added, {outcome.present} already there, {len(outcome.failures)} not a usable report")
     return 1 if outcome.failures else 0
+
+
+def describe_added(result) -> str:
+    """What adding a report did, in words."""
+    what = f"added as version {result.version}" if result.status == "added" else "already there"
+    return f"{what} (record {result.report_id})"
 
 
 def _print_frame(frame) -> None:

@@ -20,6 +20,7 @@ def register(sub) -> None:
     p.add_argument("session_dir", metavar="SESSION_DIR")
     p.add_argument("-o", "--out-dir", metavar="OUT_DIR", help="output folder (default SESSION_DIR/results)")
     add_jobs_option(p)
+    p.add_argument("--campaign", metavar="DB", help="also add the report to this campaign database")
     add_common_options(p)
     p.set_defaults(func=run)
 
@@ -44,4 +45,14 @@ def run(args) -> int:
 
     rep = report_session(args.session_dir, out_dir=args.out_dir, jobs=args.jobs, progress=progress_enabled(args))
     print_summary(rep)
+    if args.campaign:
+        add_to_campaign(args.campaign, rep.files.out_dir)
     return 1 if rep.n_failed else 0
+
+
+def add_to_campaign(db, folder) -> None:
+    """Add a report folder just written to a campaign database, and say what it became."""
+    from ..campaign import add_reports
+    from .campaign import describe_added
+
+    print(f"campaign {db}: {describe_added(add_reports(db, [folder]).results[0])}")
