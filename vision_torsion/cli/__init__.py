@@ -176,22 +176,13 @@ def main(argv=None) -> int:
 def _ends_process(*, gc_off: bool):
     """The garbage collector of a process that ends with its command.
 
-    At exit Python clears the modules and then collects: the cyclic garbage
-    collector walks and frees, one by one, the ~130 000 objects numpy, pandas,
-    scipy and matplotlib made at import, 0.3-0.5 s of CPU after ``vision-torsion
-    analyze`` has written its last file (``benchmarks/bench_analyze.py``). Freezing
-    them when the command is done leaves that memory to the operating system. The
-    command's files are closed and renamed by then; atexit handlers (logging's flush)
-    and the flush of stdout and stderr still run.
-
-    A short batch command (``gc_off``, set by the subcommand's parser: ``analyze``)
-    runs with the collector off: at the default thresholds it ran ~360 times on the
-    demo table, walking those libraries' objects again and again (0.13-0.15 s of CPU)
-    to find a few reference cycles (matplotlib figures) that go with the process;
-    peak memory 153 -> 156 MB. Reference counting frees everything else.
-
-    Only for the process's own command line, never for an in-process ``main([...])``,
-    whose caller lives on.
+    On the way out the collector is frozen, so the objects the libraries made at
+    import are left to the operating system instead of being walked and freed one
+    by one; a short batch command (``gc_off``, set by its parser) also runs with the
+    collector off. Files are closed and renamed before this; atexit handlers and the
+    flush of stdout and stderr still run. Only for the process's own command line,
+    never for an in-process ``main([...])``, whose caller lives on (the measured
+    effect is in ``benchmarks/bench_analyze.py``'s results).
     """
     if gc_off:
         gc.disable()
