@@ -96,7 +96,7 @@ def _print_frame(frame) -> None:
         print("no records")
         return
     shown = frame.copy()
-    for column in shown.select_dtypes(include="object").columns:
+    for column in [c for c in shown.columns if shown[c].dtype.kind == "O"]:
         shown[column] = shown[column].map(lambda v: "—" if v is None else v)
     print(shown.to_string(index=False, na_rep="—", float_format=lambda v: f"{v:.6g}"))
 
