@@ -135,7 +135,8 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
             charts.append(f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>')
         else:
             chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
-            charts.append(f"<figure>{image_tag(chart, name, mime='image/png')}<figcaption>{html.escape(caption)}</figcaption></figure>")
+            img = image_tag(chart, name, mime="image/png")
+            charts.append(f"<figure>{img}<figcaption>{html.escape(caption)}</figcaption></figure>")
         capability_rows.append({
             "figure": name, "unit": unit_words(unit), "n": cap.n,
             "limit": _limit_text(lower, upper),
