@@ -93,5 +93,5 @@ _LAZY = {
     "synthetic_encoder_record": "stiffness",
 }
 
-__all__ = [*_errors_all, *_LAZY]
 __getattr__, __dir__ = attach(__name__, _LAZY)
+__all__ = [*_errors_all, *_LAZY]
