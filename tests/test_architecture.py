@@ -4,7 +4,7 @@ not import each other.
 
 Imports are read from the source with ``ast`` (every ``import`` and ``from ... import``,
 those inside functions included, and the submodules a package face's ``_LAZY`` table
-names for :func:`vision_torsion._lazy.attach`), so a lazy import cannot hide a wrong
+names for :func:`vision_torsion.lazy.attach`), so a lazy import cannot hide a wrong
 direction.
 """
 
@@ -18,13 +18,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "vision_torsion"
 # (level, group, module prefixes): a module may import modules of a lower level, and
 # modules of its own level only within its own group. Keep in step with ARCHITECTURE.md.
 LAYERS = [
-    (0, "foundation", ["vision_torsion.__version__", "vision_torsion._lazy", "vision_torsion.errors",
+    (0, "foundation", ["vision_torsion.__version__", "vision_torsion.lazy", "vision_torsion.errors",
                        "vision_torsion.fileio",
                        "vision_torsion.textfiles", "vision_torsion.resources", "vision_torsion.numerics",
                        "vision_torsion.batch", "vision_torsion.measurements", "vision_torsion.settings",
                        "vision_torsion.plotting"]),
     (1, "image", ["vision_torsion.images", "vision_torsion.quality"]),
-    (2, "markers", ["vision_torsion._ring", "vision_torsion.detect", "vision_torsion.edges",
+    (2, "markers", ["vision_torsion.ring", "vision_torsion.detect", "vision_torsion.edges",
                     "vision_torsion.pixelfit", "vision_torsion.circlefit", "vision_torsion.markers"]),
     (3, "pair", ["vision_torsion.pair"]),
     (4, "angle", ["vision_torsion.correction", "vision_torsion.angle", "vision_torsion.measure",
@@ -124,7 +124,7 @@ def test_the_check_sees_a_wrong_import(tmp_path, monkeypatch):
     (fake / "angle.py").write_text("def f():\n    from .session import load\n")
     (fake / "calibration" / "__init__.py").write_text("")
     (fake / "calibration" / "x.py").write_text("from ..stiffness import rig\nfrom ..angle import f\n")
-    (fake / "images.py").write_text("from ._lazy import attach\n_LAZY = {'Plan': 'session.plan'}\n")
+    (fake / "images.py").write_text("from .lazy import attach\n_LAZY = {'Plan': 'session.plan'}\n")
     monkeypatch.setattr(__import__(__name__), "PACKAGE", fake)
     found = violations()
     assert len(found) == 3

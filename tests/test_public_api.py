@@ -7,7 +7,7 @@ import sys
 import pytest
 
 import vision_torsion
-from vision_torsion._lazy import attach, module_all
+from vision_torsion.lazy import attach, module_all
 
 
 def test_every_public_name_resolves():

@@ -14,9 +14,9 @@ Examples
 True
 """
 
-from ._lazy import attach
 from .errors import *  # noqa: F401,F403
 from .errors import __all__ as _errors_all
+from .lazy import attach
 
 __version__ = "0.1.0"
 

@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._ring import (
+from .errors import FitError
+from .ring import (
     INV_SQRT_2PI,
     MarkerPatch,
     bounded_edge_width,
@@ -61,7 +62,6 @@ from ._ring import (
     sector_edge_offsets,
     sector_index,
 )
-from .errors import FitError
 
 __all__ = ["EdgePoints", "edge_points"]
 

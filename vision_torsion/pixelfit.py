@@ -55,7 +55,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._ring import (
+from .errors import FitError
+from .ring import (
     EDGE_ZONE,
     INV_SQRT_2PI,
     OCCLUDER_SIGMAS,
@@ -64,12 +65,14 @@ from ._ring import (
     check_contrast,
     check_radius,
     cut_occluders,
+    damped_normal_matrix,
     fast_median,
     harmonic_circularity,
     in_edge_zone,
     lost_sectors,
     marker_patch,
     normal_cdf,
+    nothing_to_cut,
     occluder_group,
     occluder_groups,
     robust_sigma,
@@ -77,8 +80,8 @@ from ._ring import (
     sector_edge_offsets,
     sector_index,
     sectors_needed,
+    solve_lu,
 )
-from .errors import FitError
 
 __all__ = ["DiscFit", "fit_disc", "fit_discs"]
 
@@ -337,10 +340,10 @@ def _steep_surround(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the ring's pixels to keep, or None: under a steep lighting gradient
     (:func:`_steep`), the pixels away from the edge zone that lie beyond 4.5 robust σ
     of robustly solved levels (:func:`_robust_level_residuals`) in connected groups
-    of an occluder's size (:func:`~vision_torsion._ring.occluder_group`): a darker
+    of an occluder's size (:func:`~vision_torsion.ring.occluder_group`): a darker
     surround the gradient took up. Only those are cut here; with them gone the
     gradient no longer hides the rest, which the next examination cuts as any
-    occluder (:func:`~vision_torsion._ring.cut_occluders`) from a fit no longer
+    occluder (:func:`~vision_torsion.ring.cut_occluders`) from a fit no longer
     pulled by it."""
     r = _robust_level_residuals(p, resid, J, u)
     sigma = robust_sigma(r)
@@ -353,7 +356,7 @@ def _steep_surround(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
 def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the pixels to keep, or None: the occluder cut of
-    :func:`~vision_torsion._ring.cut_occluders`, and the edge pixels of the sectors
+    :func:`~vision_torsion.ring.cut_occluders`, and the edge pixels of the sectors
     it touched; None when the outlying pixels it saw lie along much of the edge
     (the edge's own misfit). `resid`, `J`, `u` are the model at `p`; under a steep
     lighting gradient (:func:`_steep`) a darker surround is cut first
@@ -402,9 +405,9 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
 
 def _edge_diagnostics(p, resid, J, u, sigma2):
-    """Per-sector edge points (:func:`~vision_torsion._ring.sector_edge_offsets`),
+    """Per-sector edge points (:func:`~vision_torsion.ring.sector_edge_offsets`),
     their RMS distance from the circle (px), the circularity they give
-    (:func:`~vision_torsion._ring.harmonic_circularity`) and their RMS standard
+    (:func:`~vision_torsion.ring.harmonic_circularity`) and their RMS standard
     deviation from the pixel noise alone (px; :func:`_away_variance`, `sigma2` the
     ring's residual variance in DN²)."""
     cx, cy, R = p[0], p[1], p[2]
@@ -458,7 +461,7 @@ def fit_disc(
     max_iter : int
         Levenberg-Marquardt iterations at most.
     patch : MarkerPatch, optional
-        Pixels around the marker from :func:`~vision_torsion._ring.marker_patch`;
+        Pixels around the marker from :func:`~vision_torsion.ring.marker_patch`;
         taken from `image` when None. It must reach past the edge by the ring's
         width (3s + 7.5 px, and 0.5 px more for the start's error).
 
@@ -502,31 +505,10 @@ def fit_disc(
     return _fit_from(p, ring, patch, *_evaluate(p, px), max_iter=max_iter)
 
 
-def _damped(A, lam):
-    """A + lam·diag(A): the Levenberg-Marquardt normal matrix (a copy; the same
-    values as adding the diagonal matrix, without its two 8x8 temporaries)."""
-    damped = A.copy()
-    diagonal = damped.reshape(-1)[:: A.shape[0] + 1]  # a view
-    diagonal += lam * A.reshape(-1)[:: A.shape[0] + 1]
-    return damped
 
 
-def _solve(A, b):
-    """x of A·x = b for one marker's 8x8 system, by OpenCV's LU with partial
-    pivoting: LAPACK's answer to rounding (1e-16 relative), without numpy.linalg's
-    ~5 µs of checks per call, which were a tenth of a marker's fit (three 8x8
-    solves and inversions a fit)."""
-    ok, x = cv2.solve(A, b.reshape(-1, 1), flags=cv2.DECOMP_LU)
-    if not ok:
-        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
-    return x.reshape(-1)
 
 
-def _clean(resid) -> bool:
-    """True when no residual lies beyond OCCLUDER_SIGMAS robust σ (:func:`~vision_torsion._ring.robust_sigma`):
-    the test :func:`~vision_torsion._ring.cut_occluders` begins with, by which
-    nothing is to be cut."""
-    return bool((np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)).all())
 
 
 def _fit_from(
@@ -544,7 +526,7 @@ def _fit_from(
     for _ in range(max_iter - done):
         A = J @ J.T
         b = J @ resid
-        step = _solve(_damped(A, lam), b)
+        step = solve_lu(damped_normal_matrix(A, lam), b)
         trial = p + step
         trial[3] = bounded_edge_width(trial[3], p[3])
         if final and max(abs(step[0]), abs(step[1])) < _CONVERGED_PX:
@@ -573,7 +555,7 @@ def _fit_from(
             # a clean ring (nothing beyond 4.5 robust σ: most) needs no examination
             # (_cut_outliers' own first test, without its edge zone and sectors)
             steep = bool(_steep(p))
-            new_keep = None if _clean(full[0]) and not steep else _cut_outliers(p, ring, patch, *full)
+            new_keep = None if nothing_to_cut(full[0]) and not steep else _cut_outliers(p, ring, patch, *full)
             steep_cut = steep_cut or (new_keep is not None and steep)
             cuts += 1
             if (

@@ -18,7 +18,7 @@ Modules, one job each:
 - :mod:`.checks` — angle sign, gaps, loop closure and creep, outliers.
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
 _LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "preisach", "session", "simulate", "summary")

@@ -9,7 +9,7 @@
 - :func:`calibrate_from_target` — from chessboard / circle-grid images (OpenCV).
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names:
 # ``process`` (which needs only the correction) does not pay for scipy.stats (~0.6 s)

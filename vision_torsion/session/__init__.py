@@ -6,7 +6,7 @@ A session folder holds ``session.toml`` (rig, markers, protocol, angle sign),
 else into the session folder. See the README section "Session folders".
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names:
 # a worker process of ``process`` imports .worker, which must not pull in pandas and scipy

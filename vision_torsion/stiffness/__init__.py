@@ -18,7 +18,7 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.synthetic` — records with known truth.
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
 # (so that reading a record does not load matplotlib for the plots)

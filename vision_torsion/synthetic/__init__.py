@@ -5,7 +5,7 @@ measuring code so every accuracy claim can be checked on images whose answer is
 known to far better than a thousandth of a pixel.
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
 _LAZY = ("geometry", "render", "scene")
