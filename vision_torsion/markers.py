@@ -235,7 +235,7 @@ def _start(patch: MarkerPatch, blob: Blob):
     w *= 1.0 / (F - B)
     # np.clip's values by two ufuncs, the zeros put by `where`, and no separate
     # w.any() (centroid checks the sum): on a few thousand pixels each call's
-    # overhead is what counts (0.6 of the 11 ms of discorpy 05's 315 starts)
+    # overhead is what counts
     np.minimum(np.maximum(w, 0.0, out=w), 1.0, out=w)
     np.copyto(w, 0.0, where=beyond)
     area, x, y = patch.centroid(w)
@@ -282,8 +282,8 @@ def _neighbour_cover(patches, owner, nb, edge_width) -> np.ndarray:
     Each pair is tested on the square box of pixels its reach can touch (2·reach + 4
     px a side: a quarter of a dense grid's patch) instead of the whole patch, and all
     pairs of a box size at once: on a photo of a dot grid each marker has eight
-    neighbours, and one broadcast over the whole patch per marker cost as much as
-    the marker's start (discorpy 05: 11 ms for its 315 dots; 6 ms so). The
+    neighbours, and one broadcast over the whole patch per marker would cost as
+    much as the marker's start. The
     distances are the same floating-point operations as over the whole patch (the
     pixel's index plus the patch origin's offset from the neighbour, squared and
     summed), so the same pixels are flagged; a pixel outside the box is farther than

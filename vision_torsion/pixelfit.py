@@ -184,9 +184,7 @@ class DiscFit:
         Pixels were cut from the ring under a steep lighting gradient
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
         shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
-        not to its covariance (a 90 DN step 0-7 px off a 10 px dot, 6 renders each:
-        within 0.1 px in 42 of 48, 0.13-0.25 px with the step 1 px off, at a reported
-        σ of 0.01-0.05 px; up to 0.31 px before the cut, at 0.05 px).
+        not to its covariance.
     """
 
     x_px: float
@@ -404,6 +402,86 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     return keep
 
 
+def _examine(p, ring: _Pixels, patch: MarkerPatch, resid, J, u):
+    """One examination of the whole ring for an occluder, at the parameters `p`
+    (`resid`, `J`, `u`: the model there on all of `ring`'s pixels): the flags of
+    the pixels to keep (:func:`_cut_outliers`; None: all), and whether they were
+    cut under a steep lighting gradient (:attr:`DiscFit.steep_cut`). A ring with
+    nothing beyond 4.5 robust σ (most) is not examined further."""
+    steep = bool(_steep(p))
+    keep = None if not steep and nothing_to_cut(resid) else _cut_outliers(p, ring, patch, resid, J, u)
+    return keep, keep is not None and steep
+
+
+def _last_examination(cuts, keep, new_keep) -> bool:
+    """True when the examination number `cuts` (1, 2, ...) ends the examining: the
+    third, or one that changed nothing (`keep`, `new_keep`: the flags of the pixels
+    kept before and after it, None for all)."""
+    if keep is None or new_keep is None:
+        return cuts == 3 or (keep is None and new_keep is None)
+    return cuts == 3 or np.array_equal(keep, new_keep)
+
+
+def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut) -> DiscFit:
+    """The :class:`DiscFit` of the converged parameters `p` (8) of `n` pixels of
+    residual variance `sigma2` (DN²), after the checks every fit makes, in this
+    order: the contrast against the noise (:func:`~vision_torsion.ring.check_contrast`),
+    the covariance (``inverse()``: (JᵀJ)⁻¹), the radius against its σ
+    (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
+    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError).
+
+    Raises
+    ------
+    FitError
+        The first check that fails.
+    """
+    check_contrast(p[5] - p[4], sigma2)
+    cov = sigma2 * inverse()
+    check_radius(p[2], cov[2, 2])
+    found = diagnostics()
+    if isinstance(found, FitError):
+        raise found
+    ex, ey, rms, circularity, noise = found
+    return DiscFit(
+        x_px=float(p[0]),
+        y_px=float(p[1]),
+        radius_px=float(p[2]),
+        edge_width_px=float(p[3]),
+        cov=cov[:3, :3].copy(),
+        noise_dn=float(np.sqrt(sigma2)),
+        background_dn=float(p[4]),
+        foreground_dn=float(p[5]),
+        n_pixels=int(n),
+        edge_x_px=ex,
+        edge_y_px=ey,
+        residual_rms_px=rms,
+        circularity=circularity,
+        edge_noise_px=noise,
+        steep_cut=bool(steep_cut),
+    )
+
+
+def _inverse(A, *, lapack=False):
+    """(`A`)⁻¹ of one marker's 8x8 normal matrix by OpenCV's LU (numpy's LAPACK
+    with `lapack`, as the batched fit inverts its rows).
+
+    Raises
+    ------
+    FitError
+        `A` is singular: the edge model is degenerate.
+    """
+    if lapack:
+        try:
+            return np.linalg.inv(A)
+        except np.linalg.LinAlgError:
+            ok = False
+    else:
+        ok, inverse = cv2.invert(A, flags=cv2.DECOMP_LU)
+    if not ok:
+        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
+    return inverse
+
+
 def _edge_diagnostics(p, resid, J, u, sigma2):
     """Per-sector edge points (:func:`~vision_torsion.ring.sector_edge_offsets`),
     their RMS distance from the circle (px), the circularity they give
@@ -552,18 +630,10 @@ def _fit_from(
             # settled, then after each refit without what was cut, as a fit pulled
             # by an occluder hides part of it (at most three times).
             full = (resid, J, u) if keep is None else _evaluate(p, ring)
-            # a clean ring (nothing beyond 4.5 robust σ: most) needs no examination
-            # (_cut_outliers' own first test, without its edge zone and sectors)
-            steep = bool(_steep(p))
-            new_keep = None if nothing_to_cut(full[0]) and not steep else _cut_outliers(p, ring, patch, *full)
-            steep_cut = steep_cut or (new_keep is not None and steep)
+            new_keep, steep = _examine(p, ring, patch, *full)
+            steep_cut = steep_cut or steep
             cuts += 1
-            if (
-                cuts == 3
-                or (keep is None and new_keep is None)
-                or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
-            ):
-                final = True
+            final = _last_examination(cuts, keep, new_keep)
             if not (keep is None and new_keep is None):
                 keep = new_keep
                 resid, J, u = full
@@ -580,39 +650,16 @@ def _fit_from(
         raise FitError(f"the marker's edge model did not converge in {max_iter} iterations")
     n = resid.size
     sigma2 = ssr / max(n - 8, 1)
-    check_contrast(p[5] - p[4], sigma2)
-    ok, inverse = cv2.invert(A, flags=cv2.DECOMP_LU)
-    if not ok:
-        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
-    cov = sigma2 * inverse
-    check_radius(p[2], cov[2, 2])
-    ex, ey, rms, circularity, noise = _edge_diagnostics(p, resid, J, u, sigma2)
-    return DiscFit(
-        x_px=float(p[0]),
-        y_px=float(p[1]),
-        radius_px=float(p[2]),
-        edge_width_px=float(p[3]),
-        cov=cov[:3, :3].copy(),
-        noise_dn=float(np.sqrt(sigma2)),
-        background_dn=float(p[4]),
-        foreground_dn=float(p[5]),
-        n_pixels=int(n),
-        edge_x_px=ex,
-        edge_y_px=ey,
-        residual_rms_px=rms,
-        circularity=circularity,
-        edge_noise_px=noise,
-        steep_cut=steep_cut,
-    )
+    return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(p, resid, J, u, sigma2), n=n,
+                     steep_cut=steep_cut)
 
 
 class _Scratch(threading.local):
     """The batched fit's large arrays, kept from one call to the next (one set per
-    thread): a fit's rings, Jacobians and residuals are a few MB, and on a virtual
-    machine each page of freshly allocated memory costs a page fault when first
-    touched (on discorpy 06 the faults were a quarter of :func:`fit_discs`'s
-    time). Each array is asked for by name; a later call's arrays overwrite an
-    earlier call's, so nothing returned to a caller may be one of them."""
+    thread): a fit's rings, Jacobians and residuals are a few MB, and each page of
+    freshly allocated memory costs a page fault when first touched. Each array is
+    asked for by name; a later call's arrays overwrite an earlier call's, so
+    nothing returned to a caller may be one of them."""
 
     def __init__(self):
         self.arrays: dict = {}
@@ -806,7 +853,6 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 5)
     if len(patches) > _BATCH:
         # markers are independent rows: in groups whose arrays stay in the cache
-        # (315 dots of discorpy 05 at once: 0.26 s; 64 at a time: 0.16 s)
         return [
             fit
             for k in range(0, len(patches), _BATCH)
@@ -847,15 +893,10 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
         then holds the pixels kept. True when they changed and the fit goes on."""
         keep, n = keeps.get(k), px.n[k]
         full = (resid[k, :n], Jm[k, :, :n], u[k, :n]) if keep is None else _evaluate(P[k], rings[k])
-        new_keep = _cut_outliers(P[k], rings[k], patches[live[k]], *full)
-        steep_cut[k] |= new_keep is not None and bool(_steep(P[k]))
+        new_keep, steep = _examine(P[k], rings[k], patches[live[k]], *full)
+        steep_cut[k] |= steep
         cuts[k] += 1
-        if (
-            cuts[k] == 3
-            or (keep is None and new_keep is None)
-            or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
-        ):
-            final[k] = True
+        final[k] = final[k] or _last_examination(cuts[k], keep, new_keep)
         if keep is None and new_keep is None:
             return False
         if new_keep is None:
@@ -955,40 +996,17 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     else:
         diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
     try:
-        covs = sigma2[good, None, None] * np.linalg.inv(A[good])
+        inverses = np.linalg.inv(A[good])
     except np.linalg.LinAlgError:
-        covs = None  # one of them singular: inverted one by one below
+        inverses = None  # one of them singular: inverted one by one
     for j, k in enumerate(good):
         try:
-            check_contrast(P[k, 5] - P[k, 4], sigma2[k])
-            cov = sigma2[k] * np.linalg.inv(A[k]) if covs is None else covs[j]
-            check_radius(P[k, 2], cov[2, 2])
-            if isinstance(diagnostics[j], FitError):
-                raise diagnostics[j]
-            ex, ey, rms, circularity, noise = diagnostics[j]
-        except np.linalg.LinAlgError:
-            failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
-            continue
+            out[live[k]] = _disc_fit(
+                P[k], sigma2[k], (lambda: _inverse(A[k], lapack=True)) if inverses is None else (lambda: inverses[j]),
+                lambda: diagnostics[j], n=px.n[k], steep_cut=steep_cut[k],
+            )
         except FitError as exc:
             failed[k] = exc
-            continue
-        out[live[k]] = DiscFit(
-            x_px=float(P[k, 0]),
-            y_px=float(P[k, 1]),
-            radius_px=float(P[k, 2]),
-            edge_width_px=float(P[k, 3]),
-            cov=cov[:3, :3].copy(),
-            noise_dn=float(np.sqrt(sigma2[k])),
-            background_dn=float(P[k, 4]),
-            foreground_dn=float(P[k, 5]),
-            n_pixels=int(px.n[k]),
-            edge_x_px=ex,
-            edge_y_px=ey,
-            residual_rms_px=rms,
-            circularity=circularity,
-            edge_noise_px=noise,
-            steep_cut=bool(steep_cut[k]),
-        )
     for k, exc in failed.items():
         out[live[k]] = exc
     return out
