@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import sys
 from importlib import import_module
-from importlib.util import find_spec
 
 __all__ = ["attach", "module_all"]
 
@@ -34,6 +33,8 @@ def module_all(module: str) -> list[str]:
     loaded = sys.modules.get(module)
     if loaded is not None and hasattr(loaded, "__all__"):
         return list(loaded.__all__)
+    from importlib.util import find_spec  # here: the root face never needs it
+
     spec = find_spec(module)
     if spec is None:
         raise ImportError(f"no module named {module!r}", name=module)
