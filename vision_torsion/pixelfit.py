@@ -820,6 +820,188 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
     return out
 
 
+#: Diagonal indices of an 8x8 matrix.
+_DIAG = np.arange(8)
+
+
+class _RowsFit:
+    """The state of :func:`fit_discs`' Levenberg-Marquardt fit of M markers as rows,
+    and its steps: the parameters `P` (M x 8); the model's residuals, Jacobian and
+    u on the pixels each row uses (:func:`_evaluate_rows`, in the :class:`_Scratch`
+    slot `cur`) with their sums of squares `ssr` and normal equations `A`, `b`; per
+    row the damping `lam`, the examinations for an occluder made (`cuts`), whether
+    the last one changed nothing (`final`), whether pixels were cut under a steep
+    gradient (`steep_cut`) and the flags of the ring's pixels kept (`keeps`, rows
+    with a cut only); `active` rows are still iterating, `failed` ones hold their
+    FitError. Every rule is :func:`fit_disc`'s, taken for all rows at once."""
+
+    def __init__(self, patches, rings: list[_Pixels], live: np.ndarray, starts: np.ndarray, s: float):
+        self.patches, self.rings, self.live = patches, rings, live
+        self.px = _Batch(rings, starts[live])
+        m = self.m = live.size
+        self.P = np.zeros((m, 8))
+        self.P[:, :3], self.P[:, 3], self.P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
+        self.cur = 0  # the scratch slot of the current state; the other takes trials
+        self.resid, self.Jm, self.u = _evaluate_rows(self.P, self.px, self.cur)
+        self.ssr = np.einsum("ij,ij->i", self.resid, self.resid)
+        self.A, self.b = _normal_equations(self.Jm, self.resid)
+        self.lam = np.full(m, 1e-3)
+        self.final = np.zeros(m, bool)
+        self.active = np.ones(m, bool)
+        self.failed: dict[int, FitError] = {}
+        self.cuts = np.zeros(m, np.int64)
+        self.steep_cut = np.zeros(m, bool)
+        self.keeps: dict[int, np.ndarray] = {}
+
+    def iterate(self) -> bool:
+        """One Levenberg-Marquardt iteration of the active rows; False when none is."""
+        act = np.flatnonzero(self.active)
+        if not act.size:
+            return False
+        act, step = self._steps(act)
+        P, final = self.P, self.final
+        trial = P[act] + step
+        trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
+        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
+        last = final[act] & small
+        # converged: the last step taken without evaluating the model (as fit_disc)
+        P[act[last]] = trial[last]
+        self.active[act[last]] = False
+        act, trial = act[~last], trial[~last]
+        if not act.size:
+            return True
+        m = self.m
+        r_t, J_t, u_t = _evaluate_rows(trial, self.px if act.size == m else self.px.rows(act), 1 - self.cur)
+        ssr_t = np.einsum("ij,ij->i", r_t, r_t)
+        better = ssr_t <= self.ssr[act]
+        worse = act[~better]
+        self.lam[worse] *= 10.0
+        for k in worse[self.lam[worse] > 1e8]:
+            self.failed[k] = FitError("the marker's edge model does not converge")
+            self.active[k] = False
+        acc, trial = act[better], trial[better]
+        if not acc.size:
+            return True
+        moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
+        if acc.size == m:  # every marker stepped: the new arrays as they are
+            self.P, self.resid, self.Jm, self.u, self.ssr = trial, r_t, J_t, u_t, ssr_t
+            self.cur = 1 - self.cur
+            self.A, self.b = _normal_equations(self.Jm, self.resid)
+        else:
+            P[acc], self.ssr[acc] = trial, ssr_t[better]
+            # row by row into the current state's buffers: copies of the accepted
+            # rows (r_t[better]) would be fresh memory each iteration
+            for j, k in zip(np.flatnonzero(better), acc):
+                self.resid[k], self.Jm[k], self.u[k] = r_t[j], J_t[j], u_t[j]
+            A_t, b_t = _normal_equations(J_t, r_t)
+            self.A[acc], self.b[acc] = A_t[better], b_t[better]
+        self.lam[acc] = np.maximum(0.3 * self.lam[acc], 1e-9)
+        going_on = self._examinations(acc, moved)
+        self.active[acc[self.final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
+        return True
+
+    def _steps(self, act):
+        """The damped steps (len(act) x 8) of rows `act`, and those rows; a row whose
+        system is singular fails and is left out."""
+        Aa = self.A[act]
+        Aa[:, _DIAG, _DIAG] += self.lam[act, None] * Aa[:, _DIAG, _DIAG]
+        try:
+            return act, np.linalg.solve(Aa, self.b[act][:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            step = np.zeros((act.size, 8))
+            for j, k in enumerate(act):
+                try:
+                    step[j] = np.linalg.solve(Aa[j], self.b[k])
+                except np.linalg.LinAlgError:
+                    self.failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
+                    self.active[k] = False
+            keep = self.active[act]
+            return act[keep], step[keep]
+
+    def _examinations(self, acc, moved) -> np.ndarray:
+        """fit_disc's examinations for an occluder of the rows `acc` just stepped
+        (`moved`: their centres' moves, px) that are due: first once the centre has
+        settled, then once it has converged after each change of the pixels used.
+        Flags (M) of the rows whose pixels changed, which go on."""
+        cuts, final = self.cuts, self.final
+        due = acc[~final[acc] & (moved < np.where(cuts[acc] == 0, _SETTLED_PX, _CONVERGED_PX))]
+        going_on = np.zeros(self.m, bool)
+        if not due.size:
+            return going_on
+        # Most rings have no pixel beyond 4.5 robust σ at their first examination:
+        # that is settled for all at once (nothing to cut makes the fit final).
+        first = due[cuts[due] == 0]
+        clean = np.zeros(self.m, bool)
+        if first.size:
+            rows = self.resid if first.size == self.m else self.resid[first]  # no copy when all are due
+            sig = robust_sigma_rows(rows, self.px.n[first])
+            quiet = (np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)
+            quiet &= ~_steep(self.P[first])
+            clean[first[quiet]] = True
+        final[clean] = True
+        cuts[clean] = 1
+        for k in due[~clean[due]]:
+            going_on[k] = self._examine(k)
+        return going_on
+
+    def _examine(self, k) -> bool:
+        """fit_disc's examination of row `k`'s whole ring for an occluder; its row
+        then holds the pixels kept. True when they changed and the fit goes on."""
+        P, px, ring = self.P, self.px, self.rings[k]
+        keep, n = self.keeps.get(k), px.n[k]
+        full = (self.resid[k, :n], self.Jm[k, :, :n], self.u[k, :n]) if keep is None else _evaluate(P[k], ring)
+        new_keep, steep = _examine(P[k], ring, self.patches[self.live[k]], *full)
+        self.steep_cut[k] |= steep
+        self.cuts[k] += 1
+        self.final[k] = self.final[k] or _last_examination(self.cuts[k], keep, new_keep)
+        if keep is None and new_keep is None:
+            return False
+        if new_keep is None:
+            self.keeps.pop(k)
+            r_k, J_k, u_k = full
+        else:
+            self.keeps[k] = new_keep
+            ring, r_k, J_k, u_k = ring.subset(new_keep), full[0][new_keep], full[1][:, new_keep], full[2][new_keep]
+        n = r_k.size
+        px.set_row(k, ring)
+        self.resid[k, :n], self.resid[k, n:] = r_k, 0.0
+        self.Jm[k, :, :n], self.Jm[k, :, n:] = J_k, 0.0
+        self.u[k, :n], self.u[k, n:] = u_k, np.inf
+        self.ssr[k] = r_k @ r_k
+        self.A[k], self.b[k] = J_k @ J_k.T, J_k @ r_k
+        return not self.final[k]
+
+    def results(self, out: list, max_iter: int) -> None:
+        """Each row's :class:`DiscFit` (:func:`_disc_fit`) or FitError, into `out`
+        at the marker's index (`live`)."""
+        P, px, A, m = self.P, self.px, self.A, self.m
+        failed = self.failed
+        for k in np.flatnonzero(self.active):
+            failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
+        unfit = np.zeros(m, bool)
+        unfit[list(failed)] = True
+        good = np.flatnonzero(~unfit)
+        sigma2 = self.ssr / np.maximum(px.n - 8, 1)
+        resid, Jm, u = self.resid, self.Jm, self.u
+        if good.size == m:  # no copies of the rows (most fits: none failed)
+            diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
+        else:
+            diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
+        try:
+            inverses = np.linalg.inv(A[good])
+        except np.linalg.LinAlgError:
+            inverses = None  # one of them singular: inverted one by one
+        for j, k in enumerate(good):
+            inverse = (lambda: _inverse(A[k], lapack=True)) if inverses is None else (lambda: inverses[j])
+            try:
+                out[self.live[k]] = _disc_fit(P[k], sigma2[k], inverse, lambda: diagnostics[j], n=px.n[k],
+                                              steep_cut=self.steep_cut[k])
+            except FitError as exc:
+                failed[k] = exc
+        for k, exc in failed.items():
+            out[self.live[k]] = exc
+
+
 def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     """:func:`fit_disc` of many markers at once, vectorised across them.
 
@@ -870,143 +1052,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             out[k] = exc
     if not live:
         return out
-    live = np.array(live)
-    px = _Batch(rings, starts[live])
-    m = live.size
-    P = np.zeros((m, 8))
-    P[:, :3], P[:, 3], P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
-    cur = 0  # the scratch slot of the current state (resid, Jm, u); the other takes trials
-    resid, Jm, u = _evaluate_rows(P, px, cur)
-    ssr = np.einsum("ij,ij->i", resid, resid)
-    A, b = _normal_equations(Jm, resid)
-    lam = np.full(m, 1e-3)
-    final = np.zeros(m, bool)
-    active = np.ones(m, bool)
-    failed: dict[int, FitError] = {}
-    diag = np.arange(8)
-    cuts = np.zeros(m, np.int64)  # examinations for an occluder made (fit_disc's `cuts`)
-    steep_cut = np.zeros(m, bool)  # pixels cut under a steep lighting gradient (fit_disc's)
-    keeps: dict[int, np.ndarray] = {}  # rows with pixels cut: flags of the ring's pixels kept
-
-    def examine(k) -> bool:
-        """fit_disc's examination of row `k`'s whole ring for an occluder; its row
-        then holds the pixels kept. True when they changed and the fit goes on."""
-        keep, n = keeps.get(k), px.n[k]
-        full = (resid[k, :n], Jm[k, :, :n], u[k, :n]) if keep is None else _evaluate(P[k], rings[k])
-        new_keep, steep = _examine(P[k], rings[k], patches[live[k]], *full)
-        steep_cut[k] |= steep
-        cuts[k] += 1
-        final[k] = final[k] or _last_examination(cuts[k], keep, new_keep)
-        if keep is None and new_keep is None:
-            return False
-        if new_keep is None:
-            keeps.pop(k)
-            ring, (r_k, J_k, u_k) = rings[k], full
-        else:
-            keeps[k] = new_keep
-            ring, r_k, J_k, u_k = rings[k].subset(new_keep), full[0][new_keep], full[1][:, new_keep], full[2][new_keep]
-        n = r_k.size
-        px.set_row(k, ring)
-        resid[k, :n], resid[k, n:] = r_k, 0.0
-        Jm[k, :, :n], Jm[k, :, n:] = J_k, 0.0
-        u[k, :n], u[k, n:] = u_k, np.inf
-        ssr[k] = r_k @ r_k
-        A[k], b[k] = J_k @ J_k.T, J_k @ r_k
-        return not final[k]
+    fit = _RowsFit(patches, rings, np.array(live), starts, s)
     for _ in range(max_iter):
-        act = np.flatnonzero(active)
-        if not act.size:
+        if not fit.iterate():
             break
-        Aa = A[act]
-        Aa[:, diag, diag] += lam[act, None] * Aa[:, diag, diag]
-        try:
-            step = np.linalg.solve(Aa, b[act][:, :, None])[:, :, 0]
-        except np.linalg.LinAlgError:
-            step = np.zeros((act.size, 8))
-            for j, k in enumerate(act):
-                try:
-                    step[j] = np.linalg.solve(Aa[j], b[k])
-                except np.linalg.LinAlgError:
-                    failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
-                    active[k] = False
-            keep = active[act]
-            act, step = act[keep], step[keep]
-        trial = P[act] + step
-        trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
-        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
-        last = final[act] & small
-        # converged: the last step taken without evaluating the model (as fit_disc)
-        P[act[last]] = trial[last]
-        active[act[last]] = False
-        act, trial = act[~last], trial[~last]
-        if not act.size:
-            continue
-        r_t, J_t, u_t = _evaluate_rows(trial, px if act.size == m else px.rows(act), 1 - cur)
-        ssr_t = np.einsum("ij,ij->i", r_t, r_t)
-        better = ssr_t <= ssr[act]
-        worse = act[~better]
-        lam[worse] *= 10.0
-        for k in worse[lam[worse] > 1e8]:
-            failed[k] = FitError("the marker's edge model does not converge")
-            active[k] = False
-        acc, trial = act[better], trial[better]
-        if not acc.size:
-            continue
-        moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
-        if acc.size == m:  # every marker stepped: the new arrays as they are
-            P, resid, Jm, u, ssr, cur = trial, r_t, J_t, u_t, ssr_t, 1 - cur
-            A, b = _normal_equations(Jm, resid)
-        else:
-            P[acc], ssr[acc] = trial, ssr_t[better]
-            # row by row into the current state's buffers: copies of the accepted
-            # rows (r_t[better]) would be fresh memory each iteration
-            for j, k in zip(np.flatnonzero(better), acc):
-                resid[k], Jm[k], u[k] = r_t[j], J_t[j], u_t[j]
-            A_t, b_t = _normal_equations(J_t, r_t)
-            A[acc], b[acc] = A_t[better], b_t[better]
-        lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
-        # fit_disc's examinations for an occluder: first once the centre has
-        # settled, then once it has converged after each change of the pixels used
-        due = acc[~final[acc] & (moved < np.where(cuts[acc] == 0, _SETTLED_PX, _CONVERGED_PX))]
-        going_on = np.zeros(m, bool)  # rows whose pixels changed at their examination
-        if due.size:
-            # Most rings have no pixel beyond 4.5 robust σ at their first examination:
-            # that is settled for all at once (nothing to cut makes the fit final).
-            first = due[cuts[due] == 0]
-            clean = np.zeros(m, bool)
-            if first.size:
-                rows = resid if first.size == m else resid[first]  # no copy when all are due
-                sig = robust_sigma_rows(rows, px.n[first])
-                quiet = (np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)
-                quiet &= ~_steep(P[first])
-                clean[first[quiet]] = True
-            final[clean] = True
-            cuts[clean] = 1
-            for k in due[~clean[due]]:
-                going_on[k] = examine(k)
-        active[acc[final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
-    for k in np.flatnonzero(active):
-        failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
-    unfit = np.zeros(m, bool)
-    unfit[list(failed)] = True
-    good = np.flatnonzero(~unfit)
-    sigma2 = ssr / np.maximum(px.n - 8, 1)
-    if good.size == m:  # no copies of the rows (most fits: none failed)
-        diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
-    else:
-        diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
-    try:
-        inverses = np.linalg.inv(A[good])
-    except np.linalg.LinAlgError:
-        inverses = None  # one of them singular: inverted one by one
-    for j, k in enumerate(good):
-        try:
-            out[live[k]] = _disc_fit(
-                P[k], sigma2[k], (lambda: _inverse(A[k], lapack=True)) if inverses is None else (lambda: inverses[j]),
-                lambda: diagnostics[j], n=px.n[k], steep_cut=steep_cut[k],
-            )
-        except FitError as exc:
-            failed[k] = exc
-    for k, exc in failed.items():
-        out[live[k]] = exc
+    fit.results(out, max_iter)
     return out
