@@ -185,7 +185,7 @@ def min_circularity(radius: float) -> float:
     5 px the limit is an absolute 0.5 px of second-harmonic edge deviation: on
     small discs pixelation, blur and JPEG blocks move sector edge points by a
     few tenths of a pixel whatever the radius, which a relative limit would
-    call "not round" (photographs of 4-5 px dots were 50-60 % rejected at 0.9).
+    call "not round".
     """
     return 1.0 - max(0.2, 1.0 / max(float(radius), 1e-9))
 
@@ -574,11 +574,9 @@ def _not_round(cx, cy, r, circ) -> Marker:
 #: A pixel fit judged not round is a disc seen obliquely when an ellipse centred on
 #: the fit's centre describes its per-sector edge points: their RMS distance from it
 #: is at most this share of their RMS distance from the circle (:func:`_oblique`).
-#: Rendered ellipses of axis ratio 0.6-0.75 (radius 6-25 px, blur 1 px, 2 DN noise)
-#: leave 0.05-0.11; the tilted card of the UCL laparoscope frames (214 dots judged
-#: not round) a median of 0.25 and 0.33 at the 95th percentile, its edge points' own
-#: scatter (two dots 0.57); shapes that are not such ellipses leave more: a teardrop
-#: 0.58, a 30x24 px rectangle 0.81.
+#: Discs seen obliquely leave well under it (rendered ellipses about 0.1, the tilted
+#: card of the photos about 0.3, their edge points' own scatter); shapes that are no
+#: such ellipse leave more (a teardrop about 0.6, a rectangle 0.8).
 _OBLIQUE_RESIDUAL_SHARE = 0.4
 #: Smallest axis ratio of such an ellipse (a disc seen 60° off-axis): beyond it the
 #: circle's ring of pixels no longer holds the whole edge (a 0.6 ellipse of 25 px did
@@ -586,15 +584,11 @@ _OBLIQUE_RESIDUAL_SHARE = 0.4
 _OBLIQUE_MIN_AXIS_RATIO = 0.5
 #: ... and its RMS distance may hold, besides that share, this many times the edge
 #: points' scatter from the pixel noise alone (:attr:`DiscFit.edge_noise_px`, added in
-#: quadrature): the share alone asked a small dot's noisy edge points to lie on the
-#: ellipse closer than their noise allows. On the full discorpy 06 frame the dots near
-#: the border are ellipses of axis ratio 0.7-0.8 (lens distortion, r ≈ 5 px, s ≈ 2.5
-#: px): ellipse RMS over the noise figure 1.43 at the median and 1.99 at the 95th
-#: percentile, as noisy as the edge points of its round dots about their circle
-#: (1.62 and 2.06; on discorpy 02 and 05 medians 1.77 and 1.24, 95th percentiles 2.58
-#: and 1.96); 343 of its 1461 grid dots were not_round for the share rule. A teardrop
-#: and a rectangle leave 12-47 times their noise figure at 2 DN of noise (blur 1 px),
-#: and stay not_round at a contrast of 17 times the noise and blur 2.2 px (tested).
+#: quadrature): the share alone asks a small dot's noisy edge points to lie on the
+#: ellipse closer than their noise allows. Round dots' edge points lie within about
+#: twice their noise figure of their circle (photographed grids: 95th percentile
+#: 2.0-2.6), and so do small, blurred ellipses of their ellipse; a teardrop or a
+#: rectangle leaves 12-47 times it.
 _OBLIQUE_NOISE_TIMES = 2.0
 
 

@@ -88,12 +88,10 @@ __all__ = ["DiscFit", "fit_disc", "fit_discs"]
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
 #: Ring beyond the edge zone ±3s (px). Inside, the marker's pixels only inform its
-#: level, which is not correlated with the centre: 2.5 px instead of 0.5 px gave the
-#: same RMS on 120 centres. Outside, they also pin the lighting gradient, which is
-#: correlated with the centre (a tilt of the levels mimics a shift). Paired against the
-#: maximum-likelihood reference of the benchmarks (square window, exact blurred-disc profile) on 200 centres of the
-#: standard scene: 5.5 px gave 1.054x its RMS, 7.5 px 1.033x, 9.5 px 1.025x, each
-#: 2 px costing ~15 % more pixels.
+#: level, which is not correlated with the centre. Outside, they also pin the
+#: lighting gradient, which is (a tilt of the levels mimics a shift): 7.5 px puts the
+#: centre's RMS within 4 % of the maximum-likelihood reference of
+#: ``benchmarks/bench_peers.py``, each 2 px more costing ~15 % more pixels.
 _INNER_PX = 0.5
 _OUTER_PX = 7.5
 #: Extra ring width (px) each side for the start's error (the intensity centroid
@@ -101,24 +99,20 @@ _OUTER_PX = 7.5
 _START_MARGIN_PX = 0.5
 #: A cut whose pixels lie (this share of them) in the edge zone and along more than
 #: this fraction of the edge's sectors is the edge itself not being the model's
-#: profile there (interlaced fields, motion smear, a sharpening halo on one side:
-#: 14 of the 23 dots of the UCL laparoscope photo, whose cuts of 25-35 % of the edge
-#: zone, 99 % of them in it along 60-90 % of the arc, cost 0.07 px of row
-#: straightness), not an occluder. An occluder is another object in the ring: a
-#: wire crosses the whole ring (40-55 % of its cut pixels in the edge zone in the
-#: rendered tests), a speck covers a short arc (at most 14 % of the sectors in the
-#: rendered distractor scene).
+#: profile there (interlaced fields, motion smear, a sharpening halo on one side),
+#: not an occluder, and is not made. An occluder is another object in the ring: a
+#: wire crosses the whole ring (about half its cut pixels in the edge zone), a
+#: speck covers a short arc.
 _MISFIT_EDGE_SHARE = 0.9
 _MISFIT_ARC = 0.25
 #: Lighting gradient |(gx, gy)| (relative change of the light per starting radius)
 #: above which a ring is examined for an occluder with robustly solved levels
 #: (:func:`_robust_level_residuals`) even when no pixel is beyond 4.5 robust σ. A
 #: darker surround (a card's edge, a shadow) within a few px of a marker's edge is
-#: taken up by the gradient, which spreads its misfit over the whole ring (robust σ
-#: 21 DN at 2 DN of noise, a 90 DN step 4 px off the edge of a 10 px dot): nothing
-#: looked outlying and the centre was 0.22-0.31 px off at a reported 0.05 px. The
-#: marker's own light varies far less over it: rendered scenes at most 0.02, the
-#: photos' dots 0.01 (discorpy) and 0.05 (UCL, 99th percentile).
+#: taken up by the gradient, which spreads its misfit over the whole ring so that
+#: nothing looks outlying while the centre moves by tenths of a pixel. A marker's
+#: own light varies far less over it (at most 0.02 on the rendered scenes, 0.05 on
+#: the photographed dots of ``benchmarks/bench_photos.py``).
 _STEEP_LIGHT = 0.04
 #: Iterations of the Tukey-weighted (c = 4.685 robust σ) solution of the levels.
 _ROBUST_LEVEL_ITER = 6
