@@ -583,19 +583,16 @@ def fit_disc(
 
 
 
-def _fit_from(
-    p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, lam=1e-3, keep=None, cuts=0, done=0
-) -> DiscFit:
-    """:func:`fit_disc`'s Levenberg-Marquardt loop and result from a state: the
-    parameters `p`; the model's residuals, Jacobian and u there on the ring's
-    pixels in use (`keep`: flags of those of `ring`, None: all); the damping `lam`;
-    the outlier examinations made (`cuts`) and the iterations used (`done`).
-    (:func:`fit_disc` starts it from its first evaluation.)"""
-    px = ring if keep is None else ring.subset(keep)
+def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) -> DiscFit:
+    """:func:`fit_disc`'s Levenberg-Marquardt loop and result from the starting
+    parameters `p` and the model's residuals, Jacobian and u there on all of
+    `ring`'s pixels: :func:`fit_discs`' rules (:class:`_RowsFit`) for one marker,
+    in scalar steps."""
+    px, keep, lam, cuts = ring, None, 1e-3, 0  # keep: flags of the ring's pixels in use, None: all
     ssr = float(resid @ resid)
     final = False  # the last examination changed nothing
     steep_cut = False  # pixels cut under a steep lighting gradient (DiscFit.steep_cut)
-    for _ in range(max_iter - done):
+    for _ in range(max_iter):
         A = J @ J.T
         b = J @ resid
         step = solve_lu(damped_normal_matrix(A, lam), b)
