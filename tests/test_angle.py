@@ -64,7 +64,7 @@ def test_identity_from_distinct_radii(small_scene):
     from vision_torsion.pair import select_pair
     from vision_torsion.synthetic.coverage import shape_coverage
     from vision_torsion.synthetic.geometry import CameraMapping
-    from vision_torsion.synthetic.render import _circle_distance_fn
+    from vision_torsion.synthetic.render import circle_distance_fn
 
     img_a = render(small_scene, 0.0, seed=1).image.astype(np.float32)
     img_b = render(small_scene, 170.0, seed=2).image.astype(np.float32)
@@ -72,7 +72,7 @@ def test_identity_from_distinct_radii(small_scene):
         # grow the marker that started on the +x axis to 21 px (20 px is the other) (exact coverage, blurred)
         c = rotate_about(np.array([[300.3, 150.8]]), (200.3, 150.8), ang)[0]
         cov = shape_coverage(
-            _circle_distance_fn(CameraMapping(small_scene), c[0], c[1], 21.0), 0, 0, img.shape[1], img.shape[0]
+            circle_distance_fn(CameraMapping(small_scene), c[0], c[1], 21.0), 0, 0, img.shape[1], img.shape[0]
         )
         cov = cv2.GaussianBlur(cov, (0, 0), 1.0)
         img[:] = img * (1 - cov) + 40 * cov

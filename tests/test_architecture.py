@@ -3,7 +3,9 @@ a module from a layer above its own, and packages beside each other at one level
 not import each other.
 
 Imports are read from the source with ``ast`` (every ``import`` and ``from ... import``,
-those inside functions included), so a lazy import cannot hide a wrong direction.
+those inside functions included, and the submodules a package face's ``_LAZY`` table
+names for :func:`vision_torsion.lazy.attach`), so a lazy import cannot hide a wrong
+direction.
 """
 
 import ast
@@ -16,12 +18,13 @@ PACKAGE = Path(__file__).resolve().parents[1] / "vision_torsion"
 # (level, group, module prefixes): a module may import modules of a lower level, and
 # modules of its own level only within its own group. Keep in step with ARCHITECTURE.md.
 LAYERS = [
-    (0, "foundation", ["vision_torsion", "vision_torsion._lazy", "vision_torsion.errors", "vision_torsion.fileio",
+    (0, "foundation", ["vision_torsion.__version__", "vision_torsion.lazy", "vision_torsion.errors",
+                       "vision_torsion.fileio",
                        "vision_torsion.textfiles", "vision_torsion.resources", "vision_torsion.numerics",
                        "vision_torsion.batch", "vision_torsion.measurements", "vision_torsion.settings",
                        "vision_torsion.plotting"]),
     (1, "image", ["vision_torsion.images", "vision_torsion.quality"]),
-    (2, "markers", ["vision_torsion._ring", "vision_torsion.detect", "vision_torsion.edges",
+    (2, "markers", ["vision_torsion.ring", "vision_torsion.detect", "vision_torsion.edges",
                     "vision_torsion.pixelfit", "vision_torsion.circlefit", "vision_torsion.markers"]),
     (3, "pair", ["vision_torsion.pair"]),
     (4, "angle", ["vision_torsion.correction", "vision_torsion.angle", "vision_torsion.measure",
@@ -34,6 +37,7 @@ LAYERS = [
     (9, "report", ["vision_torsion.report"]),
     (10, "campaign", ["vision_torsion.campaign"]),
     (11, "cli", ["vision_torsion.cli", "vision_torsion.__main__"]),
+    (12, "face", ["vision_torsion"]),
 ]
 
 
@@ -58,7 +62,14 @@ def imports_of(path: Path):
     """(line, imported vision_torsion module) of every import in a file."""
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in tree.body:  # a face's lazy table: {name: submodule} or (submodule, ...)
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "_LAZY" for t in node.targets):
+            entries = node.value.values if isinstance(node.value, ast.Dict) else getattr(node.value, "elts", [])
+            for entry in entries:
+                if isinstance(entry, ast.Constant) and isinstance(entry.value, str):
+                    yield node.lineno, f"{package}.{entry.value}"
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.split(".")[0] == "vision_torsion":
@@ -114,18 +125,21 @@ def test_the_check_sees_a_wrong_import(tmp_path, monkeypatch):
     (fake / "angle.py").write_text("def f():\n    from .session import load\n")
     (fake / "calibration" / "__init__.py").write_text("")
     (fake / "calibration" / "x.py").write_text("from ..stiffness import rig\nfrom ..angle import f\n")
+    (fake / "images.py").write_text("from .lazy import attach\n_LAZY = {'Plan': 'session.plan'}\n")
     monkeypatch.setattr(__import__(__name__), "PACKAGE", fake)
     found = violations()
-    assert len(found) == 2
+    assert len(found) == 3
     assert "vision_torsion.angle (angle) imports vision_torsion.session" in found[0]
     assert "vision_torsion.calibration.x (calibration) imports vision_torsion.stiffness" in found[1]
+    assert "vision_torsion.images (image) imports vision_torsion.session.plan" in found[2]
 
 
 @pytest.mark.parametrize("module, expected", [
     ("vision_torsion.markers", (2, "markers")),
     ("vision_torsion.calibration.correction", (5, "calibration")),
     ("vision_torsion.correction", (4, "angle")),
-    ("vision_torsion", (0, "foundation")),
+    ("vision_torsion", (12, "face")),
+    ("vision_torsion.__version__", (0, "foundation")),
 ])
 def test_longest_prefix_decides_the_layer(module, expected):
     assert layer_of(module) == expected

@@ -39,10 +39,9 @@ def test_coarsest_detection_scale_is_as_accurate(standard_scene):
     """Markers of 20 px and more are found on an 8x reduced image (2.5 reduced px of
     radius at least); the fit from that start lands on the same centres. Markers of
     3-5 px (the default smallest is 3 px) are found at half resolution."""
-    from vision_torsion.detect import _reduction
+    from vision_torsion.detect import detection_reduction
 
-    assert (_reduction(20), _reduction(19.9), _reduction(10), _reduction(4), _reduction(3), _reduction(2.9)) == (
-        8, 4, 4, 2, 2, 1)
+    assert [detection_reduction(r) for r in (20, 19.9, 10, 4, 3, 2.9)] == [8, 4, 4, 2, 2, 1]
     r = render(standard_scene, 23.4, seed=5)
     fine = find_markers(r.image, radius_range=(10, 60))
     coarse = find_markers(r.image, radius_range=(20, 60))
@@ -173,10 +172,10 @@ def test_circularity_of_a_circle_with_missing_sectors_is_one():
     Regression: the radius itself leaked into the second harmonic when the points
     were unevenly spread, and a round marker was rejected as not round (0.90).
     """
-    from vision_torsion.markers import _harmonic_circularity
+    from vision_torsion.ring import points_circularity
 
     t = np.linspace(0.3, 0.3 + np.deg2rad(300), 200)
-    assert _harmonic_circularity(812.0 + 35 * np.cos(t), 455.0 + 35 * np.sin(t), 812.0, 455.0, 35.0) > 0.999
+    assert points_circularity(812.0 + 35 * np.cos(t), 455.0 + 35 * np.sin(t), 812.0, 455.0, 35.0) > 0.999
 
 
 def test_integer_and_float_images_give_the_same_markers(small_scene):
@@ -277,9 +276,9 @@ def test_a_large_neighbour_does_not_take_a_marker_s_own_pixels(gap_px):
 
 
 def test_neighbours_of_a_few_candidates_are_the_array_rule():
-    """_neighbours' plain-float path (up to 8 candidates: the pair search) picks the
-    same circles as _near's array rule, including circles exactly at its reach."""
-    from vision_torsion.markers import _near, _neighbours, _patch_extent
+    """neighbours_of' plain-float path (up to 8 candidates: the pair search) picks the
+    same circles as near_candidates's array rule, including circles exactly at its reach."""
+    from vision_torsion.markers import candidate_extent, near_candidates, neighbours_of
 
     rng = np.random.default_rng(21)
     for _ in range(2000):
@@ -287,15 +286,15 @@ def test_neighbours_of_a_few_candidates_are_the_array_rule():
         circles = np.column_stack([rng.uniform(0, 300, k), rng.uniform(0, 300, k), rng.uniform(1, 60, k)])
         width = float(rng.choice([0.8, 1.2, 2.5]))
         for i in range(k):
-            np.testing.assert_array_equal(_neighbours(circles, i, width),
-                                          circles[_near(circles, np.array([i]), width)[0]])
+            np.testing.assert_array_equal(neighbours_of(circles, i, width),
+                                          circles[near_candidates(circles, np.array([i]), width)[0]])
     # a neighbour exactly at the reach is not near (strict), one a hair inside is
     circles = np.array([[100.0, 100.0, 20.0], [0.0, 100.0, 10.0]])
-    x_reach = 100.0 - (float(_patch_extent(20.0, 1.2)) + 1.15 * 10.0 + 3.0 * 1.2 + 1.0)
+    x_reach = 100.0 - (float(candidate_extent(20.0, 1.2)) + 1.15 * 10.0 + 3.0 * 1.2 + 1.0)
     for x, expected in ((x_reach, 0), (np.nextafter(x_reach, 100.0), 1)):
         circles[1, 0] = x
-        assert len(_neighbours(circles, 0, 1.2)) == expected
-        assert len(circles[_near(circles, np.array([0]), 1.2)[0]]) == expected
+        assert len(neighbours_of(circles, 0, 1.2)) == expected
+        assert len(circles[near_candidates(circles, np.array([0]), 1.2)[0]]) == expected
 
 
 def test_a_disc_seen_obliquely_is_found_and_a_non_round_blob_is_not():
@@ -442,11 +441,11 @@ def _excluded_per_marker(patch, neighbours, edge_width, own):
     """The neighbour exclusion as it was written for one marker: every neighbour's
     distances over the whole patch (the simple version the box search replaces), none
     of a candidate whose circle holds the marker's centre."""
-    from vision_torsion.markers import _neighbour_reach
+    from vision_torsion.markers import neighbour_reach
 
     rows, cols = patch.shape
     nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
-    reach = _neighbour_reach(nb[:, 2], edge_width)
+    reach = neighbour_reach(nb[:, 2], edge_width)
     dx = np.arange(cols) + (patch.x0 - nb[:, :1])
     dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
     d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
@@ -463,13 +462,13 @@ def _excluded_per_marker(patch, neighbours, edge_width, own):
 
 
 def test_neighbour_exclusion_of_many_patches_is_the_per_marker_one():
-    """The box search over many patches at once (_excluding_neighbours) flags the
+    """The box search over many patches at once (excluding_neighbours) flags the
     same pixels as every neighbour's distances over the whole patch, marker by
     marker: dense grids, large neighbours (with and without the marker's centre in
     their circle), patches cut by the border, centres near the image origin (where
     the patch origin's offset from a neighbour is rounded)."""
     from vision_torsion.detect import Blob
-    from vision_torsion.markers import _excluding_neighbours, _near, _patch
+    from vision_torsion.markers import candidate_patch, excluding_neighbours, near_candidates
 
     rng = np.random.default_rng(2024)
     image = np.zeros((240, 320), np.uint8)
@@ -483,10 +482,10 @@ def test_neighbour_exclusion_of_many_patches_is_the_per_marker_one():
         circles[:, :2] += rng.random((n, 2)) * 1e-9  # bits far below the pixel
         width = float(rng.choice([0.4, 1.0, 1.7, 3.2]))
         rows = np.arange(n)
-        patches = [_patch(image, Blob(x=x, y=y, radius=r, elongation=1.0, fill=1.0, touches_border=False), width)
-                   for x, y, r in circles]
-        owner, near = np.nonzero(_near(circles, rows, width))
-        got = _excluding_neighbours(patches, owner, circles[near], width, circles)
+        patches = [candidate_patch(image, Blob(x=x, y=y, radius=r, elongation=1.0, fill=1.0, touches_border=False),
+                                   width) for x, y, r in circles]
+        owner, near = np.nonzero(near_candidates(circles, rows, width))
+        got = excluding_neighbours(patches, owner, circles[near], width, circles)
         for i in rows:
             want = _excluded_per_marker(patches[i], circles[near[owner == i]], width, circles[i])
             flags = got[i].excluded

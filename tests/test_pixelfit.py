@@ -5,9 +5,18 @@ import pytest
 from helpers import area_image, ellipse_mask, supersampled_grid
 from scipy.special import ndtr
 
-from vision_torsion._ring import fast_median, marker_patch, normal_cdf, occluder_group, robust_sigma
 from vision_torsion.errors import FitError
-from vision_torsion.pixelfit import _clean, _damped, _solve, fit_disc
+from vision_torsion.pixelfit import fit_disc
+from vision_torsion.ring import (
+    damped_normal_matrix,
+    fast_median,
+    marker_patch,
+    normal_cdf,
+    nothing_to_cut,
+    occluder_group,
+    robust_sigma,
+    solve_lu,
+)
 from vision_torsion.synthetic import render
 
 
@@ -41,25 +50,25 @@ def test_the_damped_8x8_solve_is_linalgs():
         J = rng.normal(size=(8, 3000)) * rng.uniform(0.01, 100.0, size=(8, 1))
         A, b = J @ J.T, J @ rng.normal(size=3000)
         lam = rng.uniform(1e-9, 10.0)
-        damped = _damped(A, lam)
+        damped = damped_normal_matrix(A, lam)
         np.testing.assert_array_equal(damped, A + lam * np.diag(np.diag(A)))
         assert damped is not A and np.array_equal(A, J @ J.T)  # A itself left alone
         expected = np.linalg.solve(damped, b)
-        np.testing.assert_allclose(_solve(damped, b), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+        np.testing.assert_allclose(solve_lu(damped, b), expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
     singular = np.ones((8, 8))
     with pytest.raises(FitError, match="degenerate"):
-        _solve(singular, np.ones(8))
+        solve_lu(singular, np.ones(8))
 
 
 def test_a_clean_ring_is_what_the_occluder_cut_leaves_alone():
-    """pixelfit._clean is cut_occluders' first test: nothing beyond 4.5 robust σ."""
+    """ring.nothing_to_cut is cut_occluders' first test: nothing beyond 4.5 robust σ."""
     rng = np.random.default_rng(12)
     resid = rng.normal(0.0, 2.0, size=4000)
     sigma = robust_sigma(resid)
     resid = np.clip(resid, -4.4 * sigma, 4.4 * sigma)
-    assert _clean(resid)
+    assert nothing_to_cut(resid)
     resid[123] = 6.0 * robust_sigma(resid)
-    assert not _clean(resid)
+    assert not nothing_to_cut(resid)
 
 
 def test_patch_geometry_matches_explicit_coordinates():
@@ -321,7 +330,7 @@ def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypat
 def test_robust_sigma_of_rows_is_robust_sigma_of_each():
     """Rows of different lengths (under and over 400 values, where the MAD is taken
     of every fourth), one with an occluder's values: each row's σ is robust_sigma's."""
-    from vision_torsion._ring import robust_sigma_rows
+    from vision_torsion.ring import robust_sigma_rows
 
     rng = np.random.default_rng(17)
     n = np.array([30, 399, 400, 1234, 900])
@@ -372,7 +381,7 @@ def test_an_edge_seen_on_too_short_an_arc_is_not_fitted():
     half of them under 4 px): a dot fitted on 23 of its 94 sectors (its other side left
     out as a neighbour's pixels) came out round, ok and 4 px off. Sector offsets from
     pixels in 31 of 94 sectors are refused with the counts; in 32 they are given."""
-    from vision_torsion._ring import sector_edge_offsets, sectors_needed
+    from vision_torsion.ring import sector_edge_offsets, sectors_needed
 
     assert [int(sectors_needed(n)) for n in (16, 24, 36, 94, 220)] == [8, 12, 12, 32, 74]
     assert sectors_needed(np.array([16, 94])).tolist() == [8, 32]
@@ -432,7 +441,7 @@ def _plain_occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
     each group's edge moved and widened by its own 2x2 least squares."""
     import cv2
 
-    from vision_torsion._ring import OCCLUDER_SIGMAS
+    from vision_torsion.ring import OCCLUDER_SIGMAS
 
     out = np.zeros(shape, np.uint8)
     out.reshape(-1)[ring_idx[~keep]] = 1
@@ -458,11 +467,11 @@ def _plain_occluder_groups(keep, resid, sigma, u, ring_idx, shape, least):
 
 
 def test_occluder_groups_are_the_plain_group_by_group_ones():
-    """_ring.occluder_groups (areas by counting, the least-squares fit skipped when
+    """ring.occluder_groups (areas by counting, the least-squares fit skipped when
     every group reaches past the edge zone) against the plain version: specks, a
     lone pixel, a band along the edge that moving it explains, one it does not,
     and a group reaching past the edge zone, on random rings of a 40 x 50 patch."""
-    from vision_torsion._ring import occluder_groups
+    from vision_torsion.ring import occluder_groups
 
     rng = np.random.default_rng(23)
     shape = (40, 50)
@@ -538,24 +547,3 @@ def test_markers_beside_a_surround_fitted_together_are_fitted_as_one_by_one():
         assert (many.x_px, many.y_px) == pytest.approx((one.x_px, one.y_px), abs=1e-9)
     assert [f.steep_cut for f in singles] == [True, True, False]
 
-
-def test_robust_levels_see_a_surround_the_gradient_took_up():
-    """The residuals against levels solved robustly show the step's pixels as the
-    outliers they are (σ near the 2 DN noise, not the least-squares 21 DN)."""
-    from vision_torsion.pixelfit import _evaluate, _Pixels, _ring, _robust_level_residuals, _steep
-
-    img, x = _dot_beside_a_step(4.0, 0)
-    f = fit_disc(img, x + 0.5, 150.3, 10.5)
-    patch = marker_patch(img, x, 150.0, 30.0)
-    ring = _Pixels(patch, _ring(patch, x, 150.0, 10.0, f.edge_width_px), x, 150.0, 10.0)
-    p = np.array([x - 0.3, 150.0, 10.0, f.edge_width_px, 200.0, 30.0, 0.0, 0.0])
-    # least-squares levels at this geometry take the step into the gradient
-    for _ in range(3):
-        resid, J, u = _evaluate(p, ring)
-        p[4:8] += np.linalg.solve(J[4:8] @ J[4:8].T, J[4:8] @ resid)
-    resid, J, u = _evaluate(p, ring)
-    assert _steep(p) and robust_sigma(resid) > 10.0
-    robust = _robust_level_residuals(p, resid, J, u)
-    assert robust_sigma(robust) < 4.0
-    beyond = ring.xs >= 300.5
-    assert (np.abs(robust[beyond]) > 4.5 * robust_sigma(robust)).mean() > 0.9

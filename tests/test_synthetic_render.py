@@ -7,7 +7,7 @@ from vision_torsion.errors import SceneError
 from vision_torsion.synthetic import Scene, load_scene, render, render_ideal, scene_from_dict, scene_to_dict
 from vision_torsion.synthetic.coverage import band_coverage, shape_coverage, square_halfplane_fraction
 from vision_torsion.synthetic.geometry import CameraMapping, marker_centres_disk, rotate_about
-from vision_torsion.synthetic.render import _circle_distance_fn
+from vision_torsion.synthetic.render import circle_distance_fn
 
 SCENES = sorted(
     (__import__("pathlib").Path(__file__).parents[1] / "vision_torsion" / "synthetic" / "scenes").glob("*.toml")
@@ -16,7 +16,7 @@ SCENES = sorted(
 
 def _disc(cx, cy, r, size=(90, 100)):
     mapping = CameraMapping(Scene())
-    return shape_coverage(_circle_distance_fn(mapping, cx, cy, r), 0, 0, size[1], size[0])
+    return shape_coverage(circle_distance_fn(mapping, cx, cy, r), 0, 0, size[1], size[0])
 
 
 def test_coverage_centroid_and_area_are_exact():

@@ -14,9 +14,9 @@ Examples
 True
 """
 
-from ._lazy import attach
 from .errors import *  # noqa: F401,F403
 from .errors import __all__ as _errors_all
+from .lazy import attach
 
 __version__ = "0.1.0"
 
@@ -93,5 +93,5 @@ _LAZY = {
     "synthetic_encoder_record": "stiffness",
 }
 
-__all__ = [*_errors_all, *_LAZY]
 __getattr__, __dir__ = attach(__name__, _LAZY)
+__all__ = [*_errors_all, *_LAZY]

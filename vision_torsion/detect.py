@@ -26,9 +26,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._ring import fast_median
+from .ring import fast_median
 
-__all__ = ["Blob", "detect_blobs", "default_radius_range", "DEFAULT_MIN_RADIUS_PX"]
+__all__ = ["Blob", "detect_blobs", "default_radius_range", "detection_reduction", "DEFAULT_MIN_RADIUS_PX"]
 
 logger = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ _MIN_REDUCED_RADIUS = 2.5
 _MIN_REDUCED_RADIUS_2X = 1.5
 
 
-def _reduction(r_min: float) -> int:
+def detection_reduction(r_min: float) -> int:
     """Detection scale (1, 2, 4 or 8: successive 2x area reductions) for markers of
     radius `r_min` (px) and more: the coarsest keeping them
     :data:`_MIN_REDUCED_RADIUS` reduced px in radius (1.5 px at the 2x scale)."""
@@ -269,7 +269,7 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         Candidates, largest first.
     """
     r_min, r_max = radius_range if radius_range is not None else default_radius_range(image.shape)
-    f = _reduction(r_min)
+    f = detection_reduction(r_min)
     small = image
     for _ in range(f.bit_length() - 1):
         # successive 2x area reductions: OpenCV's fast path, ten times quicker than

@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._ring import (
+from .errors import FitError
+from .ring import (
     INV_SQRT_2PI,
     MarkerPatch,
     bounded_edge_width,
@@ -61,7 +62,6 @@ from ._ring import (
     sector_edge_offsets,
     sector_index,
 )
-from .errors import FitError
 
 __all__ = ["EdgePoints", "edge_points"]
 
@@ -123,6 +123,36 @@ def _solve_levels(Phi, nx, ny, vals, weight, kappa=None):
     return coef, resid
 
 
+def _first_pass(u, s, nx, ny, vals, ring_idx, shape):
+    """Pass 1 of :func:`edge_points`: the levels from every ring pixel (`u` their
+    edge coordinates at the edge width `s`, px; `nx`, `ny` the lighting frame;
+    `vals` their values, DN), the occluder cut (:func:`~vision_torsion.ring.cut_occluders`)
+    and a Gauss-Newton step of s (dI/ds = -(F - B)·φ(u)·u/s). Returns the flags
+    of the pixels kept, the levels' coefficients and the new s (px)."""
+    coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, np.ones_like(vals))
+    found = cut_occluders(
+        resid,
+        u,
+        lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1],
+        ring_idx,
+        shape,
+        least=occluder_group(s),
+    )
+    if found is None:
+        keep = np.ones(vals.size, bool)
+    else:
+        keep = found[0]
+        coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64))
+    pdf = np.exp(-0.5 * u * u) * INV_SQRT_2PI
+    FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
+    band = keep & in_edge_zone(u)
+    gs = -(FB * pdf / s) * u
+    den_s = float(np.sum(gs[band] ** 2))
+    if den_s > 0:
+        s = bounded_edge_width(s + float(np.sum(gs[band] * resid[band])) / den_s, s)
+    return keep, coef, s
+
+
 def edge_points(
     image, cx, cy, radius, *, edge_width=1.2, radial_shape=None, patch: MarkerPatch | None = None
 ) -> EdgePoints:
@@ -177,30 +207,7 @@ def edge_points(
     psi = np.arctan2(dy, dx)
     R = radius if radial_shape is None else radial_shape(psi)
     nx, ny = dx / radius, dy / radius
-    # pass 1: levels from every pixel, the outlier cut, and a Gauss-Newton step for
-    # the edge width s (dI/ds = -(F - B)·φ(u)·u/s)
-    u = (R - d) / s
-    coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, np.ones_like(vals))
-    found = cut_occluders(
-        resid,
-        u,
-        lambda k: _solve_levels(normal_cdf(u), nx, ny, vals, k.astype(np.float64))[1],
-        ring_idx,
-        patch.shape,
-        least=occluder_group(s),
-    )
-    if found is None:
-        keep = np.ones(vals.size, bool)
-    else:
-        keep = found[0]
-        coef, resid = _solve_levels(normal_cdf(u), nx, ny, vals, keep.astype(np.float64))
-    pdf = np.exp(-0.5 * u * u) * INV_SQRT_2PI
-    FB = (coef[3] - coef[0]) + (coef[4] - coef[1]) * nx + (coef[5] - coef[2]) * ny
-    band = keep & in_edge_zone(u)
-    gs = -(FB * pdf / s) * u
-    den_s = float(np.sum(gs[band] ** 2))
-    if den_s > 0:
-        s = bounded_edge_width(s + float(np.sum(gs[band] * resid[band])) / den_s, s)
+    keep, coef, s = _first_pass((R - d) / s, s, nx, ny, vals, ring_idx, patch.shape)
     # pass 2: levels with the new width, without the outliers; light multiplies
     # reflectance, so one illumination gradient serves inside and outside
     u = (R - d) / s

@@ -30,7 +30,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ._ring import MarkerPatch, fast_median, harmonic_circularity, marker_patch
 from .detect import (
     COARSE_MIN_AXIS_RATIO,
     Blob,
@@ -42,6 +41,7 @@ from .detect import (
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
+from .ring import MarkerPatch, fast_median, marker_patch, points_circularity
 from .settings import MeasureSettings
 
 if TYPE_CHECKING:
@@ -55,6 +55,12 @@ __all__ = [
     "fit_marker",
     "markers_to_frame",
     "MARKER_COLUMNS",
+    "candidate_extent",
+    "candidate_patch",
+    "excluding_neighbours",
+    "near_candidates",
+    "neighbour_reach",
+    "neighbours_of",
 ]
 
 logger = logging.getLogger(__name__)
@@ -179,7 +185,7 @@ def min_circularity(radius: float) -> float:
     5 px the limit is an absolute 0.5 px of second-harmonic edge deviation: on
     small discs pixelation, blur and JPEG blocks move sector edge points by a
     few tenths of a pixel whatever the radius, which a relative limit would
-    call "not round" (photographs of 4-5 px dots were 50-60 % rejected at 0.9).
+    call "not round".
     """
     return 1.0 - max(0.2, 1.0 / max(float(radius), 1e-9))
 
@@ -200,7 +206,7 @@ def _judge(blob: Blob, shape, r_min, r_max, fit) -> Marker | None:
     return None
 
 
-def _patch_extent(r0, edge_width):
+def candidate_extent(r0, edge_width):
     """Half-size (px) of the square around a blob (coarse radius `r0`) holding the
     start's outer ring (to 1.15·r0 + 7 px) and the fit's ring, with 1 px more for
     the coarse centre's error."""
@@ -229,7 +235,7 @@ def _start(patch: MarkerPatch, blob: Blob):
     w *= 1.0 / (F - B)
     # np.clip's values by two ufuncs, the zeros put by `where`, and no separate
     # w.any() (centroid checks the sum): on a few thousand pixels each call's
-    # overhead is what counts (0.6 of the 11 ms of discorpy 05's 315 starts)
+    # overhead is what counts
     np.minimum(np.maximum(w, 0.0, out=w), 1.0, out=w)
     np.copyto(w, 0.0, where=beyond)
     area, x, y = patch.centroid(w)
@@ -238,15 +244,7 @@ def _start(patch: MarkerPatch, blob: Blob):
     return x, y, np.sqrt(area / np.pi), (B, F)
 
 
-def _harmonic_circularity(ex, ey, cx, cy, radius) -> float:
-    """:func:`~vision_torsion._ring.harmonic_circularity` of edge points (px) around
-    a circle centred on (cx, cy) (px)."""
-    dx, dy = ex - cx, ey - cy
-    dist = np.maximum(np.hypot(dx, dy), 1e-12)
-    return harmonic_circularity(dist - radius, dx / dist, dy / dist, radius)
-
-
-def _neighbour_reach(radius, edge_width):
+def neighbour_reach(radius, edge_width):
     """How far (px) from a neighbouring candidate's centre its pixels are left out of
     a marker's fit: 1.15 times its coarse radius (good to ~10 %) plus its blurred
     edge (3s + 1 px). Floats or arrays of `radius`."""
@@ -259,7 +257,7 @@ _COVER_BLOCK = 1 << 15
 
 
 def _neighbour_cover(patches, owner, nb, edge_width) -> np.ndarray:
-    """Flags of the pixel centres within reach of a neighbour (:func:`_neighbour_reach`
+    """Flags of the pixel centres within reach of a neighbour (:func:`neighbour_reach`
     of its coarse radius: d² < reach²), for many patches at once.
 
     Parameters
@@ -271,7 +269,7 @@ def _neighbour_cover(patches, owner, nb, edge_width) -> np.ndarray:
     nb : numpy.ndarray
         (k, 3) coarse circle (x, y, r in px) of each pair's neighbour.
     edge_width : float
-        Edge width s (px) of :func:`_neighbour_reach`.
+        Edge width s (px) of :func:`neighbour_reach`.
 
     Returns
     -------
@@ -284,8 +282,8 @@ def _neighbour_cover(patches, owner, nb, edge_width) -> np.ndarray:
     Each pair is tested on the square box of pixels its reach can touch (2·reach + 4
     px a side: a quarter of a dense grid's patch) instead of the whole patch, and all
     pairs of a box size at once: on a photo of a dot grid each marker has eight
-    neighbours, and one broadcast over the whole patch per marker cost as much as
-    the marker's start (discorpy 05: 11 ms for its 315 dots; 6 ms so). The
+    neighbours, and one broadcast over the whole patch per marker would cost as
+    much as the marker's start. The
     distances are the same floating-point operations as over the whole patch (the
     pixel's index plus the patch origin's offset from the neighbour, squared and
     summed), so the same pixels are flagged; a pixel outside the box is farther than
@@ -297,7 +295,7 @@ def _neighbour_cover(patches, owner, nb, edge_width) -> np.ndarray:
     flags = np.zeros(int(base[-1]), bool)
     x0 = np.array([p.x0 for p in patches], dtype=np.int64)[owner]
     y0 = np.array([p.y0 for p in patches], dtype=np.int64)[owner]
-    reach = _neighbour_reach(nb[:, 2], edge_width)
+    reach = neighbour_reach(nb[:, 2], edge_width)
     side = (2.0 * reach).astype(np.int64) + 4
     for size in np.unique(side).tolist():
         pairs = np.flatnonzero(side == size)
@@ -325,11 +323,11 @@ def _box_axis(offset, reach, length, size):
 def _large_neighbour_cover(patch: MarkerPatch, nb, edge_width, own) -> np.ndarray:
     """Flags (flat like the patch) of the pixels left out for neighbours `nb` ((k, 3)
     coarse circles, px, none holding the marker's centre) more than 1.5 times the
-    marker's `own` radius: those within reach (:func:`_neighbour_reach`) and nearer
+    marker's `own` radius: those within reach (:func:`neighbour_reach`) and nearer
     to that neighbour's coarse edge than to the marker's own (see
-    :func:`_excluding_neighbours`)."""
+    :func:`excluding_neighbours`)."""
     rows, cols = patch.shape
-    reach = _neighbour_reach(nb[:, 2], edge_width)
+    reach = neighbour_reach(nb[:, 2], edge_width)
     dx = np.arange(cols) + (patch.x0 - nb[:, :1])
     dy = np.arange(rows) + (patch.y0 - nb[:, 1:2])
     d2 = dy[:, :, None] ** 2 + dx[:, None, :] ** 2
@@ -342,7 +340,7 @@ def _large_neighbour_cover(patch: MarkerPatch, nb, edge_width, own) -> np.ndarra
     return inside.any(axis=0).ravel()
 
 
-def _excluding_neighbours(patches, owner, nb, edge_width, owns=None) -> list[MarkerPatch]:
+def excluding_neighbours(patches, owner, nb, edge_width, owns=None) -> list[MarkerPatch]:
     """`patches` with the pixels of neighbouring candidates flagged as excluded: within
     1.15 times their coarse radius (good to ~10 %) plus their blurred edge (3s + 1 px).
 
@@ -389,12 +387,12 @@ def _excluding_neighbours(patches, owner, nb, edge_width, owns=None) -> list[Mar
 def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) -> MarkerPatch:
     """`patch` with the pixels of `neighbours` ((k, 3) coarse circles x, y, r in px)
     flagged as excluded, given the marker's `own` coarse circle: one patch of
-    :func:`_excluding_neighbours`."""
+    :func:`excluding_neighbours`."""
     if neighbours is None or len(neighbours) == 0:
         return patch
     nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
     owns = None if own is None else np.asarray([own], dtype=np.float64)
-    return _excluding_neighbours([patch], np.zeros(len(nb), np.int64), nb, edge_width, owns)[0]
+    return excluding_neighbours([patch], np.zeros(len(nb), np.int64), nb, edge_width, owns)[0]
 
 
 def _prepared(image, blob: Blob, edge_width, neighbours):
@@ -411,38 +409,38 @@ def _prepared(image, blob: Blob, edge_width, neighbours):
         Too few pixels or no contrast to start from.
     """
     own = (blob.x, blob.y, blob.radius)
-    patch = _exclude_neighbours(_patch(image, blob, edge_width), neighbours, edge_width, own=own)
+    patch = _exclude_neighbours(candidate_patch(image, blob, edge_width), neighbours, edge_width, own=own)
     return patch, _start(patch, blob)
 
 
-def _patch(image, blob: Blob, edge_width) -> MarkerPatch:
-    """The square of pixels around `blob` a fit uses (:func:`_patch_extent`), cut to the image."""
-    return marker_patch(image, blob.x, blob.y, _patch_extent(blob.radius, edge_width), clip=True)
+def candidate_patch(image, blob: Blob, edge_width) -> MarkerPatch:
+    """The square of pixels around `blob` a fit uses (:func:`candidate_extent`), cut to the image."""
+    return marker_patch(image, blob.x, blob.y, candidate_extent(blob.radius, edge_width), clip=True)
 
 
 def _prepared_all(image, blobs: list[Blob], circles: np.ndarray, rows, edge_width) -> list:
     """:func:`_prepared` of the candidates `rows` of `circles` (coarse circles x, y, r
     in px of all candidates; `blobs` those of `rows`), their neighbours those of
-    :func:`_near`: per candidate its (patch, start), or the FitError that stopped it.
+    :func:`near_candidates`: per candidate its (patch, start), or the FitError that stopped it.
     The neighbours' pixels are flagged for all patches at once
-    (:func:`_excluding_neighbours`)."""
+    (:func:`excluding_neighbours`)."""
     out: list = [None] * len(blobs)
     patches, which = [], []
     for j, blob in enumerate(blobs):
         try:
-            patches.append(_patch(image, blob, edge_width))
+            patches.append(candidate_patch(image, blob, edge_width))
             which.append(j)
         except FitError as exc:
             out[j] = exc
     rows = np.asarray(rows, dtype=np.int64)[np.asarray(which, dtype=np.int64)]
     owner, near = [], []
     for k in range(0, rows.size, 256):  # neighbours of 256 markers at a time: a few MB at most
-        mine, theirs = np.nonzero(_near(circles, rows[k : k + 256], edge_width))
+        mine, theirs = np.nonzero(near_candidates(circles, rows[k : k + 256], edge_width))
         owner.append(mine + k)
         near.append(theirs)
     owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
     near = np.concatenate(near) if near else np.zeros(0, np.int64)
-    patches = _excluding_neighbours(patches, owner, circles[near], edge_width, circles[rows])
+    patches = excluding_neighbours(patches, owner, circles[near], edge_width, circles[rows])
     for j, patch in zip(which, patches):
         try:
             out[j] = patch, _start(patch, blobs[j])
@@ -523,7 +521,7 @@ def fit_marker(
                 break
     except FitError as exc:
         return _failed(blob, exc)
-    circ = _harmonic_circularity(ep.x_px, ep.y_px, cx, cy, r)
+    circ = points_circularity(ep.x_px, ep.y_px, cx, cy, r)
     if fit != "ellipse" and circ < min_circularity(r):
         return _not_round(cx, cy, r, circ)
     return _whole(
@@ -576,11 +574,9 @@ def _not_round(cx, cy, r, circ) -> Marker:
 #: A pixel fit judged not round is a disc seen obliquely when an ellipse centred on
 #: the fit's centre describes its per-sector edge points: their RMS distance from it
 #: is at most this share of their RMS distance from the circle (:func:`_oblique`).
-#: Rendered ellipses of axis ratio 0.6-0.75 (radius 6-25 px, blur 1 px, 2 DN noise)
-#: leave 0.05-0.11; the tilted card of the UCL laparoscope frames (214 dots judged
-#: not round) a median of 0.25 and 0.33 at the 95th percentile, its edge points' own
-#: scatter (two dots 0.57); shapes that are not such ellipses leave more: a teardrop
-#: 0.58, a 30x24 px rectangle 0.81.
+#: Discs seen obliquely leave well under it (rendered ellipses about 0.1, the tilted
+#: card of the photos about 0.3, their edge points' own scatter); shapes that are no
+#: such ellipse leave more (a teardrop about 0.6, a rectangle 0.8).
 _OBLIQUE_RESIDUAL_SHARE = 0.4
 #: Smallest axis ratio of such an ellipse (a disc seen 60° off-axis): beyond it the
 #: circle's ring of pixels no longer holds the whole edge (a 0.6 ellipse of 25 px did
@@ -588,15 +584,11 @@ _OBLIQUE_RESIDUAL_SHARE = 0.4
 _OBLIQUE_MIN_AXIS_RATIO = 0.5
 #: ... and its RMS distance may hold, besides that share, this many times the edge
 #: points' scatter from the pixel noise alone (:attr:`DiscFit.edge_noise_px`, added in
-#: quadrature): the share alone asked a small dot's noisy edge points to lie on the
-#: ellipse closer than their noise allows. On the full discorpy 06 frame the dots near
-#: the border are ellipses of axis ratio 0.7-0.8 (lens distortion, r ≈ 5 px, s ≈ 2.5
-#: px): ellipse RMS over the noise figure 1.43 at the median and 1.99 at the 95th
-#: percentile, as noisy as the edge points of its round dots about their circle
-#: (1.62 and 2.06; on discorpy 02 and 05 medians 1.77 and 1.24, 95th percentiles 2.58
-#: and 1.96); 343 of its 1461 grid dots were not_round for the share rule. A teardrop
-#: and a rectangle leave 12-47 times their noise figure at 2 DN of noise (blur 1 px),
-#: and stay not_round at a contrast of 17 times the noise and blur 2.2 px (tested).
+#: quadrature): the share alone asks a small dot's noisy edge points to lie on the
+#: ellipse closer than their noise allows. Round dots' edge points lie within about
+#: twice their noise figure of their circle (photographed grids: 95th percentile
+#: 2.0-2.6), and so do small, blurred ellipses of their ellipse; a teardrop or a
+#: rectangle leaves 12-47 times it.
 _OBLIQUE_NOISE_TIMES = 2.0
 
 
@@ -746,27 +738,27 @@ def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, fl
     return settings.radius_range or default_radius_range(img.shape)
 
 
-def _neighbours(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
+def neighbours_of(circles: np.ndarray, i: int, edge_width: float) -> np.ndarray:
     """The coarse circles (rows of (x, y, r), px) other than row `i` whose blurred
     disc reaches into the square of pixels marker `i`'s fit uses."""
     if len(circles) > 8:
-        return circles[_near(circles, np.array([i]), edge_width)[0]]
-    # a few candidates (the pair search): :func:`_near`'s arithmetic on plain floats,
+        return circles[near_candidates(circles, np.array([i]), edge_width)[0]]
+    # a few candidates (the pair search): :func:`near_candidates`'s arithmetic on plain floats,
     # without its dozen small array operations
     x, y, r = circles[i].tolist()
-    extent = float(_patch_extent(r, edge_width))
+    extent = float(candidate_extent(r, edge_width))
     near = []
     for j, (xj, yj, rj) in enumerate(circles.tolist()):
-        reach = extent + _neighbour_reach(rj, edge_width)
+        reach = extent + neighbour_reach(rj, edge_width)
         if j != i and abs(xj - x) < reach and abs(yj - y) < reach:
             near.append(j)
     return circles[near]
 
 
-def _near(circles: np.ndarray, rows: np.ndarray, edge_width: float) -> np.ndarray:
-    """Flags (len(rows) x len(circles)) of :func:`_neighbours` for each of `rows`."""
+def near_candidates(circles: np.ndarray, rows: np.ndarray, edge_width: float) -> np.ndarray:
+    """Flags (len(rows) x len(circles)) of :func:`neighbours_of` for each of `rows`."""
     x, y, r = circles[rows].T[:, :, None]
-    reach = _patch_extent(r, edge_width) + _neighbour_reach(circles[:, 2], edge_width)
+    reach = candidate_extent(r, edge_width) + neighbour_reach(circles[:, 2], edge_width)
     near = (np.abs(circles[:, 0] - x) < reach) & (np.abs(circles[:, 1] - y) < reach)
     near[np.arange(rows.size), rows] = False
     return near
@@ -818,7 +810,7 @@ def find_marker_list(
             break
         marker = _judge(blob, img.shape, r_min, r_max, fit)
         if marker is None:
-            marker = fit_marker(img, blob, fit=fit, edge_width=width, neighbours=_neighbours(circles, i, width))
+            marker = fit_marker(img, blob, fit=fit, edge_width=width, neighbours=neighbours_of(circles, i, width))
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)
@@ -843,7 +835,7 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
     todo = [i for i, m in enumerate(markers) if m is None]
     if todo:
         i = todo.pop(0)
-        markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=_neighbours(circles, i, width))
+        markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
         if markers[i].ok:
             width = markers[i].edge_width_px
     patches, starts, fitted = [], [], []

@@ -55,7 +55,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ._ring import (
+from .errors import FitError
+from .ring import (
     EDGE_ZONE,
     INV_SQRT_2PI,
     OCCLUDER_SIGMAS,
@@ -64,12 +65,14 @@ from ._ring import (
     check_contrast,
     check_radius,
     cut_occluders,
+    damped_normal_matrix,
     fast_median,
     harmonic_circularity,
     in_edge_zone,
     lost_sectors,
     marker_patch,
     normal_cdf,
+    nothing_to_cut,
     occluder_group,
     occluder_groups,
     robust_sigma,
@@ -77,20 +80,18 @@ from ._ring import (
     sector_edge_offsets,
     sector_index,
     sectors_needed,
+    solve_lu,
 )
-from .errors import FitError
 
 __all__ = ["DiscFit", "fit_disc", "fit_discs"]
 
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
 #: Ring beyond the edge zone ±3s (px). Inside, the marker's pixels only inform its
-#: level, which is not correlated with the centre: 2.5 px instead of 0.5 px gave the
-#: same RMS on 120 centres. Outside, they also pin the lighting gradient, which is
-#: correlated with the centre (a tilt of the levels mimics a shift). Paired against the
-#: maximum-likelihood reference of the benchmarks (square window, exact blurred-disc profile) on 200 centres of the
-#: standard scene: 5.5 px gave 1.054x its RMS, 7.5 px 1.033x, 9.5 px 1.025x, each
-#: 2 px costing ~15 % more pixels.
+#: level, which is not correlated with the centre. Outside, they also pin the
+#: lighting gradient, which is (a tilt of the levels mimics a shift): 7.5 px puts the
+#: centre's RMS within 4 % of the maximum-likelihood reference of
+#: ``benchmarks/bench_peers.py``, each 2 px more costing ~15 % more pixels.
 _INNER_PX = 0.5
 _OUTER_PX = 7.5
 #: Extra ring width (px) each side for the start's error (the intensity centroid
@@ -98,24 +99,20 @@ _OUTER_PX = 7.5
 _START_MARGIN_PX = 0.5
 #: A cut whose pixels lie (this share of them) in the edge zone and along more than
 #: this fraction of the edge's sectors is the edge itself not being the model's
-#: profile there (interlaced fields, motion smear, a sharpening halo on one side:
-#: 14 of the 23 dots of the UCL laparoscope photo, whose cuts of 25-35 % of the edge
-#: zone, 99 % of them in it along 60-90 % of the arc, cost 0.07 px of row
-#: straightness), not an occluder. An occluder is another object in the ring: a
-#: wire crosses the whole ring (40-55 % of its cut pixels in the edge zone in the
-#: rendered tests), a speck covers a short arc (at most 14 % of the sectors in the
-#: rendered distractor scene).
+#: profile there (interlaced fields, motion smear, a sharpening halo on one side),
+#: not an occluder, and is not made. An occluder is another object in the ring: a
+#: wire crosses the whole ring (about half its cut pixels in the edge zone), a
+#: speck covers a short arc.
 _MISFIT_EDGE_SHARE = 0.9
 _MISFIT_ARC = 0.25
 #: Lighting gradient |(gx, gy)| (relative change of the light per starting radius)
 #: above which a ring is examined for an occluder with robustly solved levels
 #: (:func:`_robust_level_residuals`) even when no pixel is beyond 4.5 robust σ. A
 #: darker surround (a card's edge, a shadow) within a few px of a marker's edge is
-#: taken up by the gradient, which spreads its misfit over the whole ring (robust σ
-#: 21 DN at 2 DN of noise, a 90 DN step 4 px off the edge of a 10 px dot): nothing
-#: looked outlying and the centre was 0.22-0.31 px off at a reported 0.05 px. The
-#: marker's own light varies far less over it: rendered scenes at most 0.02, the
-#: photos' dots 0.01 (discorpy) and 0.05 (UCL, 99th percentile).
+#: taken up by the gradient, which spreads its misfit over the whole ring so that
+#: nothing looks outlying while the centre moves by tenths of a pixel. A marker's
+#: own light varies far less over it (at most 0.02 on the rendered scenes, 0.05 on
+#: the photographed dots of ``benchmarks/bench_photos.py``).
 _STEEP_LIGHT = 0.04
 #: Iterations of the Tukey-weighted (c = 4.685 robust σ) solution of the levels.
 _ROBUST_LEVEL_ITER = 6
@@ -181,9 +178,7 @@ class DiscFit:
         Pixels were cut from the ring under a steep lighting gradient
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
         shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
-        not to its covariance (a 90 DN step 0-7 px off a 10 px dot, 6 renders each:
-        within 0.1 px in 42 of 48, 0.13-0.25 px with the step 1 px off, at a reported
-        σ of 0.01-0.05 px; up to 0.31 px before the cut, at 0.05 px).
+        not to its covariance.
     """
 
     x_px: float
@@ -337,10 +332,10 @@ def _steep_surround(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the ring's pixels to keep, or None: under a steep lighting gradient
     (:func:`_steep`), the pixels away from the edge zone that lie beyond 4.5 robust σ
     of robustly solved levels (:func:`_robust_level_residuals`) in connected groups
-    of an occluder's size (:func:`~vision_torsion._ring.occluder_group`): a darker
+    of an occluder's size (:func:`~vision_torsion.ring.occluder_group`): a darker
     surround the gradient took up. Only those are cut here; with them gone the
     gradient no longer hides the rest, which the next examination cuts as any
-    occluder (:func:`~vision_torsion._ring.cut_occluders`) from a fit no longer
+    occluder (:func:`~vision_torsion.ring.cut_occluders`) from a fit no longer
     pulled by it."""
     r = _robust_level_residuals(p, resid, J, u)
     sigma = robust_sigma(r)
@@ -353,7 +348,7 @@ def _steep_surround(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
 
 def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     """Flags of the pixels to keep, or None: the occluder cut of
-    :func:`~vision_torsion._ring.cut_occluders`, and the edge pixels of the sectors
+    :func:`~vision_torsion.ring.cut_occluders`, and the edge pixels of the sectors
     it touched; None when the outlying pixels it saw lie along much of the edge
     (the edge's own misfit). `resid`, `J`, `u` are the model at `p`; under a steep
     lighting gradient (:func:`_steep`) a darker surround is cut first
@@ -401,10 +396,90 @@ def _cut_outliers(p, px: _Pixels, patch: MarkerPatch, resid, J, u):
     return keep
 
 
+def _examine(p, ring: _Pixels, patch: MarkerPatch, resid, J, u):
+    """One examination of the whole ring for an occluder, at the parameters `p`
+    (`resid`, `J`, `u`: the model there on all of `ring`'s pixels): the flags of
+    the pixels to keep (:func:`_cut_outliers`; None: all), and whether they were
+    cut under a steep lighting gradient (:attr:`DiscFit.steep_cut`). A ring with
+    nothing beyond 4.5 robust σ (most) is not examined further."""
+    steep = bool(_steep(p))
+    keep = None if not steep and nothing_to_cut(resid) else _cut_outliers(p, ring, patch, resid, J, u)
+    return keep, keep is not None and steep
+
+
+def _last_examination(cuts, keep, new_keep) -> bool:
+    """True when the examination number `cuts` (1, 2, ...) ends the examining: the
+    third, or one that changed nothing (`keep`, `new_keep`: the flags of the pixels
+    kept before and after it, None for all)."""
+    if keep is None or new_keep is None:
+        return cuts == 3 or (keep is None and new_keep is None)
+    return cuts == 3 or np.array_equal(keep, new_keep)
+
+
+def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut) -> DiscFit:
+    """The :class:`DiscFit` of the converged parameters `p` (8) of `n` pixels of
+    residual variance `sigma2` (DN²), after the checks every fit makes, in this
+    order: the contrast against the noise (:func:`~vision_torsion.ring.check_contrast`),
+    the covariance (``inverse()``: (JᵀJ)⁻¹), the radius against its σ
+    (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
+    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError).
+
+    Raises
+    ------
+    FitError
+        The first check that fails.
+    """
+    check_contrast(p[5] - p[4], sigma2)
+    cov = sigma2 * inverse()
+    check_radius(p[2], cov[2, 2])
+    found = diagnostics()
+    if isinstance(found, FitError):
+        raise found
+    ex, ey, rms, circularity, noise = found
+    return DiscFit(
+        x_px=float(p[0]),
+        y_px=float(p[1]),
+        radius_px=float(p[2]),
+        edge_width_px=float(p[3]),
+        cov=cov[:3, :3].copy(),
+        noise_dn=float(np.sqrt(sigma2)),
+        background_dn=float(p[4]),
+        foreground_dn=float(p[5]),
+        n_pixels=int(n),
+        edge_x_px=ex,
+        edge_y_px=ey,
+        residual_rms_px=rms,
+        circularity=circularity,
+        edge_noise_px=noise,
+        steep_cut=bool(steep_cut),
+    )
+
+
+def _inverse(A, *, lapack=False):
+    """(`A`)⁻¹ of one marker's 8x8 normal matrix by OpenCV's LU (numpy's LAPACK
+    with `lapack`, as the batched fit inverts its rows).
+
+    Raises
+    ------
+    FitError
+        `A` is singular: the edge model is degenerate.
+    """
+    if lapack:
+        try:
+            return np.linalg.inv(A)
+        except np.linalg.LinAlgError:
+            ok = False
+    else:
+        ok, inverse = cv2.invert(A, flags=cv2.DECOMP_LU)
+    if not ok:
+        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
+    return inverse
+
+
 def _edge_diagnostics(p, resid, J, u, sigma2):
-    """Per-sector edge points (:func:`~vision_torsion._ring.sector_edge_offsets`),
+    """Per-sector edge points (:func:`~vision_torsion.ring.sector_edge_offsets`),
     their RMS distance from the circle (px), the circularity they give
-    (:func:`~vision_torsion._ring.harmonic_circularity`) and their RMS standard
+    (:func:`~vision_torsion.ring.harmonic_circularity`) and their RMS standard
     deviation from the pixel noise alone (px; :func:`_away_variance`, `sigma2` the
     ring's residual variance in DN²)."""
     cx, cy, R = p[0], p[1], p[2]
@@ -458,7 +533,7 @@ def fit_disc(
     max_iter : int
         Levenberg-Marquardt iterations at most.
     patch : MarkerPatch, optional
-        Pixels around the marker from :func:`~vision_torsion._ring.marker_patch`;
+        Pixels around the marker from :func:`~vision_torsion.ring.marker_patch`;
         taken from `image` when None. It must reach past the edge by the ring's
         width (3s + 7.5 px, and 0.5 px more for the start's error).
 
@@ -502,49 +577,25 @@ def fit_disc(
     return _fit_from(p, ring, patch, *_evaluate(p, px), max_iter=max_iter)
 
 
-def _damped(A, lam):
-    """A + lam·diag(A): the Levenberg-Marquardt normal matrix (a copy; the same
-    values as adding the diagonal matrix, without its two 8x8 temporaries)."""
-    damped = A.copy()
-    diagonal = damped.reshape(-1)[:: A.shape[0] + 1]  # a view
-    diagonal += lam * A.reshape(-1)[:: A.shape[0] + 1]
-    return damped
 
 
-def _solve(A, b):
-    """x of A·x = b for one marker's 8x8 system, by OpenCV's LU with partial
-    pivoting: LAPACK's answer to rounding (1e-16 relative), without numpy.linalg's
-    ~5 µs of checks per call, which were a tenth of a marker's fit (three 8x8
-    solves and inversions a fit)."""
-    ok, x = cv2.solve(A, b.reshape(-1, 1), flags=cv2.DECOMP_LU)
-    if not ok:
-        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
-    return x.reshape(-1)
 
 
-def _clean(resid) -> bool:
-    """True when no residual lies beyond OCCLUDER_SIGMAS robust σ (:func:`~vision_torsion._ring.robust_sigma`):
-    the test :func:`~vision_torsion._ring.cut_occluders` begins with, by which
-    nothing is to be cut."""
-    return bool((np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)).all())
 
 
-def _fit_from(
-    p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, lam=1e-3, keep=None, cuts=0, done=0
-) -> DiscFit:
-    """:func:`fit_disc`'s Levenberg-Marquardt loop and result from a state: the
-    parameters `p`; the model's residuals, Jacobian and u there on the ring's
-    pixels in use (`keep`: flags of those of `ring`, None: all); the damping `lam`;
-    the outlier examinations made (`cuts`) and the iterations used (`done`).
-    (:func:`fit_disc` starts it from its first evaluation.)"""
-    px = ring if keep is None else ring.subset(keep)
+def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) -> DiscFit:
+    """:func:`fit_disc`'s Levenberg-Marquardt loop and result from the starting
+    parameters `p` and the model's residuals, Jacobian and u there on all of
+    `ring`'s pixels: :func:`fit_discs`' rules (:class:`_RowsFit`) for one marker,
+    in scalar steps."""
+    px, keep, lam, cuts = ring, None, 1e-3, 0  # keep: flags of the ring's pixels in use, None: all
     ssr = float(resid @ resid)
     final = False  # the last examination changed nothing
     steep_cut = False  # pixels cut under a steep lighting gradient (DiscFit.steep_cut)
-    for _ in range(max_iter - done):
+    for _ in range(max_iter):
         A = J @ J.T
         b = J @ resid
-        step = _solve(_damped(A, lam), b)
+        step = solve_lu(damped_normal_matrix(A, lam), b)
         trial = p + step
         trial[3] = bounded_edge_width(trial[3], p[3])
         if final and max(abs(step[0]), abs(step[1])) < _CONVERGED_PX:
@@ -570,18 +621,10 @@ def _fit_from(
             # settled, then after each refit without what was cut, as a fit pulled
             # by an occluder hides part of it (at most three times).
             full = (resid, J, u) if keep is None else _evaluate(p, ring)
-            # a clean ring (nothing beyond 4.5 robust σ: most) needs no examination
-            # (_cut_outliers' own first test, without its edge zone and sectors)
-            steep = bool(_steep(p))
-            new_keep = None if _clean(full[0]) and not steep else _cut_outliers(p, ring, patch, *full)
-            steep_cut = steep_cut or (new_keep is not None and steep)
+            new_keep, steep = _examine(p, ring, patch, *full)
+            steep_cut = steep_cut or steep
             cuts += 1
-            if (
-                cuts == 3
-                or (keep is None and new_keep is None)
-                or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
-            ):
-                final = True
+            final = _last_examination(cuts, keep, new_keep)
             if not (keep is None and new_keep is None):
                 keep = new_keep
                 resid, J, u = full
@@ -598,39 +641,16 @@ def _fit_from(
         raise FitError(f"the marker's edge model did not converge in {max_iter} iterations")
     n = resid.size
     sigma2 = ssr / max(n - 8, 1)
-    check_contrast(p[5] - p[4], sigma2)
-    ok, inverse = cv2.invert(A, flags=cv2.DECOMP_LU)
-    if not ok:
-        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
-    cov = sigma2 * inverse
-    check_radius(p[2], cov[2, 2])
-    ex, ey, rms, circularity, noise = _edge_diagnostics(p, resid, J, u, sigma2)
-    return DiscFit(
-        x_px=float(p[0]),
-        y_px=float(p[1]),
-        radius_px=float(p[2]),
-        edge_width_px=float(p[3]),
-        cov=cov[:3, :3].copy(),
-        noise_dn=float(np.sqrt(sigma2)),
-        background_dn=float(p[4]),
-        foreground_dn=float(p[5]),
-        n_pixels=int(n),
-        edge_x_px=ex,
-        edge_y_px=ey,
-        residual_rms_px=rms,
-        circularity=circularity,
-        edge_noise_px=noise,
-        steep_cut=steep_cut,
-    )
+    return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(p, resid, J, u, sigma2), n=n,
+                     steep_cut=steep_cut)
 
 
 class _Scratch(threading.local):
     """The batched fit's large arrays, kept from one call to the next (one set per
-    thread): a fit's rings, Jacobians and residuals are a few MB, and on a virtual
-    machine each page of freshly allocated memory costs a page fault when first
-    touched (on discorpy 06 the faults were a quarter of :func:`fit_discs`'s
-    time). Each array is asked for by name; a later call's arrays overwrite an
-    earlier call's, so nothing returned to a caller may be one of them."""
+    thread): a fit's rings, Jacobians and residuals are a few MB, and each page of
+    freshly allocated memory costs a page fault when first touched. Each array is
+    asked for by name; a later call's arrays overwrite an earlier call's, so
+    nothing returned to a caller may be one of them."""
 
     def __init__(self):
         self.arrays: dict = {}
@@ -791,6 +811,188 @@ def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
     return out
 
 
+#: Diagonal indices of an 8x8 matrix.
+_DIAG = np.arange(8)
+
+
+class _RowsFit:
+    """The state of :func:`fit_discs`' Levenberg-Marquardt fit of M markers as rows,
+    and its steps: the parameters `P` (M x 8); the model's residuals, Jacobian and
+    u on the pixels each row uses (:func:`_evaluate_rows`, in the :class:`_Scratch`
+    slot `cur`) with their sums of squares `ssr` and normal equations `A`, `b`; per
+    row the damping `lam`, the examinations for an occluder made (`cuts`), whether
+    the last one changed nothing (`final`), whether pixels were cut under a steep
+    gradient (`steep_cut`) and the flags of the ring's pixels kept (`keeps`, rows
+    with a cut only); `active` rows are still iterating, `failed` ones hold their
+    FitError. Every rule is :func:`fit_disc`'s, taken for all rows at once."""
+
+    def __init__(self, patches, rings: list[_Pixels], live: np.ndarray, starts: np.ndarray, s: float):
+        self.patches, self.rings, self.live = patches, rings, live
+        self.px = _Batch(rings, starts[live])
+        m = self.m = live.size
+        self.P = np.zeros((m, 8))
+        self.P[:, :3], self.P[:, 3], self.P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
+        self.cur = 0  # the scratch slot of the current state; the other takes trials
+        self.resid, self.Jm, self.u = _evaluate_rows(self.P, self.px, self.cur)
+        self.ssr = np.einsum("ij,ij->i", self.resid, self.resid)
+        self.A, self.b = _normal_equations(self.Jm, self.resid)
+        self.lam = np.full(m, 1e-3)
+        self.final = np.zeros(m, bool)
+        self.active = np.ones(m, bool)
+        self.failed: dict[int, FitError] = {}
+        self.cuts = np.zeros(m, np.int64)
+        self.steep_cut = np.zeros(m, bool)
+        self.keeps: dict[int, np.ndarray] = {}
+
+    def iterate(self) -> bool:
+        """One Levenberg-Marquardt iteration of the active rows; False when none is."""
+        act = np.flatnonzero(self.active)
+        if not act.size:
+            return False
+        act, step = self._steps(act)
+        P, final = self.P, self.final
+        trial = P[act] + step
+        trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
+        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
+        last = final[act] & small
+        # converged: the last step taken without evaluating the model (as fit_disc)
+        P[act[last]] = trial[last]
+        self.active[act[last]] = False
+        act, trial = act[~last], trial[~last]
+        if not act.size:
+            return True
+        m = self.m
+        r_t, J_t, u_t = _evaluate_rows(trial, self.px if act.size == m else self.px.rows(act), 1 - self.cur)
+        ssr_t = np.einsum("ij,ij->i", r_t, r_t)
+        better = ssr_t <= self.ssr[act]
+        worse = act[~better]
+        self.lam[worse] *= 10.0
+        for k in worse[self.lam[worse] > 1e8]:
+            self.failed[k] = FitError("the marker's edge model does not converge")
+            self.active[k] = False
+        acc, trial = act[better], trial[better]
+        if not acc.size:
+            return True
+        moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
+        if acc.size == m:  # every marker stepped: the new arrays as they are
+            self.P, self.resid, self.Jm, self.u, self.ssr = trial, r_t, J_t, u_t, ssr_t
+            self.cur = 1 - self.cur
+            self.A, self.b = _normal_equations(self.Jm, self.resid)
+        else:
+            P[acc], self.ssr[acc] = trial, ssr_t[better]
+            # row by row into the current state's buffers: copies of the accepted
+            # rows (r_t[better]) would be fresh memory each iteration
+            for j, k in zip(np.flatnonzero(better), acc):
+                self.resid[k], self.Jm[k], self.u[k] = r_t[j], J_t[j], u_t[j]
+            A_t, b_t = _normal_equations(J_t, r_t)
+            self.A[acc], self.b[acc] = A_t[better], b_t[better]
+        self.lam[acc] = np.maximum(0.3 * self.lam[acc], 1e-9)
+        going_on = self._examinations(acc, moved)
+        self.active[acc[self.final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
+        return True
+
+    def _steps(self, act):
+        """The damped steps (len(act) x 8) of rows `act`, and those rows; a row whose
+        system is singular fails and is left out."""
+        Aa = self.A[act]
+        Aa[:, _DIAG, _DIAG] += self.lam[act, None] * Aa[:, _DIAG, _DIAG]
+        try:
+            return act, np.linalg.solve(Aa, self.b[act][:, :, None])[:, :, 0]
+        except np.linalg.LinAlgError:
+            step = np.zeros((act.size, 8))
+            for j, k in enumerate(act):
+                try:
+                    step[j] = np.linalg.solve(Aa[j], self.b[k])
+                except np.linalg.LinAlgError:
+                    self.failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
+                    self.active[k] = False
+            keep = self.active[act]
+            return act[keep], step[keep]
+
+    def _examinations(self, acc, moved) -> np.ndarray:
+        """fit_disc's examinations for an occluder of the rows `acc` just stepped
+        (`moved`: their centres' moves, px) that are due: first once the centre has
+        settled, then once it has converged after each change of the pixels used.
+        Flags (M) of the rows whose pixels changed, which go on."""
+        cuts, final = self.cuts, self.final
+        due = acc[~final[acc] & (moved < np.where(cuts[acc] == 0, _SETTLED_PX, _CONVERGED_PX))]
+        going_on = np.zeros(self.m, bool)
+        if not due.size:
+            return going_on
+        # Most rings have no pixel beyond 4.5 robust σ at their first examination:
+        # that is settled for all at once (nothing to cut makes the fit final).
+        first = due[cuts[due] == 0]
+        clean = np.zeros(self.m, bool)
+        if first.size:
+            rows = self.resid if first.size == self.m else self.resid[first]  # no copy when all are due
+            sig = robust_sigma_rows(rows, self.px.n[first])
+            quiet = (np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)
+            quiet &= ~_steep(self.P[first])
+            clean[first[quiet]] = True
+        final[clean] = True
+        cuts[clean] = 1
+        for k in due[~clean[due]]:
+            going_on[k] = self._examine(k)
+        return going_on
+
+    def _examine(self, k) -> bool:
+        """fit_disc's examination of row `k`'s whole ring for an occluder; its row
+        then holds the pixels kept. True when they changed and the fit goes on."""
+        P, px, ring = self.P, self.px, self.rings[k]
+        keep, n = self.keeps.get(k), px.n[k]
+        full = (self.resid[k, :n], self.Jm[k, :, :n], self.u[k, :n]) if keep is None else _evaluate(P[k], ring)
+        new_keep, steep = _examine(P[k], ring, self.patches[self.live[k]], *full)
+        self.steep_cut[k] |= steep
+        self.cuts[k] += 1
+        self.final[k] = self.final[k] or _last_examination(self.cuts[k], keep, new_keep)
+        if keep is None and new_keep is None:
+            return False
+        if new_keep is None:
+            self.keeps.pop(k)
+            r_k, J_k, u_k = full
+        else:
+            self.keeps[k] = new_keep
+            ring, r_k, J_k, u_k = ring.subset(new_keep), full[0][new_keep], full[1][:, new_keep], full[2][new_keep]
+        n = r_k.size
+        px.set_row(k, ring)
+        self.resid[k, :n], self.resid[k, n:] = r_k, 0.0
+        self.Jm[k, :, :n], self.Jm[k, :, n:] = J_k, 0.0
+        self.u[k, :n], self.u[k, n:] = u_k, np.inf
+        self.ssr[k] = r_k @ r_k
+        self.A[k], self.b[k] = J_k @ J_k.T, J_k @ r_k
+        return not self.final[k]
+
+    def results(self, out: list, max_iter: int) -> None:
+        """Each row's :class:`DiscFit` (:func:`_disc_fit`) or FitError, into `out`
+        at the marker's index (`live`)."""
+        P, px, A, m = self.P, self.px, self.A, self.m
+        failed = self.failed
+        for k in np.flatnonzero(self.active):
+            failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
+        unfit = np.zeros(m, bool)
+        unfit[list(failed)] = True
+        good = np.flatnonzero(~unfit)
+        sigma2 = self.ssr / np.maximum(px.n - 8, 1)
+        resid, Jm, u = self.resid, self.Jm, self.u
+        if good.size == m:  # no copies of the rows (most fits: none failed)
+            diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
+        else:
+            diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
+        try:
+            inverses = np.linalg.inv(A[good])
+        except np.linalg.LinAlgError:
+            inverses = None  # one of them singular: inverted one by one
+        for j, k in enumerate(good):
+            inverse = (lambda: _inverse(A[k], lapack=True)) if inverses is None else (lambda: inverses[j])
+            try:
+                out[self.live[k]] = _disc_fit(P[k], sigma2[k], inverse, lambda: diagnostics[j], n=px.n[k],
+                                              steep_cut=self.steep_cut[k])
+            except FitError as exc:
+                failed[k] = exc
+        for k, exc in failed.items():
+            out[self.live[k]] = exc
+
+
 def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     """:func:`fit_disc` of many markers at once, vectorised across them.
 
@@ -824,7 +1026,6 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 5)
     if len(patches) > _BATCH:
         # markers are independent rows: in groups whose arrays stay in the cache
-        # (315 dots of discorpy 05 at once: 0.26 s; 64 at a time: 0.16 s)
         return [
             fit
             for k in range(0, len(patches), _BATCH)
@@ -842,171 +1043,9 @@ def fit_discs(patches, starts, *, edge_width=1.2, max_iter=30) -> list:
             out[k] = exc
     if not live:
         return out
-    live = np.array(live)
-    px = _Batch(rings, starts[live])
-    m = live.size
-    P = np.zeros((m, 8))
-    P[:, :3], P[:, 3], P[:, 4:6] = starts[live, :3], s, starts[live, 3:5]
-    cur = 0  # the scratch slot of the current state (resid, Jm, u); the other takes trials
-    resid, Jm, u = _evaluate_rows(P, px, cur)
-    ssr = np.einsum("ij,ij->i", resid, resid)
-    A, b = _normal_equations(Jm, resid)
-    lam = np.full(m, 1e-3)
-    final = np.zeros(m, bool)
-    active = np.ones(m, bool)
-    failed: dict[int, FitError] = {}
-    diag = np.arange(8)
-    cuts = np.zeros(m, np.int64)  # examinations for an occluder made (fit_disc's `cuts`)
-    steep_cut = np.zeros(m, bool)  # pixels cut under a steep lighting gradient (fit_disc's)
-    keeps: dict[int, np.ndarray] = {}  # rows with pixels cut: flags of the ring's pixels kept
-
-    def examine(k) -> bool:
-        """fit_disc's examination of row `k`'s whole ring for an occluder; its row
-        then holds the pixels kept. True when they changed and the fit goes on."""
-        keep, n = keeps.get(k), px.n[k]
-        full = (resid[k, :n], Jm[k, :, :n], u[k, :n]) if keep is None else _evaluate(P[k], rings[k])
-        new_keep = _cut_outliers(P[k], rings[k], patches[live[k]], *full)
-        steep_cut[k] |= new_keep is not None and bool(_steep(P[k]))
-        cuts[k] += 1
-        if (
-            cuts[k] == 3
-            or (keep is None and new_keep is None)
-            or (keep is not None and new_keep is not None and np.array_equal(keep, new_keep))
-        ):
-            final[k] = True
-        if keep is None and new_keep is None:
-            return False
-        if new_keep is None:
-            keeps.pop(k)
-            ring, (r_k, J_k, u_k) = rings[k], full
-        else:
-            keeps[k] = new_keep
-            ring, r_k, J_k, u_k = rings[k].subset(new_keep), full[0][new_keep], full[1][:, new_keep], full[2][new_keep]
-        n = r_k.size
-        px.set_row(k, ring)
-        resid[k, :n], resid[k, n:] = r_k, 0.0
-        Jm[k, :, :n], Jm[k, :, n:] = J_k, 0.0
-        u[k, :n], u[k, n:] = u_k, np.inf
-        ssr[k] = r_k @ r_k
-        A[k], b[k] = J_k @ J_k.T, J_k @ r_k
-        return not final[k]
+    fit = _RowsFit(patches, rings, np.array(live), starts, s)
     for _ in range(max_iter):
-        act = np.flatnonzero(active)
-        if not act.size:
+        if not fit.iterate():
             break
-        Aa = A[act]
-        Aa[:, diag, diag] += lam[act, None] * Aa[:, diag, diag]
-        try:
-            step = np.linalg.solve(Aa, b[act][:, :, None])[:, :, 0]
-        except np.linalg.LinAlgError:
-            step = np.zeros((act.size, 8))
-            for j, k in enumerate(act):
-                try:
-                    step[j] = np.linalg.solve(Aa[j], b[k])
-                except np.linalg.LinAlgError:
-                    failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
-                    active[k] = False
-            keep = active[act]
-            act, step = act[keep], step[keep]
-        trial = P[act] + step
-        trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
-        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
-        last = final[act] & small
-        # converged: the last step taken without evaluating the model (as fit_disc)
-        P[act[last]] = trial[last]
-        active[act[last]] = False
-        act, trial = act[~last], trial[~last]
-        if not act.size:
-            continue
-        r_t, J_t, u_t = _evaluate_rows(trial, px if act.size == m else px.rows(act), 1 - cur)
-        ssr_t = np.einsum("ij,ij->i", r_t, r_t)
-        better = ssr_t <= ssr[act]
-        worse = act[~better]
-        lam[worse] *= 10.0
-        for k in worse[lam[worse] > 1e8]:
-            failed[k] = FitError("the marker's edge model does not converge")
-            active[k] = False
-        acc, trial = act[better], trial[better]
-        if not acc.size:
-            continue
-        moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
-        if acc.size == m:  # every marker stepped: the new arrays as they are
-            P, resid, Jm, u, ssr, cur = trial, r_t, J_t, u_t, ssr_t, 1 - cur
-            A, b = _normal_equations(Jm, resid)
-        else:
-            P[acc], ssr[acc] = trial, ssr_t[better]
-            # row by row into the current state's buffers: copies of the accepted
-            # rows (r_t[better]) would be fresh memory each iteration
-            for j, k in zip(np.flatnonzero(better), acc):
-                resid[k], Jm[k], u[k] = r_t[j], J_t[j], u_t[j]
-            A_t, b_t = _normal_equations(J_t, r_t)
-            A[acc], b[acc] = A_t[better], b_t[better]
-        lam[acc] = np.maximum(0.3 * lam[acc], 1e-9)
-        # fit_disc's examinations for an occluder: first once the centre has
-        # settled, then once it has converged after each change of the pixels used
-        due = acc[~final[acc] & (moved < np.where(cuts[acc] == 0, _SETTLED_PX, _CONVERGED_PX))]
-        going_on = np.zeros(m, bool)  # rows whose pixels changed at their examination
-        if due.size:
-            # Most rings have no pixel beyond 4.5 robust σ at their first examination:
-            # that is settled for all at once (nothing to cut makes the fit final).
-            first = due[cuts[due] == 0]
-            clean = np.zeros(m, bool)
-            if first.size:
-                rows = resid if first.size == m else resid[first]  # no copy when all are due
-                sig = robust_sigma_rows(rows, px.n[first])
-                quiet = (np.abs(rows) < OCCLUDER_SIGMAS * sig[:, None]).all(axis=1)
-                quiet &= ~_steep(P[first])
-                clean[first[quiet]] = True
-            final[clean] = True
-            cuts[clean] = 1
-            for k in due[~clean[due]]:
-                going_on[k] = examine(k)
-        active[acc[final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
-    for k in np.flatnonzero(active):
-        failed[k] = FitError(f"the marker's edge model did not converge in {max_iter} iterations")
-    unfit = np.zeros(m, bool)
-    unfit[list(failed)] = True
-    good = np.flatnonzero(~unfit)
-    sigma2 = ssr / np.maximum(px.n - 8, 1)
-    if good.size == m:  # no copies of the rows (most fits: none failed)
-        diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
-    else:
-        diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
-    try:
-        covs = sigma2[good, None, None] * np.linalg.inv(A[good])
-    except np.linalg.LinAlgError:
-        covs = None  # one of them singular: inverted one by one below
-    for j, k in enumerate(good):
-        try:
-            check_contrast(P[k, 5] - P[k, 4], sigma2[k])
-            cov = sigma2[k] * np.linalg.inv(A[k]) if covs is None else covs[j]
-            check_radius(P[k, 2], cov[2, 2])
-            if isinstance(diagnostics[j], FitError):
-                raise diagnostics[j]
-            ex, ey, rms, circularity, noise = diagnostics[j]
-        except np.linalg.LinAlgError:
-            failed[k] = FitError("the marker's edge model is degenerate (no edge in the ring)")
-            continue
-        except FitError as exc:
-            failed[k] = exc
-            continue
-        out[live[k]] = DiscFit(
-            x_px=float(P[k, 0]),
-            y_px=float(P[k, 1]),
-            radius_px=float(P[k, 2]),
-            edge_width_px=float(P[k, 3]),
-            cov=cov[:3, :3].copy(),
-            noise_dn=float(np.sqrt(sigma2[k])),
-            background_dn=float(P[k, 4]),
-            foreground_dn=float(P[k, 5]),
-            n_pixels=int(px.n[k]),
-            edge_x_px=ex,
-            edge_y_px=ey,
-            residual_rms_px=rms,
-            circularity=circularity,
-            edge_noise_px=noise,
-            steep_cut=bool(steep_cut[k]),
-        )
-    for k, exc in failed.items():
-        out[live[k]] = exc
+    fit.results(out, max_iter)
     return out

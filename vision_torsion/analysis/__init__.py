@@ -18,39 +18,9 @@ Modules, one job each:
 - :mod:`.checks` — angle sign, gaps, loop closure and creep, outliers.
 """
 
-from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
-from .fitcheck import LackOfFit, fit_switch, lack_of_fit
-from .loops import validate_measurements
-from .metrics import (
-    fit_three_segment,
-    loop_energy,
-    loop_width,
-    loss_factor,
-    lost_motion,
-    phase_stiffness,
-    secant_stiffness,
-)
-from .models import (
-    BilinearFit,
-    BoucWenFit,
-    bilinear_loop_energy,
-    bilinear_loop_width,
-    bilinear_response,
-    bouc_wen_response,
-    fit_bilinear,
-    fit_bouc_wen,
-)
-from .preisach import PreisachFit, fit_preisach, preisach_response
-from .session import Issue, SessionAnalysis, analyze_session
-from .simulate import simulate_measurements, torque_levels
-from .summary import orientation_anova, orientation_test
+from ..lazy import attach
 
-__all__ = [
-    "bilinear_response", "bilinear_loop_width", "bilinear_loop_energy", "fit_bilinear", "BilinearFit",
-    "bouc_wen_response", "fit_bouc_wen", "BoucWenFit",
-    "phase_stiffness", "loop_width", "lost_motion", "secant_stiffness", "loop_energy", "loss_factor",
-    "fit_three_segment", "orientation_test", "validate_measurements",
-    "analyze_session", "SessionAnalysis", "Issue", "simulate_measurements", "torque_levels",
-    "fit_preisach", "preisach_response", "PreisachFit", "lack_of_fit", "LackOfFit", "fit_switch",
-    "fit_fixed_breaks", "fit_catalogue_breaks", "orientation_anova",
-]
+# the modules whose __all__ make up this face, each imported on first use of one of its names
+_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "preisach", "session", "simulate", "summary")
+
+__getattr__, __dir__ = attach(__name__, _LAZY)

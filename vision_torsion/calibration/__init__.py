@@ -9,22 +9,10 @@
 - :func:`calibrate_from_target` — from chessboard / circle-grid images (OpenCV).
 """
 
-from .._lazy import attach
+from ..lazy import attach
 
-# public name -> submodule; imported on first use, so that ``process`` (which needs
-# only the correction) does not pay for scipy.stats (~0.6 s) in every run
-_LAZY = {
-    "AccuracyResult": "accuracy",
-    "AccuracySpec": "accuracy",
-    "check_accuracy": "accuracy",
-    "load_spec": "accuracy",
-    "read_reference_table": "accuracy",
-    "PlaneCorrection": "correction",
-    "load_correction": "correction",
-    "calibrate_plane": "selfcal",
-    "MIN_SWEEP_DEG": "selfcal",
-    "calibrate_from_target": "target",
-}
+# the modules whose __all__ make up this face, each imported on first use of one of its names:
+# ``process`` (which needs only the correction) does not pay for scipy.stats (~0.6 s)
+_LAZY = ("accuracy", "correction", "selfcal", "target")
 
-__all__ = list(_LAZY)
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -41,6 +41,37 @@ def _limits_from_spec(spec: dict | None) -> dict:
     return out
 
 
+def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
+    """A figure's control chart with its caption (or why there is none)."""
+    from ..report.page import image_tag
+
+    if usable.empty:
+        return f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>'
+    limits = control_limits(usable["value"].tolist())
+    caption = f"{name}: {len(usable)} report(s)"
+    if limits.centre is None:
+        caption += f" — control limits withheld: {limits.reason}"
+    elif limits.out_of_control:
+        caption += f"; {len(limits.out_of_control)} beyond the control limits"
+    img = image_tag(_chart(usable, limits, spec_limits, name=name, unit=unit), name, mime="image/png")
+    return f"<figure>{img}<figcaption>{html.escape(caption)}</figcaption></figure>"
+
+
+def _capability_row(usable, *, name: str, unit: str, lower, upper) -> dict:
+    """A figure's row of the capability table."""
+    from ..report.page import unit_words
+
+    cap = capability(usable["value"].tolist(), lower=lower, upper=upper)
+    return {
+        "figure": name, "unit": unit_words(unit), "n": cap.n,
+        "limit": _limit_text(lower, upper),
+        "mean": cap.mean if cap.mean is not None else float(usable["value"].mean()) if len(usable) else None,
+        "sd": cap.sd, "Ppk": cap.ppk, "Ppk 95 % lower bound": cap.ppk_lower95,
+        "within limits": "—" if cap.conforming is None else f"{100 * cap.conforming:.1f} %",
+        "note": cap.reason,
+    }
+
+
 def _limit_text(lower, upper) -> str:
     parts = ([f"≥ {lower:g}"] if lower is not None else []) + ([f"≤ {upper:g}"] if upper is not None else [])
     return ", ".join(parts) or "—"
@@ -99,7 +130,7 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
     import pandas as pd
 
     from ..fileio import atomic_write_text, check_output_dir
-    from ..report.page import fmt_value, image_tag, page_html, table_html, unit_words
+    from ..report.page import fmt_value, page_html, table_html, unit_words
 
     out_dir = check_output_dir(out_dir)
     with CampaignDB(db_path) as db:
@@ -123,28 +154,9 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
                 fmt_value(values["value"].get(r), values["u95"].get(r)) for r in reports["id"]]
         unit = str(part["unit"].iloc[0])
         usable = part[~part["withheld"]]
-        limits = control_limits(usable["value"].tolist())
         lower, upper = limits_by_figure.get(name, (None, None))
-        cap = capability(usable["value"].tolist(), lower=lower, upper=upper)
-        caption = f"{name}: {len(usable)} report(s)"
-        if limits.centre is None:
-            caption += f" — control limits withheld: {limits.reason}"
-        elif limits.out_of_control:
-            caption += f"; {len(limits.out_of_control)} beyond the control limits"
-        if usable.empty:
-            charts.append(f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>')
-        else:
-            chart = _chart(usable, limits, (lower, upper), name=name, unit=unit)
-            img = image_tag(chart, name, mime="image/png")
-            charts.append(f"<figure>{img}<figcaption>{html.escape(caption)}</figcaption></figure>")
-        capability_rows.append({
-            "figure": name, "unit": unit_words(unit), "n": cap.n,
-            "limit": _limit_text(lower, upper),
-            "mean": cap.mean if cap.mean is not None else float(usable["value"].mean()) if len(usable) else None,
-            "sd": cap.sd, "Ppk": cap.ppk, "Ppk 95 % lower bound": cap.ppk_lower95,
-            "within limits": "—" if cap.conforming is None else f"{100 * cap.conforming:.1f} %",
-            "note": cap.reason,
-        })
+        charts.append(_chart_html(usable, name=name, unit=unit, spec_limits=(lower, upper)))
+        capability_rows.append(_capability_row(usable, name=name, unit=unit, lower=lower, upper=upper))
         verdicts = part["verdict"].dropna()
         if len(verdicts):
             counts = verdicts.value_counts()

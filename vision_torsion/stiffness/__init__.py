@@ -18,43 +18,11 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.synthetic` — records with known truth.
 """
 
-from .analysis import MeshingSummary, StiffnessResult, analyze_stiffness_curve
-from .backlash import Backlash, detect_backlash
-from .branches import split_branches
-from .curve import BranchFit, StiffnessCurve, fit_loading_branch, stiffness_curve, summarise_curves
-from .filtering import filter_record, lowpass
-from .meshing import (
-    LinearityCheck,
-    calibrate_tooth_stiffness,
-    check_linearity,
-    meshing_pairs,
-    wrap_angle_rad,
-)
-from .plots import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
-from .records import TorqueAngleRecord, read_record
-from .report import StiffnessSection, stiffness_section
-from .rig import RigConstants, load_rig, output_angle_deg
-from .steps import step_stiffness, summarise_steps
-from .synthetic import (
-    SaturatingStiffness,
-    realistic_encoder_record,
-    stiffening_law,
-    synthetic_encoder_record,
-    synthetic_measurements,
-)
+from ..lazy import attach
 
-__all__ = [
-    "analyze_stiffness_curve", "StiffnessResult", "MeshingSummary",
-    "RigConstants", "load_rig", "output_angle_deg",
-    "TorqueAngleRecord", "read_record",
-    "lowpass", "filter_record", "split_branches",
-    "fit_loading_branch", "stiffness_curve", "summarise_curves", "BranchFit", "StiffnessCurve",
-    "step_stiffness", "summarise_steps",
-    "detect_backlash", "Backlash",
-    "meshing_pairs", "wrap_angle_rad", "calibrate_tooth_stiffness", "check_linearity",
-    "LinearityCheck",
-    "plot_torque_angle", "plot_stiffness", "plot_meshing", "plot_step_stiffness",
-    "stiffness_section", "StiffnessSection",
-    "SaturatingStiffness", "stiffening_law", "synthetic_encoder_record", "realistic_encoder_record",
-    "synthetic_measurements",
-]
+# the modules whose __all__ make up this face, each imported on first use of one of its names
+# (so that reading a record does not load matplotlib for the plots)
+_LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "plots", "records", "report",
+         "rig", "steps", "synthetic")
+
+__getattr__, __dir__ = attach(__name__, _LAZY)

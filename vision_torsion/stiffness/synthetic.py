@@ -30,6 +30,7 @@ from .rig import RigConstants
 
 __all__ = [
     "SaturatingStiffness",
+    "stiffening_law",
     "SyntheticRecord",
     "synthetic_encoder_record",
     "realistic_encoder_record",

@@ -5,20 +5,9 @@ measuring code so every accuracy claim can be checked on images whose answer is
 known to far better than a thousandth of a pixel.
 """
 
-from .geometry import CameraMapping, marker_centres_disk, marker_centres_image
-from .render import Rendered, render, render_ideal
-from .scene import Scene, load_scene, scene_from_dict, scene_to_dict, validate_scene
+from ..lazy import attach
 
-__all__ = [
-    "Scene",
-    "load_scene",
-    "scene_from_dict",
-    "scene_to_dict",
-    "validate_scene",
-    "render",
-    "render_ideal",
-    "Rendered",
-    "CameraMapping",
-    "marker_centres_disk",
-    "marker_centres_image",
-]
+# the modules whose __all__ make up this face, each imported on first use of one of its names
+_LAZY = ("geometry", "render", "scene")
+
+__getattr__, __dir__ = attach(__name__, _LAZY)

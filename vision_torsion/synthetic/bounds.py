@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import CameraMapping, marker_centres_disk
-from .render import _light_field, _paint_circle
+from .render import light_field, paint_circle
 from .scene import Scene
 
 __all__ = ["centre_covariance_bound", "angle_bound_deg"]
@@ -48,12 +48,12 @@ def _marker_patch(scene: Scene, mapping, params, box):
             return mapping.to_disk(np.asarray(a) + x0, np.asarray(b) + y0)
 
     if mapping.is_identity:
-        _paint_circle(sub, mapping, X - x0, Y - y0, r, F)
+        paint_circle(sub, mapping, X - x0, Y - y0, r, F)
     else:
-        _paint_circle(sub, Shifted(), X, Y, r, F)
+        paint_circle(sub, Shifted(), X, Y, r, F)
     lt = scene.lighting
     if lt.gradient_x or lt.gradient_y or lt.vignetting:
-        sub *= _light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting)[
+        sub *= light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting)[
             y0:y1, x0:x1
         ]
     s = scene.optics.blur_sigma_px

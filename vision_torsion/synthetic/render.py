@@ -27,7 +27,16 @@ from .coverage import band_coverage, shape_coverage
 from .geometry import CameraMapping, marker_centres_disk
 from .scene import Scene, check_markers_in_frame
 
-__all__ = ["Rendered", "render", "render_ideal", "bolt_hole_centres_disk", "dust_specks"]
+__all__ = [
+    "Rendered",
+    "render",
+    "render_ideal",
+    "bolt_hole_centres_disk",
+    "dust_specks",
+    "circle_distance_fn",
+    "paint_circle",
+    "light_field",
+]
 
 
 @dataclass(frozen=True)
@@ -83,8 +92,24 @@ def dust_specks(scene: Scene) -> np.ndarray:
     return np.stack([xs, ys, rs], axis=-1)
 
 
-def _circle_distance_fn(mapping: CameraMapping, cx: float, cy: float, r: float):
-    """Signed distance (image px) and normal for a circle given on the disk plane."""
+def circle_distance_fn(mapping: CameraMapping, cx: float, cy: float, r: float):
+    """The signed distance of image points from a circle given on the disk plane.
+
+    Parameters
+    ----------
+    mapping : CameraMapping
+        Disk plane -> image.
+    cx, cy, r : float
+        Centre and radius of the circle on the disk plane (disk units).
+
+    Returns
+    -------
+    callable
+        ``fn(x, y) -> (d, nx, ny)`` for image coordinates (px, origin at the centre
+        of the top-left pixel, y down): the signed distance d (image px, negative
+        inside; through the local scale of the mapping when it is not the identity)
+        and the outward unit normal (nx, ny).
+    """
     if mapping.is_identity:
 
         def fn(x, y):
@@ -110,8 +135,11 @@ def _circle_distance_fn(mapping: CameraMapping, cx: float, cy: float, r: float):
     return fn
 
 
-def _paint_circle(canvas, mapping, cx, cy, r, level, *, n_sub=8):
-    """Paint a disk-plane circle of grey `level` onto `canvas` with exact coverage."""
+def paint_circle(canvas, mapping, cx, cy, r, level, *, n_sub=8):
+    """Paint a disk-plane circle of grey `level` (DN) onto `canvas` in place, each
+    pixel blended by the share of it the circle covers (`n_sub` x `n_sub` samples
+    per pixel along the edge, :func:`~vision_torsion.synthetic.coverage.shape_coverage`).
+    A circle whose image misses `canvas` paints nothing."""
     h, w = canvas.shape
     # bounding box of the circle's image, from points around its rim
     t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
@@ -122,13 +150,17 @@ def _paint_circle(canvas, mapping, cx, cy, r, level, *, n_sub=8):
     y1 = min(int(np.ceil(by.max())) + 3, h)
     if x1 <= x0 or y1 <= y0:
         return
-    cov = shape_coverage(_circle_distance_fn(mapping, cx, cy, r), x0, y0, x1 - x0, y1 - y0, n_sub=n_sub)
+    cov = shape_coverage(circle_distance_fn(mapping, cx, cy, r), x0, y0, x1 - x0, y1 - y0, n_sub=n_sub)
     block = canvas[y0:y1, x0:x1]
     block += (level - block) * cov
 
 
 @functools.lru_cache(maxsize=8)
-def _light_field(width, height, gx, gy, vignetting):
+def light_field(width, height, gx, gy, vignetting):
+    """The relative illumination (1 at the image centre) of a `width` x `height` px
+    image as float32, read-only (cached): linear gradients `gx`, `gy` (relative
+    change across the image's width and height) times 1 - `vignetting`·ρ², ρ the
+    distance from the centre over the half-diagonal."""
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
     light = 1 + gx * (xs - width / 2) / width + gy * (ys - height / 2) / height
     if vignetting:
@@ -152,13 +184,13 @@ def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
     canvas = np.full((H, W), disk.background_level, dtype=np.float64)
     if disk.radius_px is not None:
         outside = np.full_like(canvas, disk.outside_level)
-        _paint_circle(outside, mapping, disk.center_x, disk.center_y, disk.radius_px, disk.background_level, n_sub=4)
+        paint_circle(outside, mapping, disk.center_x, disk.center_y, disk.radius_px, disk.background_level, n_sub=4)
         canvas = outside
     d = scene.distractors
     for cx, cy in bolt_hole_centres_disk(scene, angle_deg):
-        _paint_circle(canvas, mapping, cx, cy, d.bolt_hole_radius_px, d.bolt_level)
+        paint_circle(canvas, mapping, cx, cy, d.bolt_hole_radius_px, d.bolt_level)
     for (cx, cy), r in zip(marker_centres_disk(scene, angle_deg), scene.markers.radii()):
-        _paint_circle(canvas, mapping, cx, cy, r, scene.markers.level)
+        paint_circle(canvas, mapping, cx, cy, r, scene.markers.level)
     if d.wire:
         ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
         cov = band_coverage(xs, ys, point=(disk.center_x + d.wire_offset_px, disk.center_y),
@@ -167,10 +199,10 @@ def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
     if d.dust:
         identity = CameraMapping(scene.replace(optics={"tilt_deg": 0.0, "radial_k1": 0.0}))
         for x, y, r in dust_specks(scene):
-            _paint_circle(canvas, identity, x, y, r, d.dust_level, n_sub=4)
+            paint_circle(canvas, identity, x, y, r, d.dust_level, n_sub=4)
     lt = scene.lighting
     if lt.gradient_x or lt.gradient_y or lt.vignetting:
-        canvas *= _light_field(W, H, lt.gradient_x, lt.gradient_y, lt.vignetting)
+        canvas *= light_field(W, H, lt.gradient_x, lt.gradient_y, lt.vignetting)
     sigma = scene.optics.blur_sigma_px
     if sigma > 0:
         canvas = cv2.GaussianBlur(canvas, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)

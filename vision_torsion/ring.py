@@ -2,10 +2,11 @@
 fit of the blurred-disc model to the pixels) and :mod:`.edges` (sub-pixel edge points
 for the circle and ellipse fits).
 
-Private: the patch of pixels around a marker and its coordinates, the edge profile's
-normal distribution, the robust occluder cut, the ~1 px sectors of arc, and the
-checks both fits make (contrast, edge width, lost arc, circularity). Neither fit
-module imports the other's internals; both import these.
+The patch of pixels around a marker and its coordinates, the edge profile's normal
+distribution, the robust occluder cut, the ~1 px sectors of arc, the small
+Levenberg-Marquardt solve, and the checks both fits make (contrast, edge width, lost
+arc, circularity). Neither fit module imports the other's internals; both import
+these, and a new way to fit a marker starts from them (ARCHITECTURE.md).
 
 Coordinates are image pixels (x, y), origin at the centre of the top-left pixel,
 y downwards.
@@ -20,6 +21,36 @@ import cv2
 import numpy as np
 
 from .errors import FitError
+
+__all__ = [
+    "INV_SQRT_2PI",
+    "EDGE_ZONE",
+    "OCCLUDER_SIGMAS",
+    "normal_cdf",
+    "marker_roi",
+    "MarkerPatch",
+    "marker_patch",
+    "grow_cut",
+    "robust_sigma",
+    "robust_sigma_rows",
+    "in_edge_zone",
+    "occluder_group",
+    "occluder_groups",
+    "cut_occluders",
+    "sector_index",
+    "sector_edge_offsets",
+    "sectors_needed",
+    "fast_median",
+    "harmonic_circularity",
+    "points_circularity",
+    "check_contrast",
+    "check_radius",
+    "bounded_edge_width",
+    "lost_sectors",
+    "nothing_to_cut",
+    "damped_normal_matrix",
+    "solve_lu",
+]
 
 #: 1/√(2π): the standard normal density's factor (the edge profile's derivative).
 INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
@@ -389,6 +420,38 @@ def cut_occluders(resid, u, resolve, ring_idx, shape, *, least=3.0):
     return grow_cut(keep, ring_idx, shape), seen
 
 
+
+def nothing_to_cut(resid) -> bool:
+    """True when no residual (DN) lies beyond :data:`OCCLUDER_SIGMAS` robust σ
+    (:func:`robust_sigma`): the test :func:`cut_occluders` begins with, by which
+    nothing is to be cut."""
+    return bool((np.abs(resid) < OCCLUDER_SIGMAS * robust_sigma(resid)).all())
+
+
+def damped_normal_matrix(A, lam):
+    """A + lam·diag(A): the Levenberg-Marquardt normal matrix (a copy; the same
+    values as adding the diagonal matrix, without its two 8x8 temporaries)."""
+    damped = A.copy()
+    diagonal = damped.reshape(-1)[:: A.shape[0] + 1]  # a view
+    diagonal += lam * A.reshape(-1)[:: A.shape[0] + 1]
+    return damped
+
+
+def solve_lu(A, b):
+    """x of A·x = b for one marker's small system (8x8), by OpenCV's LU with partial
+    pivoting: LAPACK's answer to rounding (1e-16 relative), without numpy.linalg's
+    per-call checks.
+
+    Raises
+    ------
+    FitError
+        `A` is singular: the marker's edge model is degenerate.
+    """
+    ok, x = cv2.solve(A, b.reshape(-1, 1), flags=cv2.DECOMP_LU)
+    if not ok:
+        raise FitError("the marker's edge model is degenerate (no edge in the ring)")
+    return x.reshape(-1)
+
 def sector_index(psi, radius):
     """Angular sector (~1 px of arc at `radius` px, at least 16) of each direction
     `psi` (rad, image axes), and the number of sectors. (At least 16, not more: the
@@ -452,10 +515,9 @@ def fast_median(values) -> float:
     more than the sort itself on a few thousand values).
 
     A sort, not a partition: the grey levels and pixel differences this is asked
-    for hold few distinct values (a 4x reduced 8-bit image's row differences: ~30
-    among 6000), where numpy's introselect degrades (0.11 ms against 0.017 ms for
-    the SIMD sort); on a few hundred distinct values the sort is as fast. The
-    median is the same value either way."""
+    for hold few distinct values (a reduced 8-bit image's row differences), where
+    numpy's introselect degrades and the SIMD sort does not. The median is the same
+    value either way."""
     k = values.size // 2
     ordered = np.sort(values)
     if values.size % 2:
@@ -476,6 +538,14 @@ def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:
     b2 = scale * np.dot(deviation, 2.0 * cos_psi * sin_psi)  # sin 2ψ
     return float(1.0 - 2.0 * np.hypot(a2, b2) / radius)
 
+
+
+def points_circularity(ex, ey, cx, cy, radius) -> float:
+    """:func:`harmonic_circularity` of edge points (`ex`, `ey`, px) around a circle
+    centred on (`cx`, `cy`) of `radius` (px): 1 for points on it."""
+    dx, dy = ex - cx, ey - cy
+    dist = np.maximum(np.hypot(dx, dy), 1e-12)
+    return harmonic_circularity(dist - radius, dx / dist, dy / dist, radius)
 
 def check_contrast(contrast, sigma2) -> None:
     """Raise FitError unless the marker's contrast (DN) exceeds 3x the noise σ (σ² in DN²)."""
