@@ -324,10 +324,6 @@ def _run(args, command: str) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:  # e.g. `vision-torsion ... | head`
-        with contextlib.suppress(OSError):
-            sys.stdout = open(os.devnull, "w", encoding="utf-8")
-        return EXIT_OK
     except Exception as exc:  # noqa: BLE001 - the one place every failure ends up
         return _report_error(exc, command=command, debug=args.debug)
 
