@@ -60,6 +60,9 @@ def home(tmp_path):
 
 def _argv(home: Path, out: Path, command: str) -> list:
     s, table, photos = home / "session", home / "table" / "measurements.csv", home / "photos"
+    if command == "check-accuracy" and not (home / "acc").exists():
+        assert main(["-q", "synth", "accuracy", str(home / "acc"), "--scene", "standard",
+                     "--angles", "0", "5", "-30"]) == 0
     return {
         "process": ["process", s, "-o", out, "--jobs", "1"],
         "report": ["report", s, "-o", out, "--jobs", "1"],
@@ -68,6 +71,8 @@ def _argv(home: Path, out: Path, command: str) -> list:
         "stiffness": ["stiffness", table, "-o", out],
         "calibrate": ["calibrate", "plane", photos, "--reference", photos / "img_0.png", "-o", out],
         "plan": ["plan", out, "--steps", "2", "--step-mass", "0.02", "--arm-radius", "0.05", "--no-pdf"],
+        "check-accuracy": ["check-accuracy", home / "acc", "-o", out, "--tolerance", "1"],
+        "watch": ["watch", s, "-o", out, "--poll", "0.05", "--settle", "0", "--no-report"],
     }[command]
 
 
@@ -83,23 +88,30 @@ IN_THE_WAY = [
     ("stiffness", "stiffness_curve.csv"),
     ("calibrate", "plane_correction.toml"),
     ("plan", "capture_sheet.html"),
+    ("watch", "live.html"),
+    ("check-accuracy", "accuracy.json"),
+    # found only when written: replaced as a set with the rest, so nothing is
+    ("report", "figures/loops_overlay.svg"),
+    ("analyze", "figures/fit_residuals.svg"),
+    ("stiffness", "step_stiffness.png"),
 ]
 
 
 @pytest.mark.parametrize(("command", "name"), IN_THE_WAY, ids=[f"{c}-{n}" for c, n in IN_THE_WAY])
 def test_a_result_file_the_tool_did_not_write_is_refused_by_name(capsys, home, command, name):
     out = home / "out"
-    out.mkdir()
+    (out / name).parent.mkdir(parents=True)
     (out / name).write_bytes(FOREIGN)
+    argv = _argv(home, out, command)
     before = tree_digest(home, exclude=["out"])
-    code, _, err = run(capsys, *_argv(home, out, command))
+    code, _, err = run(capsys, *argv)
     assert code == 2
     refused_by_name(err, out / name)
     assert (out / name).read_bytes() == FOREIGN
     assert tree_digest(home, exclude=["out"]) == before  # inputs and everything around unchanged
 
 
-@pytest.mark.parametrize("command", ["process", "report", "measure", "analyze", "stiffness"])
+@pytest.mark.parametrize("command", ["process", "report", "measure", "analyze", "stiffness", "check-accuracy"])
 def test_a_command_replaces_its_own_files_without_force(capsys, home, command):
     out = home / "out"
     argv = _argv(home, out, command)
@@ -272,3 +284,15 @@ def test_a_long_record_is_compacted_to_the_files_still_there(tmp_path):
     assert fileio.is_ours(tmp_path / "last.txt")
     shutil.copy(tmp_path / "last.txt", tmp_path / "copy.txt")
     assert not fileio.is_ours(tmp_path / "copy.txt")  # same bytes, but not written here
+
+
+def test_a_figure_in_the_way_stops_the_whole_report_set(capsys, home):
+    out = home / "out"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "phase_stiffness.svg").write_bytes(FOREIGN)
+    code, _, err = run(capsys, *_argv(home, out, "report"))
+    assert code == 2
+    refused_by_name(err, out / "figures" / "phase_stiffness.svg")
+    # the report's files are replaced together or not at all: none was written
+    assert not any((out / name).exists() for name in ("report.html", "summary.json", "stiffness_table.csv"))
+    assert sorted(p.name for p in (out / "figures").iterdir()) == ["phase_stiffness.svg"]
