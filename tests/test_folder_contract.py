@@ -296,3 +296,11 @@ def test_a_figure_in_the_way_stops_the_whole_report_set(capsys, home):
     # the report's files are replaced together or not at all: none was written
     assert not any((out / name).exists() for name in ("report.html", "summary.json", "stiffness_table.csv"))
     assert sorted(p.name for p in (out / "figures").iterdir()) == ["phase_stiffness.svg"]
+
+
+def test_a_file_whose_name_is_not_utf8_is_proven_ours(tmp_path):
+    name = b"caf\xe9.csv".decode("utf-8", "surrogateescape")  # a Latin-1 name on a UTF-8 system
+    fileio.atomic_write_text(tmp_path / name, "a")
+    assert fileio.is_ours(tmp_path / name)
+    fileio.atomic_write_text(tmp_path / name, "b")  # its own file: replaced without --force
+    assert (tmp_path / name).read_text() == "b"

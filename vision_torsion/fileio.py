@@ -124,7 +124,8 @@ def _read_record(folder: Path) -> dict[str, tuple[int, str]] | None:
     """name -> (size, hash) of the record in `folder` (the last line of a name wins);
     ``{}`` when there is no record, None when a file of that name is not a record."""
     try:
-        text = (folder / RECORD_NAME).read_text(encoding="utf-8", errors="replace")
+        # surrogateescape: a file name that is not UTF-8 reads back as it was written
+        text = (folder / RECORD_NAME).read_bytes().decode("utf-8", "surrogateescape")
     except FileNotFoundError:
         return {}
     except OSError:
