@@ -122,14 +122,13 @@ def _digest(data: bytes) -> str:
 
 def _read_record(folder: Path) -> dict[str, tuple[int, str]] | None:
     """name -> (size, hash) of the record in `folder` (the last line of a name wins);
-    ``{}`` when there is no record, None when a file of that name is not a record."""
+    ``{}`` when there is no record, None when a file of that name is not a record.
+    An unreadable record raises its ``OSError``."""
     try:
         # surrogateescape: a file name that is not UTF-8 reads back as it was written
         text = (folder / RECORD_NAME).read_bytes().decode("utf-8", "surrogateescape")
     except FileNotFoundError:
         return {}
-    except OSError:
-        return None
     if not text.startswith(_RECORD_HEADER):
         return None
     entries: dict[str, tuple[int, str]] = {}
@@ -148,11 +147,15 @@ def _append_record(folder: Path, lines: list[str]) -> None:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, _file_mode())
         data = _RECORD_HEADER
     except FileExistsError:
-        if _read_record(folder) is None:
+        try:
+            ours = _read_record(folder) is not None
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND) if ours else -1
+        except OSError as exc:
+            raise OutputError(f"{path}: cannot write ({os_reason(exc)})") from exc
+        if not ours:
             raise OutputError(f"{path}: not replaced: vision-torsion keeps its record of the files it "
                               "wrote under this name, and this file is not that record; move it away",
                               reason="not_ours") from None
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND)
         data = ""
     except OSError as exc:
         raise OutputError(f"{path}: cannot write ({os_reason(exc)})") from exc
@@ -175,7 +178,10 @@ def _compact_record(folder: Path) -> None:
     """Rewrite the record with one line per name still present. A line appended by
     another process during the rewrite may be lost: that file is then refused as
     not proven ours (the safe side), never replaced unproven."""
-    entries = _read_record(folder)
+    try:
+        entries = _read_record(folder)
+    except OSError:  # the long record still holds: compaction is only tidiness
+        return
     if not entries:
         return
     text = _RECORD_HEADER + "".join(_record_line(name, size, digest)
@@ -212,13 +218,13 @@ def is_ours(path) -> bool:
     """Whether the record of `path`'s folder proves this tool wrote the file there now
     (the same size and hash as recorded; for a log, its name recorded)."""
     p = Path(path)
-    entry = (_read_record(p.parent) or {}).get(p.name)
-    if entry is None:
-        return False
-    size, digest = entry
-    if digest == _APPENDED:
-        return True
     try:
+        entry = (_read_record(p.parent) or {}).get(p.name)
+        if entry is None:
+            return False
+        size, digest = entry
+        if digest == _APPENDED:
+            return True
         if os.stat(p).st_size != size:
             return False
         return _digest(p.read_bytes()) == digest
