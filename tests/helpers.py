@@ -7,6 +7,8 @@
 - :func:`supersampled_grid`, :func:`ellipse_mask` and :func:`area_image` render
   dark shapes (ellipses seen obliquely, teardrops) by area coverage, for the marker
   tests that need shapes the synthetic renderer does not draw.
+- :func:`run_cli` runs the command line in this process and checks that no
+  traceback reached the user.
 - :class:`FakeCore` is a simple centroid measurer, passed to ``process_session`` as
   its ``measure`` function, so the bookkeeping of ``process`` (cache, resume,
   failures, output table) can be tested independently of the measurement core; it
@@ -79,6 +81,17 @@ def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, draw=None,
         write_image(Path(folder) / row["image"], draw(angle, index))
         truth[row["image"]] = angle
     return plan, truth
+
+
+def run_cli(capsys, *argv):
+    """Run the command line in this process; return (status, stdout, stderr), checking
+    that no traceback was printed."""
+    from vision_torsion.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err, err
+    return code, out, err
 
 
 def tree_digest(folder, *, exclude=()) -> dict[str, tuple[str, int]]:

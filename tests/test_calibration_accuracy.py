@@ -15,6 +15,7 @@ from vision_torsion.angle import rotation_angle
 from vision_torsion.calibration import PlaneCorrection, check_accuracy, load_spec, read_reference_table
 from vision_torsion.cli import main
 from vision_torsion.errors import ReferenceTableError
+from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.measure import measure_folder
 from vision_torsion.settings import MeasureSettings
 from vision_torsion.synthetic import load_scene
@@ -51,7 +52,7 @@ def test_check_passes_and_writes_outputs_only_in_results(folder):
     after = {k: v for k, v in _snapshot(folder).items() if not k.startswith("results/")}
     assert after == before
     out = folder / "results"
-    assert sorted(p.name for p in out.iterdir()) == ["accuracy.csv", "accuracy.json", "accuracy.png"]
+    assert sorted(p.name for p in out.iterdir()) == [RECORD_NAME, "accuracy.csv", "accuracy.json", "accuracy.png"]
     table = pd.read_csv(out / "accuracy.csv")
     assert list(table.columns) == [
         "image",

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import draw_target, make_session, tree_digest
+from helpers import draw_target, make_session, run_cli, tree_digest
 
 from vision_torsion import fileio
 from vision_torsion.cli import main
@@ -34,13 +34,7 @@ from vision_torsion.images import MAX_IMAGE_PIXELS, decode_image, load_image
 # -- helpers ------------------------------------------------------------------------
 
 
-def run(capsys, *argv):
-    """Run the command line; return (status, stdout, stderr), checking that no
-    traceback was printed."""
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    assert "Traceback" not in out + err, err
-    return code, out, err
+run = run_cli
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
@@ -306,7 +300,7 @@ def test_a_set_of_files_is_replaced_whole_or_not_at_all(tmp_path):
             fileio.atomic_write_text(out / "b.txt", "new b")
             fileio.atomic_write_text(out / "c.txt", "new c")
     assert (out / "a.txt").read_text() == "old a" and (out / "b.txt").read_text() == "old b"
-    assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.txt", "c.txt"]  # no temporaries
+    assert sorted(p.name for p in out.iterdir()) == [fileio.RECORD_NAME, "a.txt", "b.txt", "c.txt"]  # no temporaries
 
 
 def test_stiffness_with_one_plot_locked_replaces_nothing(capsys, tmp_path):

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from vision_torsion.errors import ImageReadError
+from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.images import as_grey_array, decode_image, load_image, write_image
 
 
@@ -172,7 +173,7 @@ def test_array_not_modified():
 def test_write_image_is_atomic_and_readable(tmp_path):
     data = np.linspace(0, 4095, 64).reshape(8, 8)
     write_image(tmp_path / "w.png", data, bit_depth=12)
-    assert [p.name for p in tmp_path.iterdir()] == ["w.png"]  # no temporary file left
+    assert sorted(p.name for p in tmp_path.iterdir()) == [RECORD_NAME, "w.png"]  # no temporary file left
     img = load_image(tmp_path / "w.png")
     assert img.bit_depth == 12 and img.data.max() == 4095
 

@@ -6,6 +6,7 @@ from helpers import draw_target, make_session
 
 from vision_torsion.cli import main
 from vision_torsion.errors import OutputError
+from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.images import write_image
 from vision_torsion.overlay import annotate, detections, overlay_image, write_overlays
 
@@ -53,7 +54,7 @@ def test_measure_overlay_option(tmp_path, capsys):
     assert main(["measure", str(imgs), "--reference", str(imgs / "img_0.png"),
                  "--overlay", str(tmp_path / "ov")]) == 0
     assert sorted(p.name for p in (tmp_path / "ov").iterdir()) == [
-        "img_0_overlay.png", "img_1_overlay.png", "img_2_overlay.png"]
+        RECORD_NAME, "img_0_overlay.png", "img_1_overlay.png", "img_2_overlay.png"]
     assert "wrote 3 overlay(s)" in capsys.readouterr().out
 
 

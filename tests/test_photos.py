@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.images import load_image
 from vision_torsion.markers import find_markers
 
@@ -180,4 +181,4 @@ def test_fetch_photos_writes_the_originals_checked_by_their_git_blob_ids(tmp_pat
     assert fetch_photos.main([str(out), "--repo", str(tmp_path), "--repo", str(repo), "--from", str(folder)]) == 1
     assert (out / "dot_full.png").read_bytes() == content
     assert result["gone_full.png"] == f"not found: o/n {commit[:12]} data/gone.png (in none of the sources given)"
-    assert sorted(p.name for p in out.iterdir()) == ["dot_full.png"]
+    assert sorted(p.name for p in out.iterdir()) == [RECORD_NAME, "dot_full.png"]

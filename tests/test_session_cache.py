@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+from vision_torsion import fileio
 from vision_torsion.session.cache import CacheLog, cache_line, count_entries, merge_cache, read_cache, read_logs
 
 KEY_A, KEY_B, KEY_C = "a" * 64, "b" * 64, "c" * 64
@@ -30,7 +31,7 @@ def test_damaged_lines_and_unfinished_entries_are_ignored(tmp_path, caplog):
     folder = tmp_path / "cache"
     folder.mkdir()
     changed = cache_line(KEY_B, _entry(6)).replace("6", "7")  # one digit changed
-    (folder / "run-x-1.jsonl").write_text(
+    fileio.atomic_write_text(folder / "run-x-1.jsonl",  # recorded: the cache's own
         cache_line(KEY_A, "{not json}")            # damaged
         + cache_line(KEY_B[:10], _entry(2))        # bad key
         + cache_line(KEY_C, _entry(3, "running"))  # not a result
@@ -46,7 +47,7 @@ def test_damaged_lines_and_unfinished_entries_are_ignored(tmp_path, caplog):
 def test_entries_failing_the_schema_check_are_ignored(tmp_path, caplog):
     folder = tmp_path / "cache"
     folder.mkdir()
-    (folder / "merged.jsonl").write_text(cache_line(KEY_A, _entry(1)) + cache_line(KEY_B, _entry("x")))
+    fileio.atomic_write_text(folder / "merged.jsonl", cache_line(KEY_A, _entry(1)) + cache_line(KEY_B, _entry("x")))
     entries, _ = read_cache(folder, check=lambda e: isinstance(e["value"], int))
     assert entries == {KEY_A: {"status": "ok", "value": 1}}
     assert "1 cache line(s): wrong shape ignored; those images are measured again" in caplog.text
@@ -63,7 +64,8 @@ def test_merge_keeps_the_latest_entry_per_key_and_leaves_other_runs_logs(tmp_pat
         log.close()
     logs = first.files() + second.files()
     merged = merge_cache(folder, read_logs(logs), logs)
-    assert sorted(p.name for p in folder.iterdir()) == sorted([merged.name, other.files()[0].name])
+    assert sorted(p.name for p in folder.iterdir()) == sorted([merged.name, other.files()[0].name,
+                                                               fileio.RECORD_NAME])
     assert read_cache(folder)[0] == {KEY_A: {"status": "ok", "value": 2},
                                      KEY_B: {"status": "ok", "value": 3},
                                      KEY_C: {"status": "ok", "value": 4}}

@@ -16,7 +16,7 @@ from helpers import make_session
 
 from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
-from vision_torsion.session.cache import count_entries
+from vision_torsion.session.cache import CACHE_DIRNAME, count_entries
 from vision_torsion.synthetic import Scene, render
 
 # Small frames keep the tests fast; the rotation centre is off the pixel grid.
@@ -73,7 +73,7 @@ def test_killed_run_resumes_to_the_same_file(tmp_path, jobs):
     n = len(plan.rows)
     reference = process_session(folder, out_dir=tmp_path / "a", jobs=1).measurements_path
     out = tmp_path / "b"
-    cache = out / ".cache"
+    cache = out / CACHE_DIRNAME
     proc = subprocess.Popen([sys.executable, "-c", _RUN, str(folder), str(out), str(jobs)],
                             env={**os.environ, "PYTHONWARNINGS": "error"})
     try:

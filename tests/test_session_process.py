@@ -22,7 +22,7 @@ from vision_torsion.errors import ManifestError, OutputError, SessionError
 from vision_torsion.images import write_image
 from vision_torsion.session import process as process_module
 from vision_torsion.session import process_session
-from vision_torsion.session.cache import count_entries
+from vision_torsion.session.cache import CACHE_DIRNAME, count_entries
 from vision_torsion.session.process import OUTPUT_COLUMNS
 
 # The stand-in's darkness-weighted centroids of OpenCV's anti-aliased discs are off
@@ -167,7 +167,7 @@ def test_resume_after_interruption_gives_the_same_file(session, tmp_path, jobs):
         process_session(folder, out_dir=tmp_path / "b", jobs=jobs,
                         measure=FakeCore(interrupt_after=8).measure_pair)
     assert not (tmp_path / "b" / "measurements.csv").exists()
-    assert count_entries(tmp_path / "b" / ".cache") == 8 + 1  # + the failure
+    assert count_entries(tmp_path / "b" / CACHE_DIRNAME) == 8 + 1  # + the failure
     resumed = FakeCore()
     result = process_session(folder, out_dir=tmp_path / "b", jobs=jobs, measure=resumed.measure_pair)
     assert (result.n_measured, result.n_cached) == (20 - 9, 9)
@@ -191,7 +191,7 @@ def test_an_image_removed_after_validation_fails_alone(session, core, monkeypatc
     assert (result.n_ok, result.n_failed) == (19, 1)
     row = read(result.measurements_path).set_index("image").loc[gone]
     assert row["message"] == f"{gone}: cannot be read (No such file or directory)"
-    assert count_entries(folder / "results" / ".cache") == 19  # not cached: tried again next run
+    assert count_entries(folder / "results" / CACHE_DIRNAME) == 19  # not cached: tried again next run
 
 
 @pytest.mark.parametrize("jobs", [1, 3])
@@ -206,7 +206,7 @@ def test_an_unexpected_error_fails_its_image_and_is_not_cached(session, core, jo
 
     result = process_session(folder, jobs=jobs, measure=measure_pair)
     assert result.failures == ((broken, "internal error: RuntimeError: a bug"),)
-    assert count_entries(folder / "results" / ".cache") == 19
+    assert count_entries(folder / "results" / CACHE_DIRNAME) == 19
 
 
 def test_rerun_measures_only_new_or_changed_images(session, core, tmp_path):

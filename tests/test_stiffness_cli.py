@@ -6,6 +6,7 @@ import pandas as pd
 import tomli_w
 
 from vision_torsion.cli import main
+from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.stiffness import synthetic_encoder_record, synthetic_measurements
 
 
@@ -26,7 +27,7 @@ def test_writes_curve_summary_and_plots_beside_data(tmp_path, capsys):
     # The input folder only gained the output folder.
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["run1_stiffness"])
     assert sorted(p.name for p in out.iterdir()) == [
-        "meshing_pairs.png", "stiffness_curve.csv", "stiffness_summary.json",
+        RECORD_NAME, "meshing_pairs.png", "stiffness_curve.csv", "stiffness_summary.json",
         "stiffness_torque.png", "torque_angle.png",
     ]
     curve = pd.read_csv(out / "stiffness_curve.csv")

@@ -15,6 +15,14 @@
   at once (naming the path and the reason) instead of after the work.
 - Every ``OSError`` while writing becomes an :class:`~vision_torsion.errors.OutputError`
   naming the file and the reason in words.
+- **The folder contract.** Every file written here is recorded in the record of
+  its folder, :data:`RECORD_NAME` (one line per write: the name, its size and the
+  XXH3-128 hash of the bytes written). A file already at the destination is
+  replaced only when the record proves this tool wrote it, byte for byte; a file
+  the tool did not write, or one changed since, is refused with an
+  :class:`~vision_torsion.errors.OutputError` (``reason="not_ours"``) naming it and
+  explaining ``--force`` (:func:`replacing_others`). New files need no proof;
+  :func:`check_replaceable` lets a command refuse before its work.
 """
 
 from __future__ import annotations
@@ -43,6 +51,11 @@ __all__ = [
     "format_float",
     "write_records_csv",
     "MIN_FREE_BYTES",
+    "RECORD_NAME",
+    "is_ours",
+    "check_replaceable",
+    "record_created",
+    "replacing_others",
 ]
 
 #: An output folder with less free space than this is refused before any work.
@@ -76,9 +89,176 @@ def _file_mode() -> int:
 
 
 _staged: ContextVar[list | None] = ContextVar("vision_torsion_staged_outputs", default=None)
+_force: ContextVar[bool] = ContextVar("vision_torsion_replace_others", default=False)
+
+#: The record, in every folder this tool writes into, of the files it wrote there.
+RECORD_NAME = ".vision-torsion-files"
+_RECORD_HEADER = "# vision-torsion: files this tool wrote in this folder (name, size, xxh3-128)\n"
+#: The hash field of a file created to be appended to (a log): its name is proof enough.
+_APPENDED = "appended"
+_FORCE_HINT = ("move it away, choose another output folder, or give --force to replace "
+               "files vision-torsion did not write")
 
 
-def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
+@contextmanager
+def replacing_others(allowed: bool = True):
+    """Inside, files the tool cannot prove it wrote may be replaced (``--force``).
+
+    Writers that must never replace another program's file (the cache) pass
+    ``force=False`` to :func:`atomic_write_bytes` and are not affected.
+    """
+    token = _force.set(bool(allowed))
+    try:
+        yield
+    finally:
+        _force.reset(token)
+
+
+def _digest(data: bytes) -> str:
+    import xxhash  # here: a command that writes nothing does not import it
+
+    return xxhash.xxh3_128_hexdigest(data)
+
+
+def _read_record(folder: Path) -> dict[str, tuple[int, str]] | None:
+    """name -> (size, hash) of the record in `folder` (the last line of a name wins);
+    ``{}`` when there is no record, None when a file of that name is not a record.
+    An unreadable record raises its ``OSError``."""
+    try:
+        # surrogateescape: a file name that is not UTF-8 reads back as it was written
+        text = (folder / RECORD_NAME).read_bytes().decode("utf-8", "surrogateescape")
+    except FileNotFoundError:
+        return {}
+    if not text.startswith(_RECORD_HEADER):
+        return None
+    entries: dict[str, tuple[int, str]] = {}
+    for line in text[len(_RECORD_HEADER):].split("\n")[:-1]:  # a cut last line is ignored
+        parts = line.rsplit("\t", 2)
+        if len(parts) == 3 and parts[1].isdigit():
+            entries[parts[0]] = (int(parts[1]), parts[2])
+    return entries
+
+
+def _append_record(folder: Path, lines: list[str]) -> None:
+    """Append record lines with one ``write`` (O_APPEND: concurrent writers do not
+    interleave lines); a record that is not ours is never written to."""
+    path = folder / RECORD_NAME
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, _file_mode())
+        data = _RECORD_HEADER
+    except FileExistsError:
+        try:
+            ours = _read_record(folder) is not None
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND) if ours else -1
+        except OSError as exc:
+            raise OutputError(f"{path}: cannot write ({os_reason(exc)})") from exc
+        if not ours:
+            raise OutputError(f"{path}: not replaced: vision-torsion keeps its record of the files it "
+                              "wrote under this name, and this file is not that record; move it away",
+                              reason="not_ours") from None
+        data = ""
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write ({os_reason(exc)})") from exc
+    try:
+        os.write(fd, (data + "".join(lines)).encode("utf-8", "surrogateescape"))
+        size = os.fstat(fd).st_size
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write ({os_reason(exc)})") from exc
+    finally:
+        os.close(fd)
+    if size > _RECORD_COMPACT_BYTES:
+        _compact_record(folder)
+
+
+#: A record longer than this is rewritten with the last line of each name only.
+_RECORD_COMPACT_BYTES = 1 << 18
+
+
+def _compact_record(folder: Path) -> None:
+    """Rewrite the record with one line per name still present. A line appended by
+    another process during the rewrite may be lost: that file is then refused as
+    not proven ours (the safe side), never replaced unproven."""
+    try:
+        entries = _read_record(folder)
+    except OSError:  # the long record still holds: compaction is only tidiness
+        return
+    if not entries:
+        return
+    text = _RECORD_HEADER + "".join(_record_line(name, size, digest)
+                                    for name, (size, digest) in entries.items()
+                                    if os.path.lexists(folder / name))
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{RECORD_NAME}.", suffix=".tmp", dir=folder)
+    except OSError:  # the long record still holds: compaction is only tidiness
+        return
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(text.encode("utf-8", "surrogateescape"))
+        os.replace(tmp, folder / RECORD_NAME)
+    except OSError:
+        _unlink(tmp)
+
+
+def _record_line(name: str, size: int, digest: str) -> str:
+    if "\n" in name or "\t" in name:  # a name the record cannot hold is never proven ours
+        return ""
+    return f"{name}\t{size}\t{digest}\n"
+
+
+def record_created(path) -> None:
+    """Record `path` as a file this tool created to append to (a cache log): its name
+    in the record proves it ours, whatever it holds."""
+    p = Path(path)
+    line = _record_line(p.name, 0, _APPENDED)
+    if line:
+        _append_record(p.parent, [line])
+
+
+def is_ours(path) -> bool:
+    """Whether the record of `path`'s folder proves this tool wrote the file there now
+    (the same size and hash as recorded; for a log, its name recorded)."""
+    p = Path(path)
+    try:
+        entry = (_read_record(p.parent) or {}).get(p.name)
+        if entry is None:
+            return False
+        size, digest = entry
+        if digest == _APPENDED:
+            return True
+        if os.stat(p).st_size != size:
+            return False
+        return _digest(p.read_bytes()) == digest
+    except OSError:
+        return False
+
+
+def check_replaceable(paths, *, force: bool | None = None) -> None:
+    """Refuse, before any work, to replace a file in `paths` the tool did not write.
+
+    Parameters
+    ----------
+    paths : iterable of path
+        Files a command is about to write. Missing ones are fine.
+    force : bool, optional
+        Replace them anyway; default: inside :func:`replacing_others`.
+
+    Raises
+    ------
+    OutputError
+        ``reason="not_ours"``: a file is there that the folder's record does not
+        prove this tool wrote (another program's, or changed since); the message
+        names it and explains ``--force``.
+    """
+    if _force.get() if force is None else force:
+        return
+    for path in paths:
+        p = Path(path)
+        if os.path.lexists(p) and not p.is_dir() and not is_ours(p):
+            raise OutputError(f"{p}: not replaced: vision-torsion did not write this file (or it "
+                              f"was changed since); {_FORCE_HINT}", reason="not_ours")
+
+
+def atomic_write_bytes(path, data: bytes, *, durable: bool = True, force: bool | None = None) -> Path:
     """Write `data` to `path` atomically, creating parent folders; return the path.
 
     With `durable` (the default) the data is flushed to the disk (fsync) before
@@ -86,15 +266,19 @@ def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
     content. Without it, a power cut may leave it empty; for files whose reader
     checks them anyway (cache entries) that saves a disk flush per file. Inside
     :func:`output_set` the file is only staged; it is renamed into place with the
-    rest of the set.
+    rest of the set. The write is recorded in the folder's record; a file at `path`
+    the record does not prove ours is refused (the folder contract, module docstring)
+    unless `force` (default: inside :func:`replacing_others`).
 
     Raises
     ------
     OutputError
         The file or its folder cannot be written; the message names the path and
-        the reason (read-only, permission, no space, a file or folder in the way).
+        the reason (read-only, permission, no space, a file or folder in the way,
+        ``reason="not_ours"``: a file this tool did not write).
     """
     p = Path(path)
+    check_replaceable([p], force=force)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent)
@@ -107,9 +291,10 @@ def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
             if durable:
                 fh.flush()
                 os.fsync(fh.fileno())
+        line = _record_line(p.name, len(data), _digest(data))
         staged = _staged.get()
         if staged is not None:
-            staged.append((Path(tmp), p))
+            staged.append((Path(tmp), p, line))
             return p
         os.replace(tmp, p)
     except BaseException as exc:
@@ -117,6 +302,8 @@ def atomic_write_bytes(path, data: bytes, *, durable: bool = True) -> Path:
         if isinstance(exc, OSError):
             raise OutputError(f"{p}: cannot write ({os_reason(exc)})") from exc
         raise
+    if line:
+        _append_record(p.parent, [line])
     return p
 
 
@@ -148,12 +335,12 @@ def output_set():
     if _staged.get() is not None:
         yield
         return
-    staged: list[tuple[Path, Path]] = []
+    staged: list[tuple[Path, Path, str]] = []
     token = _staged.set(staged)
     try:
         yield
     except BaseException:
-        for tmp, _ in staged:
+        for tmp, _, _ in staged:
             _unlink(tmp)
         raise
     finally:
@@ -161,32 +348,31 @@ def output_set():
     _commit(staged)
 
 
-def _commit(staged: list[tuple[Path, Path]]) -> None:
+def _commit(staged: list[tuple[Path, Path, str]]) -> None:
     n = len(staged)
 
     def fail(dest: Path, why: str, cause=None):
-        for tmp, _ in staged:
+        for tmp, _, _ in staged:
             _unlink(tmp)
         raise OutputError(f"{dest}: cannot write ({why}); none of the {n} result files of "
                           "this set was replaced") from cause
 
-    for _, dest in staged:
+    for _, dest, _ in staged:
         if dest.is_dir():
             fail(dest, "a folder is in the way where the file should be")
     backups: dict[Path, Path | None] = {}
     done: list[Path] = []
     try:
-        for tmp, dest in staged:
+        for tmp, dest, _ in staged:
             backup = None
-            if dest.exists():
-                backup = dest.with_name(f".{dest.name}.{os.getpid()}.bak")
-                _unlink(backup)
+            if dest.exists():  # a fresh name: nothing of anyone else's is removed
+                backup = dest.with_name(f".{dest.name}.{os.getpid()}.{os.urandom(6).hex()}.bak")
                 try:
                     os.link(dest, backup)
                 except OSError:
                     shutil.copy2(dest, backup)
             backups[dest] = backup
-        for tmp, dest in staged:
+        for tmp, dest, _ in staged:
             os.replace(tmp, dest)
             done.append(dest)
     except OSError as exc:
@@ -207,9 +393,15 @@ def _commit(staged: list[tuple[Path, Path]]) -> None:
     for backup in backups.values():
         if backup is not None:
             _unlink(backup)
+    by_folder: dict[Path, list[str]] = {}
+    for _, dest, line in staged:
+        if line:
+            by_folder.setdefault(dest.parent, []).append(line)
+    for folder, lines in by_folder.items():
+        _append_record(folder, lines)
 
 
-def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES) -> Path:
+def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES, replaces=()) -> Path:
     """Create the output folder `path` if needed and make sure results can be written there.
 
     Called before any measuring, so that a run never does its work and then fails
@@ -221,6 +413,9 @@ def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES) -> Path:
         The output folder.
     need_bytes : int
         Free space required (bytes); less is refused as "no space".
+    replaces : iterable of str
+        Names (relative to `path`) of the files the command will write: one there
+        that this tool cannot prove it wrote is refused now (:func:`check_replaceable`).
 
     Returns
     -------
@@ -231,9 +426,11 @@ def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES) -> Path:
     OutputError
         The path is a file (or lies under one), the folder cannot be created or
         written (read-only file system, permission denied), or the disk has less
-        than `need_bytes` free. The message names the path and the reason.
+        than `need_bytes` free; or (``reason="not_ours"``) a file of `replaces` is
+        not the tool's own. The message names the path and the reason.
     """
     p = Path(path)
+    check_replaceable(p / name for name in replaces)
     if p.exists() and not p.is_dir():
         raise OutputError(f"{p}: cannot write results there: it is a file, not a folder")
     try:
@@ -296,11 +493,11 @@ def _finite(obj):
     return obj
 
 
-def atomic_write_text(path, text: str, *, durable: bool = True) -> Path:
+def atomic_write_text(path, text: str, *, durable: bool = True, force: bool | None = None) -> Path:
     """Write UTF-8 `text` to `path` atomically (see :func:`atomic_write_bytes`); a
     character UTF-8 cannot hold (a non-UTF-8 file name's byte) is written as an
     escape, never a crash."""
-    return atomic_write_bytes(path, text.encode("utf-8", "backslashreplace"), durable=durable)
+    return atomic_write_bytes(path, text.encode("utf-8", "backslashreplace"), durable=durable, force=force)
 
 
 def write_json(path, obj) -> Path:

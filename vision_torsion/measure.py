@@ -204,7 +204,7 @@ def measure_folder(
     if out.resolve() == Path(image_dir).resolve():
         raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
                           "subfolder such as results/")
-    check_output_dir(out)
+    check_output_dir(out, replaces=["angles.csv"])
     ref_pair = measure_pair(reference, settings=settings, name=f"reference {reference}")
     pairs, angles, messages = measure_sequence(
         ref_pair, [(f, f.name) for f in files], settings=settings, correction=correction, progress=progress,

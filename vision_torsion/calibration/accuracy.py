@@ -366,7 +366,7 @@ def check_accuracy(
             "written among the images would be taken for images); use a subfolder "
             "such as results/"
         )
-    check_output_dir(out)
+    check_output_dir(out, replaces=["accuracy.csv", "accuracy.json", "accuracy.png"])
     names, refs = list(table["image"]), table["reference_angle_deg"].to_numpy()
     ref_pair = measure_pair(folder / names[0], settings=settings, name=f"reference {names[0]}")
     _, angles, reasons = measure_sequence(

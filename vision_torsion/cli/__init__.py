@@ -26,8 +26,18 @@ Exit status
 Options every command has, before or after the subcommand's name: ``-q/--quiet``
 (nothing on stdout, no progress bar; warnings and errors still go to stderr),
 ``-v/--verbose`` (the tool's own debug messages; other libraries stay quiet) and
-``--debug`` (``-v``, and the traceback of an internal error). A new subcommand
-gets them by calling :func:`add_common_options` on its parser.
+``--debug`` (``-v``, and the traceback of an internal error). After the subcommand's
+name, ``--force``: replace files in the way that vision-torsion cannot prove it wrote
+(:mod:`vision_torsion.fileio`, the folder contract; without it such a file is refused
+by name). A new subcommand gets them by calling :func:`add_common_options` on its parser.
+
+Streams
+-------
+Everything printed goes through one place, :class:`Terminal`: control characters
+and escape sequences (a camera file named to set the window title or clear the
+screen) are shown escaped, never sent raw; a closed stdout or stderr (``2>&-``) or a
+reader that went away (``| head``) silences that stream and never changes the exit
+status.
 """
 
 from __future__ import annotations
@@ -37,10 +47,11 @@ import contextlib
 import gc
 import logging
 import os
+import re
 import sys
 
 __all__ = ["main", "build_parser", "failure_line", "add_common_options", "progress_enabled",
-           "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL"]
+           "Terminal", "printable", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL"]
 
 EXIT_OK, EXIT_FAILED, EXIT_UNUSABLE, EXIT_INTERNAL = 0, 1, 2, 3
 
@@ -73,11 +84,18 @@ def _add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:
                    help="show the tool's own debug messages")
     g.add_argument("--debug", action="store_true", default=default(False),
                    help="like -v, and show the traceback of an internal error")
+    if not top:
+        try:
+            g.add_argument("--force", action="store_true", default=False,
+                           help="replace files in the output folder that vision-torsion cannot prove "
+                                "it wrote (without it they are refused by name)")
+        except argparse.ArgumentError:  # the command has its own --force (plan, synth, demo), meaning this too
+            pass
 
 
 def add_common_options(parser: argparse.ArgumentParser) -> None:
     """Options every subcommand has: -q/--quiet, -v/--verbose, --debug (also accepted
-    before the subcommand)."""
+    before the subcommand) and --force (after it; kept when the command has its own)."""
     _add_common(parser, top=False)
 
 
@@ -159,17 +177,110 @@ def main(argv=None) -> int:
     line naming the file and the reason (status 2); anything else is an internal
     error, one line and status 3 (the traceback with ``--debug``).
     """
-    for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 must not crash a print
-        with contextlib.suppress(AttributeError, ValueError):
-            stream.reconfigure(errors="backslashreplace")
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    _configure_logging(args)
-    command = _command_name(args)
-    if argv is None:  # this process's own command line (the console script, python -m): it ends after
-        with _ends_process(gc_off=getattr(args, "gc_off", False)):
-            return _run(args, command)
-    return _run(args, command)
+    _fill_standard_fds()
+    saved = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = Terminal(saved[0]), Terminal(saved[1])
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        _configure_logging(args)
+        command = _command_name(args)
+        if argv is None:  # this process's own command line (the console script, python -m): it ends after
+            with _ends_process(gc_off=getattr(args, "gc_off", False)):
+                return _run(args, command)
+        return _run(args, command)
+    finally:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        sys.stdout, sys.stderr = saved
+
+
+def _fill_standard_fds() -> None:
+    """A closed descriptor 0, 1 or 2 (``2>&-``) opened on the null device, so the next
+    file this process opens (a result) cannot land on it and receive what a library
+    writes to "stderr"."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            with contextlib.suppress(OSError):
+                new = os.open(os.devnull, os.O_RDWR)
+                if new != fd:
+                    os.dup2(new, fd)
+                    os.close(new)
+
+
+_UNPRINTABLE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069]")
+_NAMED = {"\r": "\\r", "\x1b": "\\x1b", "\x7f": "\\x7f"}
+
+
+def printable(text: str) -> str:
+    """`text` with control characters, escape sequences' introducer and bidirectional
+    overrides shown as escapes (``\\x1b``, ``\\r``, ``\\u202e``); newline and tab kept.
+    A leading carriage return is kept too: a progress bar redraws its line with it,
+    and at the start of a write it can hide nothing written by the same write."""
+    head = "\r" if text.startswith("\r") else ""
+    body = text[len(head):]
+    if _UNPRINTABLE.search(body) is None:
+        return text
+    return head + _UNPRINTABLE.sub(
+        lambda m: _NAMED.get(m.group(), f"\\x{ord(m.group()):02x}" if ord(m.group()) < 0x100
+                             else f"\\u{ord(m.group()):04x}"), body)
+
+
+class Terminal:
+    """stdout or stderr as the command line writes to it (the one place output goes).
+
+    Every write is passed through :func:`printable`. A stream that is closed (None
+    when Python started with it closed) or whose reader went away (a broken pipe)
+    (or that cannot be written: a full disk) is silenced: its descriptor is pointed at the null device (so Python's own
+    flush at exit cannot fail and change the exit status) and later writes are
+    dropped. Other attributes are the wrapped stream's.
+    """
+
+    def __init__(self, stream):
+        if isinstance(stream, Terminal):
+            stream = stream._stream
+        self._stream = stream
+        self._broken = stream is None
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            stream.reconfigure(errors="backslashreplace")  # a non-UTF-8 file name must not crash a print
+
+    def _silence(self) -> None:
+        self._broken = True
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            fd = self._stream.fileno()
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, fd)
+            os.close(devnull)
+
+    def write(self, text: str) -> int:
+        if not self._broken:
+            try:
+                self._stream.write(printable(text))
+            except (OSError, ValueError):  # a broken pipe, a full disk; ValueError: a closed file
+                self._silence()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._broken:
+            try:
+                self._stream.flush()
+            except (OSError, ValueError):
+                self._silence()
+
+    def isatty(self) -> bool:
+        if self._broken:
+            return False
+        try:
+            return bool(self._stream.isatty())
+        except (AttributeError, OSError, ValueError):
+            return False
+
+    def __getattr__(self, name):
+        if self._stream is None:
+            raise AttributeError(name)
+        return getattr(self._stream, name)
 
 
 @contextlib.contextmanager
@@ -198,14 +309,13 @@ def _run(args, command: str) -> int:
             if args.quiet:
                 devnull = stack.enter_context(open(os.devnull, "w", encoding="utf-8"))
                 stack.enter_context(contextlib.redirect_stdout(devnull))
+            from ..fileio import replacing_others
+
+            stack.enter_context(replacing_others(getattr(args, "force", False)))
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:  # e.g. `vision-torsion ... | head`
-        with contextlib.suppress(OSError):
-            sys.stdout = open(os.devnull, "w", encoding="utf-8")
-        return EXIT_OK
     except Exception as exc:  # noqa: BLE001 - the one place every failure ends up
         return _report_error(exc, command=command, debug=args.debug)
 

@@ -74,7 +74,7 @@ def _destination(args):
     if name.name != args.name:
         raise CalibrationError(f"--name {args.name}: a file name, not a path (the folder is -o OUT_DIR)")
     check_suffix(name)
-    out = check_output_dir(Path(args.out_dir) if args.out_dir else Path.cwd())
+    out = check_output_dir(Path(args.out_dir) if args.out_dir else Path.cwd(), replaces=[name.name])
     return out / name
 
 

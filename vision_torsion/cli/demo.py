@@ -25,7 +25,9 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic session")
     p.add_argument("--force", action="store_true",
                    help="render the session again even if OUT_DIR holds one rendered with the same seed "
-                        "(without it that session is reused and only what changed is measured)")
+                        "(without it that session is reused and only what changed is measured); also "
+                        "write into a non-empty OUT_DIR that is not a demo folder, replacing files "
+                        "vision-torsion did not write")
     add_jobs_option(p)
     add_common_options(p)
     p.set_defaults(func=run)

@@ -3,8 +3,10 @@
 ``--force`` is consistent: commands that create a new folder (``plan``, ``synth
 accuracy``, ``synth session``, ``demo``) refuse an existing non-empty one without it;
 commands that write results into an output folder (``measure``, ``process``,
-``report``, ``check-accuracy``, ``stiffness``, ``calibrate``) replace their own result
-files there and need no ``--force``.
+``report``, ``check-accuracy``, ``stiffness``, ``calibrate``, ``analyze``, ``bind``,
+``watch``) replace their own result files there and need no ``--force``. A file in
+the way that the tool cannot prove it wrote (the folder contract,
+:mod:`vision_torsion.fileio`) is refused by every command, by name, unless ``--force``.
 """
 
 from __future__ import annotations
@@ -76,7 +78,9 @@ def add_output_option(parser, default: str) -> None:
 
 def add_force_option(parser, what: str = "the folder") -> None:
     """--force: a command that creates a new folder refuses a non-empty one without it."""
-    parser.add_argument("--force", action="store_true", help=f"write into {what} even if it exists and is not empty")
+    parser.add_argument("--force", action="store_true",
+                        help=f"write into {what} even if it exists and is not empty, replacing files "
+                             "vision-torsion did not write")
 
 
 def check_new_folder(path, *, force: bool) -> None:

@@ -59,7 +59,8 @@ def register(subparsers) -> None:
     p.add_argument("--image-type", default=".png", metavar="SUFFIX",
                    help="file type of the images to save")
     p.add_argument("--force", action="store_true",
-                   help="overwrite an existing session.toml and manifest.csv")
+                   help="overwrite an existing session.toml and manifest.csv, and files "
+                        "vision-torsion did not write")
     p.add_argument("--preconditioning", type=int, default=0, metavar="N",
                    help="full cycles to ±Tmax before each reference image (not photographed)")
     p.add_argument("--closing", action="store_true",

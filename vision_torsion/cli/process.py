@@ -18,7 +18,7 @@ def register(subparsers) -> None:
         description="Validate the whole session (session.toml, manifest.csv, image "
         "files) and stop with every problem listed if anything is wrong; then measure "
         "every image in parallel and write measurements.csv to the output folder. "
-        "Re-running measures only new or changed images (cache in OUT_DIR/.cache). "
+        "Re-running measures only new or changed images (cache in OUT_DIR/.vision-torsion-cache). "
         "A partly shot session is not an error: rows whose image does not exist yet "
         "are written with status 'pending' and listed, as are image files no row "
         "names. Exit status: 0 no image failed (pending rows included), 1 some image "

@@ -79,7 +79,8 @@ def run(args) -> int:
         from ..errors import RecordError
 
         raise RecordError(f"{args.data}: no such file")
-    check_output_dir(out)
+    # files every run writes; the optional plots are checked when written (nothing replaced then)
+    check_output_dir(out, replaces=["stiffness_curve.csv", "stiffness_summary.json", "torque_angle.png"])
     result = analyze_stiffness_curve(
         args.data, rig=rig, method=args.method, order=args.order, cutoff_hz=args.cutoff_hz,
         filter_order=args.filter_order, threshold_nm=args.threshold_nm,

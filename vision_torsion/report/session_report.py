@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..fileio import atomic_write_text, write_csv
+from ..errors import OutputError
+from ..fileio import atomic_write_text, check_replaceable, is_ours, write_csv
 from ..measurements import output_folder
 from . import ReportFiles
 
@@ -218,6 +219,9 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
 
     session = load_session(session_dir, missing="pending")
     out = output_folder(session.folder, out_dir)
+    # before measuring: another program's result file in the way is refused now (figures when written)
+    check_replaceable(out / name for name in ("stiffness_steps.csv", "summary.json", "stiffness_table.csv",
+                                              "report.html"))
     result = process_session(session.folder, out_dir=out, jobs=jobs, progress=progress)
     measurements = read_measurements(result.measurements_path)  # indexed by CSV line
     waiting = measurements[measurements["status"] == "pending"]
@@ -287,16 +291,29 @@ def run_demo(
     progress : bool
         Show progress bars.
     force : bool
-        Render the session again even when one with the same seed is there.
+        Render the session again even when one with the same seed is there, and
+        write into a folder this tool did not make a demo in.
 
     Returns
     -------
     SessionReport
+
+    Raises
+    ------
+    OutputError
+        ``reason="not_ours"``: `out_dir` exists, is not empty, and holds no demo
+        record of this tool's own (:data:`DEMO_STAMP`, proven by the folder's record,
+        :mod:`vision_torsion.fileio`), and `force` is false. Nothing is written.
     """
     from ..synthetic.session import write_session_folder
 
     session_dir = Path(out_dir) / "session"
     stamp = Path(out_dir) / DEMO_STAMP
+    if not force and Path(out_dir).is_dir() and any(Path(out_dir).iterdir()) and not is_ours(stamp):
+        raise OutputError(f"{out_dir}: folder exists and is not empty, and vision-torsion did not write a "
+                          f"demo there (no {DEMO_STAMP} of its own); choose a new folder, or give --force "
+                          "to write the demo into it (files of the same names are replaced)",
+                          reason="not_ours")
     rendered = _demo_seed(stamp) if (session_dir / "truth.csv").is_file() else None
     # truth.csv is written last: without it an earlier demo was interrupted
     if force or rendered != seed:

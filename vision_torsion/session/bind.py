@@ -30,8 +30,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SessionError
+from ..fileio import check_replaceable
 from ..measurements import output_folder
-from .binding import Binding, write_binding
+from .binding import BINDING_NAME, Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
 from .steps import StepPoint, check_steps
@@ -206,6 +207,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     from .shots import ShotMeasurer
 
     session = load_session(session_dir, check_files=False)
+    if write:  # another program's binding.json is refused before anything is measured
+        check_replaceable([session.folder / BINDING_NAME])
     camera = Path(camera_dir).absolute()
     listing = list_camera_files(camera, by=by)
     files = listing.files

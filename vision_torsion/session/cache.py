@@ -1,6 +1,7 @@
 """The results cache of ``process``: append-only logs of one line per measured image.
 
-Layout, in ``OUT_DIR/.cache/``: files ``*.jsonl``, each line ``KEY SUM ENTRY`` where
+Layout, in ``OUT_DIR/.vision-torsion-cache/``: files ``merged.jsonl`` and
+``run-RUN-PID.jsonl``, each line ``KEY SUM ENTRY`` where
 KEY is the 64-hex-digit cache key (SHA-256 of the image bytes' XXH3-128 hash, the
 measurement settings and the measuring code), SUM the 16-hex-digit XXH3-64 checksum
 of ``KEY ENTRY``, and ENTRY the JSON of the image's result or of why it failed. A
@@ -17,6 +18,14 @@ layout (no checksum) is ignored the same way.
 
 One small file per image cost each image half a millisecond of file creation and
 renaming, about a twentieth of decoding it.
+
+The cache touches only files it can prove it wrote (the folder contract,
+:mod:`vision_torsion.fileio`): a log is created new (never opened if a file of its
+name is there) and recorded in the folder's record at once; only logs of its own
+name pattern that the record proves ours are read, merged and removed, and the
+merged file is never written over a file of that name the record does not prove
+ours. Anything else in the folder is left alone. The folder's name is the tool's
+own, not ``.cache``, so ``-o ~`` does not write into a user's ``~/.cache``.
 """
 
 from __future__ import annotations
@@ -24,21 +33,23 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 from pathlib import Path
 
 import xxhash
 
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, is_ours, record_created
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "cache_line", "CACHE_DIRNAME"]
 
 #: Name of the cache folder inside the output folder.
-CACHE_DIRNAME = ".cache"
+CACHE_DIRNAME = ".vision-torsion-cache"
 _KEY_CHARS = 64
 _SUM_CHARS = 16
 _MERGED = "merged.jsonl"
+_LOG_NAME = re.compile(r"run-.+-[0-9]+\.jsonl")
 _DONE = ("ok", "failed")
 
 
@@ -114,11 +125,17 @@ def read_cache(folder, *, check=None) -> tuple[dict[str, dict], list[Path]]:
     entries : dict
         Cache key -> entry (:func:`read_logs`).
     files : list of pathlib.Path
-        The ``*.jsonl`` files read (to merge them later with :func:`merge_cache`).
+        The logs read (to merge them later with :func:`merge_cache`): only the
+        cache's own (its names, proven by the folder's record).
     """
     folder = Path(folder)
-    files = sorted(folder.glob("*.jsonl")) if folder.is_dir() else []
+    files = sorted(f for f in folder.glob("*.jsonl") if _own_log(f)) if folder.is_dir() else []
     return read_logs(files, check=check), files
+
+
+def _own_log(path: Path) -> bool:
+    """A log of this cache: one of its names, and the folder's record proves it ours."""
+    return (path.name == _MERGED or _LOG_NAME.fullmatch(path.name) is not None) and is_ours(path)
 
 
 def count_entries(folder) -> int:
@@ -129,12 +146,20 @@ def count_entries(folder) -> int:
 def merge_cache(folder, entries: dict[str, dict], files) -> Path:
     """Write `entries` (as read from the logs `files` by :func:`read_logs`) as one
     log of the cache `folder`, sorted by key and atomically, then remove `files`.
-    Logs not listed (another run's) are left alone."""
+    Logs not listed (another run's), and any file the folder's record does not prove
+    the cache's own, are left alone.
+
+    Raises
+    ------
+    OutputError
+        ``reason="not_ours"``: a ``merged.jsonl`` is there that this tool did not
+        write (never replaced, not even with ``--force``).
+    """
     folder = Path(folder)
     text = "".join(cache_line(key, json.dumps(entry, sort_keys=True)) for key, entry in sorted(entries.items()))
-    merged = atomic_write_text(folder / _MERGED, text, durable=False)
-    for path in files:
-        if Path(path) != merged:
+    merged = atomic_write_text(folder / _MERGED, text, durable=False, force=False)
+    for path in map(Path, files):
+        if path != merged and _own_log(path):
             try:
                 os.unlink(path)
             except FileNotFoundError:
@@ -170,11 +195,15 @@ class CacheLog:
         return sorted(self.folder.glob(f"run-{self.run}-*.jsonl"))
 
     def append(self, key: str, entry_json: str) -> None:
-        """Append one entry: a single ``write`` of a whole line, without fsync."""
+        """Append one entry: a single ``write`` of a whole line, without fsync.
+
+        The log is created on the first entry; a file already of its name (not this
+        run's) is never opened: :class:`FileExistsError`."""
         if self._fd is None:
             self.folder.mkdir(parents=True, exist_ok=True)
             path = self.folder / f"run-{self.run}-{os.getpid()}.jsonl"
-            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+            record_created(path)
         line = cache_line(key, entry_json).encode("utf-8")
         if os.write(self._fd, line) != len(line):  # a full disk: a cut line is ignored on reading
             raise OSError(f"{self.folder}: short write to the cache log")

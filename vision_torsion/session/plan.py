@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, check_replaceable
 from ..images import IMAGE_SUFFIXES
 from ..measurements import CYCLE_PHASES, PHASES
 from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
@@ -548,6 +548,10 @@ def plan_session(
         raise SessionError(
             f"{folder}: already holds a session ({', '.join(existing)}); choose another folder or overwrite"
         )
+    from .sheet import CAPTURE_SHEET_HTML, CAPTURE_SHEET_PDF
+
+    check_replaceable(folder / name for name in (CONFIG_NAME, MANIFEST_NAME, CAPTURE_SHEET_NAME,
+                                                 CAPTURE_SHEET_HTML, CAPTURE_SHEET_PDF))
     if levels:  # the analysis reads T_R from here for lost motion
         doc["gear"] = {"rated_torque_nm": float(rated_torque_nm)}
     planned = config_from_dict({**doc, "protocol": {**doc["protocol"], "max_torque_nm": planned_max}})

@@ -6,7 +6,7 @@ Steps
    (configuration, every manifest row, every image file) before anything is
    measured.
 2. Every image is read, hashed (XXH3-128 of its bytes) and, unless the cache
-   (``OUT_DIR/.cache/``, :mod:`.cache`) held a result for that image hash and those
+   (``OUT_DIR/.vision-torsion-cache/``, :mod:`.cache`) held a result for that image hash and those
    measurement settings when the run started, decoded and measured by
    :func:`vision_torsion.pair.measure_pair`. With up to three jobs this happens in
    this process: `jobs` threads read, decode and find the marker candidates at most
@@ -371,7 +371,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         The session folder (session.toml, manifest.csv, images).
     out_dir : str or os.PathLike, optional
         Output folder; ``SESSION_DIR/results`` by default. It holds
-        ``measurements.csv`` and the cache ``.cache/``.
+        ``measurements.csv`` and the cache ``.vision-torsion-cache/``.
     jobs : int, optional
         Images read and decoded at once; all available cores by default. 1
         measures in this process alone; up to 3 (``_MAX_THREAD_JOBS``) run as
@@ -414,7 +414,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
-    check_output_dir(out)  # before measuring: a run must not do its work and then fail to write it
+    # before measuring: a run must not do its work and then fail to write it
+    check_output_dir(out, replaces=[MEASUREMENTS_NAME])
     settings = session.settings
     # a bad correction file is unusable input: say so before measuring anything
     correction = load_correction(settings.correction)

@@ -65,7 +65,7 @@ class ShotMeasurer:
     ----------
     session : Session
     out_dir : path-like
-        The output folder whose ``.cache`` is shared with ``process``.
+        The output folder whose cache is shared with ``process``.
     measure : callable, optional
         The measuring function (:func:`~vision_torsion.pair.measure_pair` by
         default; the seam ``process_session(measure=...)`` has too).
