@@ -135,15 +135,70 @@ def test_the_camera_folder_disappears_and_comes_back(rig):
         assert len(w.bound) == 2
 
 
-def test_a_file_that_never_decodes_is_set_aside(rig):
+def test_a_stalled_file_holds_its_row_and_the_files_after_it_wait(rig):
     folder, cam, plan, photos = rig
-    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]][:-30])  # no IEND: cut short
+    first = photos[plan.rows[0]["image"]]
+    put(cam, "IMG_0001.png", first[:-30])  # no IEND: stalled half-way
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))  # taken after it
     clock = Clock()
     with Watcher(folder, camera_dir=cam, clock=clock, give_up_s=10.0) as w:
-        assert run(w, clock, 6) == []  # waited for: it may still be being written
-        ignored = messages(run(w, clock, 2), "ignored")
-    assert len(ignored) == 1 and ignored[0].startswith("IMG_0001.png: ") and ignored[0].endswith(
-        "; still so after 10 s: set aside, not bound")
+        assert run(w, clock, 6) == []  # waited for, and IMG_0002 waits behind it
+        events = run(w, clock, 2)
+        (stalled,) = [e.message for e in events if e.kind == "warning"]
+        assert stalled.startswith("IMG_0001.png (line 2: orientation 0, cycle 1, reference, step 0): "
+                                  "still not a complete image after 10 s (IMG_0001.png: ")
+        assert stalled.endswith("bound to this row as failed, so that the photographs after it keep "
+                                "their rows. It is measured again when it changes; if it is not a "
+                                "photograph of this row, leave it out with `vision-torsion bind "
+                                "--skip IMG_0001.png`")
+        assert [e.file for e in events if e.kind == "shot"] == ["IMG_0001.png", "IMG_0002.png"]
+        assert {b.file: b.row.line for b in w.bound.values()} == {"IMG_0001.png": 2, "IMG_0002.png": 3}
+        # the card finally delivers the rest: measured again, announced, warning gone
+        put(cam, "IMG_0001.png", first)
+        events = run(w, clock, 2)
+        assert messages(events, "replaced") == [
+            "IMG_0001.png changed after it was measured (a re-shot, or a file written late): "
+            "measured again for line 2: orientation 0, cycle 1, reference, step 0; its old "
+            "result is dropped"]
+        assert not [b for b in w.bound.values() if b.warnings]
+
+
+def test_a_stalled_file_fails_its_row_in_process(rig):
+    from vision_torsion.session import process_session
+
+    folder, cam, plan, photos = rig
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]][:-30])
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock, give_up_s=3.0) as w:
+        run(w, clock, 4)
+    res = process_session(folder, jobs=1)
+    # the reference failed, so the row after it has no angle either: not pending, failed
+    assert not res.ok and [image for image, _ in res.failures] == [plan.rows[0]["image"], plan.rows[1]["image"]]
+    assert "truncated PNG" in res.failures[0][1] and "reference image" in res.failures[1][1]
+
+
+def test_a_reshot_under_the_same_name_is_measured_again(rig):
+    folder, cam, plan, photos = rig
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock) as w:
+        run(w, clock)
+        before = w.bound[1].angle
+        write_image(cam / "IMG_0002.png", draw_target(7.0))
+        os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+        events = run(w, clock)
+        assert messages(events, "replaced") == [
+            "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
+            "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
+            "old result is dropped"]
+        assert [e.file for e in events if e.kind == "shot"] == ["IMG_0002.png"]
+        (point,) = [p for p in w.live_points() if p.file == "IMG_0002.png"]
+        assert point.angle_deg == w.bound[1].angle != before
+        assert len(w.bound) == 2
 
 
 def warnings_of(rig, second):

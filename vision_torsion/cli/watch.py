@@ -32,6 +32,10 @@ def register(subparsers) -> None:
                    help="seconds between looks at the folder")
     p.add_argument("--settle", type=float, default=1.0, metavar="S",
                    help="seconds a file must stay unchanged before it is read")
+    p.add_argument("--give-up", type=float, default=10.0, metavar="S",
+                   help="seconds a settled file may stay incomplete (a slow card, a network "
+                        "share) before it is bound to its row as failed; the files after it "
+                        "wait for it meanwhile, so none takes its row")
     p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
     add_common_options(p)
     p.set_defaults(func=run)
@@ -49,7 +53,7 @@ def run(args) -> int:
         return rep
 
     res = watch_session(args.session_dir, camera_dir=args.camera_dir, out_dir=args.out_dir,
-                        poll_s=args.poll, settle_s=args.settle,
+                        poll_s=args.poll, settle_s=args.settle, give_up_s=args.give_up,
                         finish=None if args.no_report else report)
     print(f"{res.n_bound} of {res.n_rows} planned images bound; {res.n_warnings} with warnings; "
           f"live page {res.page}")

@@ -61,8 +61,9 @@ logger = logging.getLogger(__name__)
 #: Columns added after the manifest's own (whose torque_nm/torque_std_nm, if any,
 #: are replaced by these): :data:`vision_torsion.measurements.RESULT_COLUMNS`.
 OUTPUT_COLUMNS = RESULT_COLUMNS
-#: Bump when the cache entry layout changes; part of every cache key.
-_CACHE_FORMAT = 5
+#: Bump when the cache entry layout, or the way an entry is measured, changes; part of
+#: every cache key.
+_CACHE_FORMAT = 6
 #: Up to this many jobs run as threads of the calling process (jobs threads read,
 #: decode and find candidates, the calling thread measures); more run as worker
 #: processes. The measuring thread (~2 ms per image, holding the GIL) would keep

@@ -16,9 +16,8 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ImageReadError
-from ..images import GreyImage, decode_image
-from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
+from ..images import GreyImage
+from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
 __all__ = ["Shot", "ShotMeasurer"]
@@ -72,11 +71,12 @@ class ShotMeasurer:
     """
 
     def __init__(self, session: Session, out_dir, *, measure=None):
+        from ..pair import measure_pair
         from .process import _settings_key, _valid_entry  # process's cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
-        self.key = _settings_key(self.settings)
+        self.key = _settings_key(self.settings, measure_pair if measure is None else measure)
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
         self._check = _valid_entry
         self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
@@ -105,9 +105,8 @@ class ShotMeasurer:
         Never raises for a bad image: an unreadable, undecodable or unmeasurable
         file gives a Shot with ``pair=None`` and the reason.
         """
-        from ..markers import find_candidates
         from ..pair import PairMeasurement
-        from .worker import ReadImage, content_hash, digest, finish_task
+        from .worker import content_hash, finish_task, prepare_task
 
         path = Path(path)
         t0 = time.perf_counter()
@@ -116,29 +115,28 @@ class ShotMeasurer:
         except OSError as exc:
             return Shot(path, None, f"{path.name}: cannot be read ({exc.strerror or exc})")
         image_hash = content_hash(data)
-        key = digest(f"{image_hash}\n{self.key}".encode())
+        key = cache_key(image_hash, self.key)
         t1 = time.perf_counter()
         entry = self.cached.get(key)
         image, cached = None, entry is not None
         t2 = t1
         if entry is None:
+            # process's own steps (decode, candidates, measure): one key, one result
             task = (str(path), self.settings_json, self.key)
-            try:
-                image = decode_image(data, name=str(path), keep_integers=True)
-            except ImageReadError as exc:  # not cached: it may be a file still being written
-                message = str(exc).replace(str(path), path.name)
-                return Shot(path, None, message, undecodable=True, image_hash=image_hash,
-                            timings={"read": t1 - t0, "decode": time.perf_counter() - t1, "measure": 0.0})
+            read = prepare_task(data, task)
             t2 = time.perf_counter()
-            try:
-                read = ReadImage(key, image_hash, image=image,
-                                 candidates=find_candidates(image.data, self.settings))
-            except Exception as exc:  # noqa: BLE001 - finish_task reports it as a failure
-                read = ReadImage(key, image_hash, error=exc)
-            _, text, _ = finish_task(read, task)
-            entry = json.loads(text)
-            if entry["status"] == "ok":
-                self.cached[key] = entry
+            if read.undecodable:  # not cached: it may be a file still being written
+                message = str(read.error).replace(str(path), path.name)
+                return Shot(path, None, message, undecodable=True, image_hash=image_hash,
+                            timings={"read": t1 - t0, "decode": t2 - t1, "measure": 0.0})
+            image = read.image
+            if read.result is not None:  # cached by another Shot of this run
+                entry = self.cached.get(key)
+            if entry is None:
+                _, text, _ = finish_task(read, task)
+                entry = json.loads(text)
+                if entry["status"] == "ok":
+                    self.cached[key] = entry
         t3 = time.perf_counter()
         timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
         if entry["status"] != "ok":

@@ -13,15 +13,19 @@ A tick:
    Says so once, and waits for it to come back.
 2. A file is complete when its size and modification time have not changed for
    `settle_s` (a camera writes in chunks) and it decodes (a PNG without its IEND
-   chunk, a JPEG without its end marker is waited for, not measured). A file
-   that stays undecodable for `give_up_s` is reported and set aside. Files whose
+   chunk, a JPEG without its end marker is waited for, not measured). Files whose
    time is already older than `settle_s` when first seen (a resumed watch) are
    complete at once.
 3. Each complete file, in capture order (file time, then natural name order), is
    measured (:class:`~.shots.ShotMeasurer`: ``process``'s cache, shared) and bound
    to the next planned row not yet photographed (with no ``--camera-dir``, a file
-   saved under a row's planned name is bound to that row). Non-images, copies
-   (the same bytes as an earlier file) and files beyond the last row are set
+   saved under a row's planned name is bound to that row). A file not complete yet
+   holds back every file after it in capture order, so none takes its row; one that
+   stays undecodable for `give_up_s` (stalled half-way: a slow card, a network
+   share) is bound to its row as failed, with a warning naming it, and ``process``
+   fails that row. A bound file that changes (a re-shot under the same name, a
+   stalled file finished late) is measured again and announced. Non-images,
+   copies (the same bytes as an earlier file) and files beyond the last row are set
    aside with a message naming them; nothing is ever written in the camera folder.
 4. Its angle (against its orientation's reference image, ``angle_sign`` applied),
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
@@ -75,8 +79,9 @@ class WatchEvent:
     ----------
     kind : str
         "shot" (a photograph bound and measured), "warning" (about a photograph),
-        "retracted" (a warning the next image showed to be the gear), "ignored" (a
-        file set aside), "leftover" (a photograph beyond the last row), "deleted",
+        "retracted" (a warning the next image showed to be the gear), "replaced" (a
+        bound file changed: measured again), "ignored" (a file set aside), "leftover"
+        (a photograph beyond the last row), "deleted",
         "folder_gone", "folder_back", "complete" (every row has its photograph).
     file : str
         The file concerned ("" for folder events).
@@ -111,6 +116,9 @@ class _Bound:
     delta: float = math.nan
     edge_width: float = math.nan
     result: object | None = None  # AngleResult against the orientation's reference
+    stat: tuple | None = None  # (size, mtime_ns) of the file when it was measured
+    image_hash: str = ""
+    stalled: str | None = None  # why a file that never completed holds its row
 
 
 class Watcher:
@@ -127,7 +135,10 @@ class Watcher:
     settle_s : float
         Seconds a file's size and time must stay the same before it is read.
     give_up_s : float
-        Seconds a settled file may stay undecodable before it is set aside.
+        Seconds a settled file may stay undecodable (half-written: a slow card, a
+        network share) before it is bound to its row as failed, with a warning
+        naming it; the files after it in capture order wait for it meanwhile, so
+        none of them takes its row. It is measured again when it changes.
     page : bool
         Write the live page (after every tick that took in a photograph).
     binding_every_s : float
@@ -144,6 +155,10 @@ class Watcher:
                  clock=time.monotonic):
         from .shots import ShotMeasurer
 
+        for what, value in (("settle_s", settle_s), ("give_up_s", give_up_s)):
+            if not (isinstance(value, (int, float)) and 0 <= value < math.inf):
+                raise SessionError(f"{what} = {value!r}: expected a finite number of seconds >= 0",
+                                   reason="bad_option")
         self.session = load_session(session_dir, check_files=False)
         folder = self.session.folder
         self.camera_mode = camera_dir is not None
@@ -235,13 +250,13 @@ class Watcher:
             elif info is not None:
                 events.append(self._notice("deleted", name, f"{name} was deleted before it was "
                                            "complete; not bound"))
-        ready = []
+        ready, unsettled, changed_bound = [], [], []
         wall = time.time()
         for e in entries:
             name = e.name
-            if name in self.done or name in self.set_aside:
+            if name in self.set_aside:
                 continue
-            if Path(name).suffix.lower() not in IMAGE_SUFFIXES:
+            if name not in self.done and Path(name).suffix.lower() not in IMAGE_SUFFIXES:
                 self.set_aside[name] = "not an image"
                 events.append(self._notice("ignored", name, f"{name}: not an image file (expected "
                                            f"{', '.join(IMAGE_SUFFIXES)}); not bound"))
@@ -249,19 +264,42 @@ class Watcher:
             if name in self.skipped:
                 self.set_aside[name] = "skipped"
                 continue
-            st = e.stat()
+            try:
+                st = e.stat()
+            except OSError:  # vanished meanwhile: the next tick says so
+                continue
             info = self.seen.get(name)
             if info is None or (info.size, info.mtime_ns) != (st.st_size, st.st_mtime_ns):
                 old = wall - st.st_mtime > self.settle_s
                 self.seen[name] = info = _Seen(st.st_size, st.st_mtime_ns,
                                                -math.inf if old else now)
-            if st.st_size > 0 and now - info.since >= self.settle_s:
-                ready.append((st.st_mtime_ns, natural_key(name), name))
+            settled = now - info.since >= self.settle_s
+            order = (st.st_mtime_ns, natural_key(name), name)
+            if name in self.done:
+                pos = self._position(name)
+                if pos is not None and self.bound[pos].stat != (st.st_size, st.st_mtime_ns) and settled:
+                    changed_bound.append((pos, name))
+            elif settled:
+                ready.append(order)
+            else:
+                unsettled.append(order)
         changed = False
-        for _, _, name in sorted(ready):
+        for pos, name in changed_bound:
+            new = self._remeasure(pos, name, now)
+            changed = changed or bool(new)
+            events += new
+        # capture order is binding order: a file still being written (or stalled
+        # half-way) holds back every file after it, so none takes its row
+        first_unsettled = min(unsettled, default=None)
+        for order in sorted(ready):
+            if first_unsettled is not None and order > first_unsettled:
+                break
+            name = order[2]
             new = self._handle(name, now)
             changed = changed or bool(new)
             events += new
+            if name not in self.done and name not in self.set_aside:
+                break  # waited for (not decodable yet): the files after it wait too
         if changed and self.complete:
             events.append(WatchEvent("complete", "", f"all {len(self.rows)} planned images are in"))
         if changed:
@@ -274,29 +312,37 @@ class Watcher:
         self.notices.append(message)
         return WatchEvent(kind, name, message, line)
 
+    def _position(self, name: str) -> int | None:
+        return next((p for p, b in self.bound.items() if b.file == name), None)
+
     def _handle(self, name: str, now: float) -> list[WatchEvent]:
-        """A file that looks complete: measure it and bind it, or wait, or set it aside."""
+        """A file that looks complete: measure it and bind it, or wait."""
         t0 = time.perf_counter()
         path = self.camera / name
         shot = self.measurer.measure(path)
         info = self.seen.get(name)
+        stalled = None
         if shot.undecodable:
             if info is not None and info.first_undecodable is None:
                 info.first_undecodable = now
             if info is not None and now - info.first_undecodable < self.give_up_s:
                 return []  # still being written, most likely: wait
-            self.set_aside[name] = "undecodable"
-            return [self._notice("ignored", name, f"{shot.message}; still so after "
-                                 f"{self.give_up_s:g} s: set aside, not bound")]
-        if not shot.image_hash:
+            # stalled half-written (a slow card, a network share): it takes its row
+            # as a failed image, so the photographs after it keep theirs
+            stalled = (f"still not a complete image after {self.give_up_s:g} s ({shot.message}); "
+                       "bound to this row as failed, so that the photographs after it keep "
+                       "their rows. It is measured again when it changes; if it is not a "
+                       f"photograph of this row, leave it out with `vision-torsion bind "
+                       f"--skip {name}`")
+        elif not shot.image_hash:
             return []  # unreadable: deleted meanwhile (the next tick says so), or no access
         digest = shot.image_hash
-        if digest in self.hashes:
+        if stalled is None and digest in self.hashes:
             self.set_aside[name] = "copy"
             return [self._notice("ignored", name, f"{name}: the same bytes as {self.hashes[digest]} "
                                  "(a copy, not a new photograph); not bound")]
-        self.hashes[digest] = name
-        self.done.add(name)
+        if stalled is None:
+            self.hashes[digest] = name
         pos = None
         if not self.camera_mode:
             row = self.by_name.get(f"images/{name}")
@@ -304,21 +350,59 @@ class Watcher:
         if pos is None:
             nxt = self.next_row()
             if nxt is None:
+                self.done.add(name)
                 return [self._notice("leftover", name, f"{name}: every planned row already has its "
                                      f"photograph ({len(self.rows)} rows); not bound (an extra shot?)")]
             pos = nxt[0]
-        row = self.rows[pos]
-        edge = math.nan
-        if shot.pair is not None:
-            widths = [getattr(m, "edge_width_px", math.nan) for m in (shot.pair.first, shot.pair.second)]
-            edge = float(np.nanmean(widths)) if np.isfinite(widths).any() else math.nan
-        b = _Bound(row, name, shot.pair, shot.message, [], edge_width=edge)
-        self.bound[pos] = b
-        self.order.append(pos)
+        self.done.add(name)
+        self._bind(pos, name, shot, info)
+        self.bound[pos].stalled = stalled
         events = self._check(pos, shot)
         self.timings.append({**shot.timings, "live": time.perf_counter() - t0 - shot.timings.get("decode", 0.0),
                              "file": name, "cached": shot.cached})
         return events
+
+    def _bind(self, pos: int, name: str, shot, info) -> None:
+        edge = math.nan
+        if shot.pair is not None:
+            widths = [getattr(m, "edge_width_px", math.nan) for m in (shot.pair.first, shot.pair.second)]
+            edge = float(np.nanmean(widths)) if np.isfinite(widths).any() else math.nan
+        b = _Bound(self.rows[pos], name, shot.pair, shot.message, [], edge_width=edge,
+                   stat=None if info is None else (info.size, info.mtime_ns), image_hash=shot.image_hash)
+        if pos not in self.bound:
+            self.order.append(pos)
+        self.bound[pos] = b
+
+    def _remeasure(self, pos: int, name: str, now: float) -> list[WatchEvent]:
+        """A bound file whose size or time changed (a re-shot under the same name, or
+        a stalled file finished late): measured again, and said so."""
+        old = self.bound[pos]
+        info = self.seen.get(name)
+        shot = self.measurer.measure(self.camera / name)
+        if shot.undecodable:
+            if info is not None and info.first_undecodable is None:
+                info.first_undecodable = now
+            if info is not None and now - info.first_undecodable < self.give_up_s:
+                return []  # being rewritten: wait for it
+        if not shot.image_hash:
+            return []
+        if shot.image_hash == old.image_hash:  # touched, not changed
+            old.stat = None if info is None else (info.size, info.mtime_ns)
+            return []
+        if self.hashes.get(old.image_hash) == name:
+            del self.hashes[old.image_hash]
+        if not shot.undecodable:
+            self.hashes.setdefault(shot.image_hash, name)
+        self._bind(pos, name, shot, info)
+        b = self.bound[pos]
+        b.stalled = None if not shot.undecodable else old.stalled
+        for x in self.bound.values():  # the reference may be the one replaced: angles again
+            if x.row.orientation_deg == b.row.orientation_deg:
+                x.result = None
+        notice = self._notice("replaced", name, f"{name} changed after it was measured (a re-shot, "
+                              "or a file written late): measured again for "
+                              f"{row_text(b.row)}; its old result is dropped", b.row.line)
+        return [notice] + self._check(pos, shot)
 
     def _check(self, pos: int, shot) -> list[WatchEvent]:
         """Angles of the orientation, the step checks, the image checks; events."""
@@ -327,7 +411,9 @@ class Watcher:
         b = self.bound[pos]
         row = b.row
         warnings: list[str] = []
-        if shot.pair is None:
+        if b.stalled is not None:
+            warnings.append(b.stalled)
+        elif shot.pair is None:
             warnings.append(f"marker not found: {shot.message}")
         if shot.image is not None:
             data = shot.image.data

@@ -30,11 +30,12 @@ from ..batch import attempt
 from ..images import GreyImage, decode_image
 from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
-from .cache import CacheLog
+from .cache import CacheLog, cache_key
 
 __all__ = [
     "measure_task",
     "read_task",
+    "prepare_task",
     "finish_task",
     "ReadImage",
     "digest",
@@ -102,6 +103,8 @@ class ReadImage:
         Why it could not be decoded.
     result : tuple or None
         The task's result when it needs no measuring: cached, or unreadable.
+    undecodable : bool
+        The bytes could not be decoded as an image (`error` says why).
     """
 
     key: str
@@ -110,6 +113,7 @@ class ReadImage:
     candidates: object | None = None
     error: Exception | None = None
     result: tuple[str, str | None, str] | None = None
+    undecodable: bool = False
 
 
 def read_task(task: tuple[str, str, str]) -> ReadImage:
@@ -122,21 +126,32 @@ def read_task(task: tuple[str, str, str]) -> ReadImage:
     (:func:`finish_task`). Detecting here, while the image is still in this core's
     caches, costs about half as much as in the measuring thread.
     """
-    path, settings_json, settings_key = task
+    path = task[0]
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
         why = json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"})
         return ReadImage("", result=("", why, "unread"))
+    return prepare_task(data, task)
+
+
+def prepare_task(data: bytes, task: tuple[str, str, str]) -> ReadImage:
+    """:func:`read_task` on bytes already read: hash, and unless cached, decode and
+    find the candidates. ``bind`` and ``watch`` (:mod:`.shots`) use it too, so an
+    image is measured from the same candidates whichever command measures it."""
+    path, settings_json, settings_key = task
     image_hash = content_hash(data)
-    key = digest(f"{image_hash}\n{settings_key}".encode())
+    key = cache_key(image_hash, settings_key)
     if key in _Cache.known:
         return ReadImage(key, image_hash, result=(key, None, "cached"))
     try:
         image = decode_image(data, name=path, keep_integers=True)
+    except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
+        return ReadImage(key, image_hash, error=exc, undecodable=True)
+    try:
         candidates = pair_candidates(image.data, _settings_from(settings_json))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
-        return ReadImage(key, image_hash, error=exc)
+        return ReadImage(key, image_hash, image=image, error=exc)
     return ReadImage(key, image_hash, image=image, candidates=candidates)
 
 
