@@ -11,6 +11,7 @@ is never measured again by ``process`` or ``report``, and the other way round.
 from __future__ import annotations
 
 import json
+import math
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -20,7 +21,7 @@ from ..images import GreyImage
 from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
-__all__ = ["Shot", "ShotMeasurer"]
+__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "SATURATED_FRACTION", "BLUR_RATIO"]
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,8 @@ class Shot:
         image); nothing was cached for it.
     timings : dict
         Seconds spent: ``read`` (file read and hash), ``decode``, ``measure``.
+    saturated_fraction : float
+        Fraction of the pixels at full scale (NaN when not known: not decoded).
     """
 
     path: Path
@@ -55,6 +58,53 @@ class Shot:
     timings: dict = field(default_factory=dict)
     undecodable: bool = False
     image_hash: str = ""
+    saturated_fraction: float = math.nan
+
+
+#: An image with more than this fraction of its pixels at full scale is saturated.
+SATURATED_FRACTION = 0.005
+#: Marker edges this many times as wide as in the orientation's reference: blurred.
+BLUR_RATIO = 1.5
+
+
+def edge_width(pair) -> float:
+    """Mean fitted edge width of the pair's two markers (px; NaN when unknown)."""
+    if pair is None:
+        return math.nan
+    widths = [getattr(m, "edge_width_px", math.nan) for m in (pair.first, pair.second)]
+    widths = [w for w in widths if isinstance(w, (int, float)) and math.isfinite(w)]
+    return sum(widths) / len(widths) if widths else math.nan
+
+
+def image_warnings(pair, reference, saturated: float) -> list[str]:
+    """The image checks of ``watch`` and ``bind``, one rule for both.
+
+    Parameters
+    ----------
+    pair : PairMeasurement or None
+        The image's target.
+    reference : PairMeasurement or None
+        Its orientation's reference image's target (None: the image is the
+        reference, or the reference failed: no blur check).
+    saturated : float
+        Fraction of its pixels at full scale (:attr:`Shot.saturated_fraction`).
+
+    Returns
+    -------
+    list of str
+        "saturated: ..." when more than :data:`SATURATED_FRACTION` of the pixels
+        are at full scale; "blurred: ..." when the markers' edges are more than
+        :data:`BLUR_RATIO` times as wide as the reference's (camera shake, focus).
+    """
+    out = []
+    if math.isfinite(saturated) and saturated > SATURATED_FRACTION:
+        out.append(f"saturated: {100 * saturated:.1f} % of the pixels at full scale "
+                   "(shorten the exposure or dim the light)")
+    width, ref = edge_width(pair), edge_width(reference)
+    if reference is not None and math.isfinite(width) and math.isfinite(ref) and width > BLUR_RATIO * ref:
+        out.append(f"blurred: marker edges {width:.1f} px wide against {ref:.1f} px in the "
+                   "reference (camera shake, or focus?); shoot it again")
+    return out
 
 
 class ShotMeasurer:
@@ -139,8 +189,11 @@ class ShotMeasurer:
                     self.cached[key] = entry
         t3 = time.perf_counter()
         timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
+        saturated = entry.get("saturated_fraction", math.nan)
+        saturated = float(saturated) if isinstance(saturated, (int, float)) else math.nan
         if entry["status"] != "ok":
             message = entry.get("message", "").replace(str(path), path.name)
-            return Shot(path, None, message, image, cached, timings, image_hash=image_hash)
+            return Shot(path, None, message, image, cached, timings, image_hash=image_hash,
+                        saturated_fraction=saturated)
         return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings,
-                    image_hash=image_hash)
+                    image_hash=image_hash, saturated_fraction=saturated)

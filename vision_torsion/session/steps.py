@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["StepPoint", "StepWarning", "check_steps", "WARNING_KINDS"]
+__all__ = ["StepPoint", "StepWarning", "check_steps", "first_load_inverted", "WARNING_KINDS"]
 
 #: Kinds of step warning.
 WARNING_KINDS = ("no_movement", "wrong_direction", "small_step", "large_step")
@@ -94,7 +94,7 @@ class StepWarning:
     message: str
 
 
-def check_steps(points, *, step_torque_nm: float) -> list[StepWarning]:
+def check_steps(points, *, step_torque_nm: float, open_end: bool = False) -> list[StepWarning]:
     """Warnings for the steps of one orientation's image sequence (module docstring).
 
     Parameters
@@ -103,6 +103,12 @@ def check_steps(points, *, step_torque_nm: float) -> list[StepWarning]:
         The orientation's images in capture order, the reference (zero torque) first.
     step_torque_nm : float
         Torque of one planned weight step, ``2 m g r`` (N·m).
+    open_end : bool
+        The sequence goes on (a live one): an out-of-line newest step, which only
+        the next step can confirm, is not reported yet (``watch`` reports it at the
+        next image, or never when the next goes on at the new stiffness: an
+        expected change of stiffness is not a mistake). False: it is reported,
+        saying the next step would tell.
 
     Returns
     -------
@@ -153,6 +159,9 @@ def check_steps(points, *, step_torque_nm: float) -> list[StepWarning]:
             small = ratio < _SMALL
             nxt = steps[k + 1] if k + 1 < len(steps) else None
             hedge = not (nxt is not None and single(nxt[1]) and nxt[1] * d_tau > 0)
+            if nxt is None and open_end:
+                after_warning = False
+                continue  # undecided until the next image: neither a warning nor a reference
             if not hedge:
                 r_next = nxt[2] / (compliance[0] * nxt[1])
                 confirmed = r_next >= _RECOVERY if small else r_next <= _GOES_ON
@@ -178,3 +187,30 @@ def check_steps(points, *, step_torque_nm: float) -> list[StepWarning]:
             out.append(StepWarning(i, warn[0], d_theta, d_tau, ratio, warn[1]))
             after_warning = True
     return out
+
+
+def first_load_inverted(points) -> int | None:
+    """Whether the first loaded image of a sequence turned against its torque.
+
+    Parameters
+    ----------
+    points : sequence of StepPoint
+        An orientation's images in capture order, its reference (zero torque) first,
+        angles with the session's ``angle_sign`` applied.
+
+    Returns
+    -------
+    int or None
+        The position of the first image with a planned torque and an angle when
+        that angle's sign is opposite to the torque's by more than 5 σ (the
+        ``angle_sign`` is inverted, or the wrong pans were loaded); None when it
+        turned with the torque, or there is no such image yet. The first load is
+        the largest step of a session (the reference to ±T_max): a sign read there
+        is unambiguous.
+    """
+    for i, p in enumerate(points[1:], start=1):
+        if p.torque_nm == 0 or p.angle_deg is None or not math.isfinite(p.angle_deg):
+            continue
+        still = abs(p.angle_deg) < _STILL_SIGMAS * math.hypot(p.angle_std_deg, points[0].angle_std_deg)
+        return i if (p.angle_deg * p.torque_nm < 0 and not still) else None
+    return None

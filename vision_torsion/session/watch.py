@@ -45,12 +45,11 @@ from __future__ import annotations
 import logging
 import math
 import os
+import shlex
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from ..errors import SessionError
 from ..fileio import atomic_write_text
@@ -67,8 +66,6 @@ __all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult"]
 
 logger = logging.getLogger(__name__)
 
-_BLUR_RATIO = 1.5
-_SATURATED_FRACTION = 0.005
 
 
 @dataclass(frozen=True)
@@ -119,6 +116,7 @@ class _Bound:
     stat: tuple | None = None  # (size, mtime_ns) of the file when it was measured
     image_hash: str = ""
     stalled: str | None = None  # why a file that never completed holds its row
+    own: list = field(default_factory=list)  # the image's own warnings (not its steps')
 
 
 class Watcher:
@@ -186,6 +184,9 @@ class Watcher:
         cfg = self.session.config
         self.step_torque = 2.0 * cfg.protocol.step_mass_kg * cfg.rig.gravity_m_per_s2 * cfg.rig.arm_radius_m
         self.torques = [self.session.torque(row).torque_nm for row in rows]
+        self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
+        self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)
+        self.swapped: dict[int, tuple[int, str]] = {}  # position -> (its partner, the diagnosis)
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
         self._closed = False
         self.binding_every_s = binding_every_s
@@ -363,10 +364,9 @@ class Watcher:
         return events
 
     def _bind(self, pos: int, name: str, shot, info) -> None:
-        edge = math.nan
-        if shot.pair is not None:
-            widths = [getattr(m, "edge_width_px", math.nan) for m in (shot.pair.first, shot.pair.second)]
-            edge = float(np.nanmean(widths)) if np.isfinite(widths).any() else math.nan
+        from .shots import edge_width
+
+        edge = edge_width(shot.pair)
         b = _Bound(self.rows[pos], name, shot.pair, shot.message, [], edge_width=edge,
                    stat=None if info is None else (info.size, info.mtime_ns), image_hash=shot.image_hash)
         if pos not in self.bound:
@@ -405,73 +405,144 @@ class Watcher:
         return [notice] + self._check(pos, shot)
 
     def _check(self, pos: int, shot) -> list[WatchEvent]:
-        """Angles of the orientation, the step checks, the image checks; events."""
-        from ..angle import pair_angle
+        """The image checks of the new photograph, then its orientation's (angles,
+        steps, swaps, the axis, the sign); events: its line, then the warnings
+        found now (on it, or on the image before it that it decided)."""
+        from .shots import image_warnings
 
         b = self.bound[pos]
         row = b.row
-        warnings: list[str] = []
+        own: list[str] = []
         if b.stalled is not None:
-            warnings.append(b.stalled)
+            own.append(b.stalled)
         elif shot.pair is None:
-            warnings.append(f"marker not found: {shot.message}")
-        if shot.image is not None:
-            data = shot.image.data
-            frac = np.count_nonzero(data >= shot.image.full_scale) / data.size
-            if frac > _SATURATED_FRACTION:
-                warnings.append(f"saturated: {100 * frac:.1f} % of the pixels at full scale "
-                                "(shorten the exposure or dim the light)")
-        same = sorted(p for p, x in self.bound.items() if x.row.orientation_deg == row.orientation_deg)
-        ref = next((p for p in same if self.bound[p].row.phase == "reference"), None)
-        retracted: list[WatchEvent] = []
-        if ref is not None and self.bound[ref].pair is not None:
-            rb = self.bound[ref]
-            if (pos != ref and math.isfinite(b.edge_width) and math.isfinite(rb.edge_width)
-                    and b.edge_width > _BLUR_RATIO * rb.edge_width):
-                warnings.append(f"blurred: marker edges {b.edge_width:.1f} px wide against "
-                                f"{rb.edge_width:.1f} px in the reference (camera shake, or focus?)")
-            seq = [p for p in same if p >= ref]
-            seq.sort(key=self.order.index)
-            ok = [p for p in seq if self.bound[p].pair is not None]
-            # incremental: the new photograph is the last of its orientation in capture
-            # order, so only its angle is new (the recurrence of sequence_angles)
-            sign = self.session.config.angle_sign
-            prev = math.nan
-            for p in ok:
-                x = self.bound[p]
-                if x.result is None:
-                    near = 0.0 if not math.isfinite(prev) else sign * prev
-                    x.result = pair_angle(rb.pair, x.pair, near_deg=near)
-                    x.angle = sign * x.result.angle_deg
-                x.delta = x.angle - prev
-                prev = x.angle
-            angles = [self.bound[p].result for p in ok]
-            points = [StepPoint(self.torques[p], self.bound[p].angle,
-                                0.0 if a is None else a.angle_std_deg) for p, a in zip(ok, angles)]
-            current = {ok[w.index]: w for w in check_steps(points, step_torque_nm=self.step_torque)}
-            for p in ok:
-                x = self.bound[p]
-                old = [w for w in x.warnings if w.startswith("step:")]
-                if p != pos and old and p in current:  # confirmed by the next image: no hedge now
-                    x.warnings = [w for w in x.warnings if not w.startswith("step:")] + [
-                        "step: " + current[p].message]
-                if p != pos and old and p not in current:
-                    x.warnings = [w for w in x.warnings if not w.startswith("step:")]
-                    retracted.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
-                                                "not a mistake after all: the next image goes on at "
-                                                "the new stiffness (the gear switching branch)", x.row.line))
-            if pos in current:
-                warnings.append("step: " + current[pos].message)
-        b.warnings = warnings
+            own.append(f"marker not found: {shot.message}")
+        ref = self._reference(row.orientation_deg)
+        reference = self.bound[ref].pair if ref is not None and ref != pos else None
+        own += image_warnings(shot.pair, reference, shot.saturated_fraction)
+        b.own = own
+        before = {p: list(x.warnings) for p, x in self.bound.items()}
+        for orientation in dict.fromkeys(x.row.orientation_deg for x in self.bound.values()):
+            self._analyse(orientation)
         number = self.order.index(pos) + 1
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
                 + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
                 )
-        events = [WatchEvent("shot", b.file, line, row.line)] + retracted
-        events += [WatchEvent("warning", b.file, f"{b.file} ({row_text(row)}): {w.removeprefix('step: ')}",
-                              row.line) for w in warnings]
+        events = [WatchEvent("shot", b.file, line, row.line)]
+        for p in sorted(self.bound, key=lambda q: (q != pos, self.order.index(q))):
+            x = self.bound[p]
+            old = [] if p == pos else before.get(p, [])
+            for w in x.warnings:
+                if w not in old:
+                    events.append(WatchEvent("warning", x.file, f"{x.file} ({row_text(x.row)}): {w}",
+                                             x.row.line))
+            if old and not x.warnings:
+                events.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
+                                         "not a mistake after all: the next image goes on at the new "
+                                         "stiffness (the gear switching branch)", x.row.line))
         return events
+
+    def _reference(self, orientation: float) -> int | None:
+        return next((p for p in sorted(self.bound) if self.bound[p].row.orientation_deg == orientation
+                     and self.bound[p].row.phase == "reference"), None)
+
+    def _analyse(self, orientation: float) -> None:
+        """Angles, step checks, swaps, the axis and the sign of one orientation's
+        photographs so far; sets each one's warnings (its own, then these)."""
+        from ..angle import pair_angle
+        from .axis import check_axis
+        from .steps import first_load_inverted
+
+        same = [p for p in self.bound if self.bound[p].row.orientation_deg == orientation]
+        derived: dict[int, list[str]] = {p: [] for p in same}
+        ref = self._reference(orientation)
+        if ref is not None and self.bound[ref].pair is not None:
+            rb = self.bound[ref]
+            seq = sorted((p for p in same if p >= ref), key=self.order.index)
+            ok = [p for p in seq if self.bound[p].pair is not None]
+            self._angles(rb, ok, pair_angle)
+            points = self._points(ok)
+            if self.sign_decided is None:
+                inverted = first_load_inverted(points)
+                if inverted is not None or any(self.torques[p] != 0 for p in ok[1:]):
+                    self.sign_decided = ok[inverted] if inverted is not None else -1
+                if inverted is not None:
+                    self.sign = -self.sign
+                    for x in self.bound.values():
+                        x.result = None
+                    self._angles(rb, ok, pair_angle)
+                    points = self._points(ok)
+            open_end = any(row.orientation_deg == orientation and i not in self.bound
+                           and row.line not in self.missing for i, row in enumerate(self.rows))
+            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+            if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
+                self._try_swap(ok, points, warns, open_end)
+                points = self._points(ok)
+                warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+            for w in warns:
+                derived[ok[w.index]].append(w.message)
+            for p in ok:
+                if p in self.swapped:
+                    derived[p].append(self.swapped[p][1])
+            for w in check_axis([self.bound[p].pair for p in ok]):
+                derived[ok[w.index]].append(w.message)
+        if self.sign_decided in derived:
+            derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
+        for p in same:
+            self.bound[p].warnings = self.bound[p].own + derived[p]
+
+    def _angles(self, rb, ok, pair_angle) -> None:
+        """Each photograph's angle (``sign`` applied) and Δangle, in capture order;
+        only the new ones are measured (the recurrence of sequence_angles)."""
+        prev = math.nan
+        for p in ok:
+            x = self.bound[p]
+            if x.result is None:
+                near = 0.0 if not math.isfinite(prev) else self.sign * prev
+                x.result = pair_angle(rb.pair, x.pair, near_deg=near)
+            x.angle = self.sign * x.result.angle_deg
+            x.delta = x.angle - prev
+            prev = x.angle
+
+    def _points(self, ok) -> list[StepPoint]:
+        """The step points, the angles of two photographs found swapped exchanged."""
+        def angle(p):
+            return self.bound[self.swapped[p][0] if p in self.swapped else p].angle
+
+        return [StepPoint(self.torques[p], angle(p), self.bound[p].result.angle_std_deg) for p in ok]
+
+    def _try_swap(self, ok, points, warns, open_end) -> None:
+        """The newest photograph warned: were it and the one before taken the other way
+        round? If exchanging them makes their steps fit, they are recorded as swapped
+        (with the ``bind`` fix) and checked that way from now on."""
+        a, b = ok[-2], ok[-1]
+        if a in self.swapped or b in self.swapped:
+            return
+        trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
+                               StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end)
+        if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
+            return
+        fa, fb = self.bound[a].file, self.bound[b].file
+        if self.camera_mode:
+            fix = ("fix: " + shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera),
+                                         "--swap", fa, fb]))
+        else:
+            fix = f"fix: exchange the names of {fa} and {fb}"
+        text = (f"{fa} and {fb} look swapped: {fa} shows the load of line {self.bound[b].row.line} "
+                f"and {fb} that of line {self.bound[a].row.line} (their angle steps fit the plan the "
+                f"other way round); {fix}")
+        self.swapped[a] = (b, text)
+        self.swapped[b] = (a, text)
+
+    def sign_message(self, pos: int) -> str:
+        """The one line saying the session's angle_sign is inverted (at `pos`, the
+        first loaded photograph)."""
+        x = self.bound[pos]
+        return (f"angle_sign is inverted: this first loaded image turned {-x.angle:+.4f}° under "
+                f"{self.torques[pos]:+.5f} N·m; set angle_sign = {self.sign:+d} in "
+                f"{self.session.folder / 'session.toml'} (watch checks the angles with it from here on)")
 
     # -- outputs -----------------------------------------------------------------
 

@@ -23,6 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import cv2
+import numpy as np
 import xxhash
 from threadpoolctl import threadpool_limits
 
@@ -36,6 +37,7 @@ __all__ = [
     "measure_task",
     "read_task",
     "prepare_task",
+    "saturated_fraction",
     "finish_task",
     "ReadImage",
     "digest",
@@ -175,6 +177,8 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         return key, json.dumps({"status": "failed", "message": done.message}), "measured"
     entry = {"status": "ok", "pair": done.value.to_dict()} if done.ok else {"status": "failed", "message": done.message}
     entry["image_xxh3_128"] = read.image_hash
+    if read.image is not None:
+        entry["saturated_fraction"] = saturated_fraction(read.image)
     text = json.dumps(entry, sort_keys=True)
     if _Cache.log is not None:
         try:
@@ -182,6 +186,14 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         except OSError as exc:  # the result stands; only a re-run would measure it again
             logger.warning("%s: result not cached (%s)", path, exc)
     return key, text, "measured"
+
+
+def saturated_fraction(image: GreyImage) -> float:
+    """Fraction of `image`'s pixels at its full scale (0-1): kept with its cached
+    result, so ``watch``, ``bind`` and ``process`` judge saturation from the same
+    number whichever measured it (:func:`~.shots.image_warnings`)."""
+    data = image.data
+    return float(np.count_nonzero(data >= image.full_scale)) / data.size
 
 
 def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:
