@@ -17,13 +17,25 @@ out; a step twice as large as its neighbours (or in the wrong direction) may be 
 missed shot, so the row is marked as not photographed. A fix is proposed, naming
 the file and the row, with the command line that applies it, when it removes that
 misfit and leaves fewer misfits in the whole session; then the next misfit, and so
-on. Misfits no re-binding explains (a step half as large as its neighbours: a
-weight piece forgotten on a pan) are listed with the file and the row.
+on. Two photographs taken the other way round are found the same way (exchanging
+them, ``swap``, makes their steps fit). Misfits no re-binding explains (a step
+half as large as its neighbours: a weight piece forgotten on a pan) are listed
+with the file and the row.
+
+Besides the steps, what the photographs themselves show is diagnosed, one line
+each: an ``angle_sign`` inverted (the first loaded image of most orientations
+turned against its torque: said once, and the steps are checked with the right
+sign, so no good photograph is proposed for skipping), a photograph that could
+not be measured (a half-written file keeps its row: nothing after it shifts), a
+saturated or blurred one (the rule ``watch`` applies,
+:func:`~vision_torsion.session.shots.image_warnings`), and a bumped camera or a
+loosened target (:mod:`.axis`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import shlex
 from collections import defaultdict
 from dataclasses import dataclass
@@ -49,8 +61,9 @@ class Fix:
     Attributes
     ----------
     kind : str
-        "skip" (leave the camera file out: an extra shot) or "missing" (the row was
-        not photographed: a missed shot).
+        "skip" (leave the camera file out: an extra shot), "missing" (the row was
+        not photographed: a missed shot) or "swap" (this file and the next one were
+        taken the other way round).
     file : str
         The camera file (the extra shot, or the first file after the gap).
     line : int
@@ -93,6 +106,12 @@ class BindResult:
         same as `warnings` when no fix is proposed).
     command : str or None
         The ``vision-torsion bind`` command line applying the fixes.
+    diagnoses : tuple of str
+        What the photographs themselves show, one line each, naming file and row:
+        an inverted ``angle_sign`` (one line; the steps are then checked with the
+        right sign, so it proposes no fix), photographs not measured (a stalled,
+        half-written file keeps its row), saturated or blurred ones, and the first
+        camera or target move of each orientation.
     """
 
     binding: Binding
@@ -106,14 +125,15 @@ class BindResult:
     fixes: tuple[Fix, ...]
     remaining: tuple[str, ...]
     command: str | None
+    diagnoses: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
-        """Every row has a file (or was declared missing), every file a row, and
-        every step fits the plan. Files set aside (copies, non-images) are listed
-        but do not count."""
+        """Every row has a file (or was declared missing), every file a row, every
+        step fits the plan and no photograph needs a look (`diagnoses`). Files set
+        aside (copies, non-images) are listed but do not count."""
         declared = set(self.binding.missing)
-        return not (self.leftovers or self.warnings
+        return not (self.leftovers or self.warnings or self.diagnoses
                     or any(line not in declared for line, _ in self.unphotographed))
 
 
@@ -123,31 +143,25 @@ def row_text(row) -> str:
             f"{row.phase}, step {row.step}")
 
 
-def _assign(rows, files, skip, missing):
+def _assign(rows, files, skip, missing, swaps=()):
     """[(row, file or None)] in row order, and the files left over."""
-    usable = iter([f for f in files if f.name not in skip])
+    order = [f for f in files if f.name not in skip]
+    names = [f.name for f in order]
+    for a, b in swaps:
+        i, j = names.index(a), names.index(b)
+        order[i], order[j] = order[j], order[i]
+        names[i], names[j] = names[j], names[i]
+    usable = iter(order)
     out = []
     for row in rows:
         out.append((row, None if row.line in missing else next(usable, None)))
     return out, list(usable)
 
 
-def step_warnings(session: Session, bound, pairs) -> list[tuple[int, object]]:
-    """Step warnings of a bound session: [(position in `bound`, StepWarning)].
-
-    Parameters
-    ----------
-    session : Session
-    bound : sequence of (ManifestRow, object or None)
-        Rows in manifest order with what was photographed for them (None: nothing).
-    pairs : mapping
-        What was photographed -> its PairMeasurement (or None when it failed).
-    """
+def _sequences(session: Session, bound, pairs, sign):
+    """Per orientation: (positions in `bound` from its reference on, their StepPoints)."""
     from ..angle import sequence_angles
 
-    sign = session.config.angle_sign
-    proto, rig = session.config.protocol, session.config.rig
-    step_torque = 2.0 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m
     groups = defaultdict(list)
     for pos, (row, shot) in enumerate(bound):
         if shot is not None and pairs.get(shot) is not None:
@@ -160,15 +174,95 @@ def step_warnings(session: Session, bound, pairs) -> list[tuple[int, object]]:
         points = [StepPoint(session.torque(bound[p][0]).torque_nm,
                             None if a is None else sign * a.angle_deg,
                             0.0 if a is None else a.angle_std_deg) for p, a in zip(seq, angles)]
-        out += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=step_torque)]
+        out.append((seq, points))
+    return out
+
+
+def _step_torque(session: Session) -> float:
+    proto, rig = session.config.protocol, session.config.rig
+    return 2.0 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m
+
+
+def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[int, object]]:
+    """Step warnings of a bound session: [(position in `bound`, StepWarning)].
+
+    Parameters
+    ----------
+    session : Session
+    bound : sequence of (ManifestRow, object or None)
+        Rows in manifest order with what was photographed for them (None: nothing).
+    pairs : mapping
+        What was photographed -> its PairMeasurement (or None when it failed).
+    sign : {1, -1}, optional
+        The angle sign to check with (the session's ``angle_sign`` by default).
+    """
+    sign = session.config.angle_sign if sign is None else sign
+    out = []
+    for seq, points in _sequences(session, bound, pairs, sign):
+        out += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
     return sorted(out, key=lambda t: t[0])
+
+
+def _sign_diagnosis(session: Session, bound, pairs):
+    """(the sign to check with, the one-line diagnosis or None): the session's
+    ``angle_sign`` is inverted when the first loaded image turned against its
+    torque in most orientations (:func:`~.steps.first_load_inverted`)."""
+    from .steps import first_load_inverted
+
+    sign = session.config.angle_sign
+    verdicts = []
+    for seq, points in _sequences(session, bound, pairs, sign):
+        i = first_load_inverted(points)
+        loaded = any(p.torque_nm != 0 and p.angle_deg is not None for p in points[1:])
+        if loaded:
+            verdicts.append(None if i is None else (seq[i], points[i]))
+    against = [v for v in verdicts if v is not None]
+    if not against or 2 * len(against) <= len(verdicts):
+        return sign, None
+    pos, point = against[0]
+    row, f = bound[pos]
+    return -sign, (f"angle_sign is inverted: the first loaded image turned against the torque in "
+                   f"{len(against)} of {len(verdicts)} orientation(s) ({f.name}, {row_text(row)}: "
+                   f"{point.angle_deg:+.4f}° under {point.torque_nm:+.5f} N·m); set angle_sign = "
+                   f"{-sign:+d} in {session.folder / 'session.toml'} (the steps are checked with it)")
+
+
+def _image_diagnoses(bound, pairs, saturated, failed) -> list[str]:
+    """Per photograph: not measured, saturated, blurred (:func:`~.shots.image_warnings`,
+    the rule ``watch`` applies), and the first camera or target move of each
+    orientation (:func:`~.axis.check_axis`)."""
+    from .axis import check_axis
+    from .shots import image_warnings
+
+    out = []
+    refs = {}
+    for row, f in bound:
+        if f is not None and row.phase == "reference":
+            refs.setdefault(row.orientation_deg, f)
+    sequences = defaultdict(list)
+    for row, f in bound:
+        if f is None:
+            continue
+        where = f"{f.name} ({row_text(row)})"
+        if f.name in failed:
+            out.append(f"{where}: not measured: {failed[f.name]}")
+        ref = refs.get(row.orientation_deg)
+        reference = pairs.get(ref) if ref is not None and ref is not f else None
+        out += [f"{where}: {w}" for w in image_warnings(pairs.get(f), reference, saturated.get(f, math.nan))]
+        if ref is not None:
+            sequences[row.orientation_deg].append((row, f))
+    for seq in sequences.values():
+        for w in check_axis([pairs.get(f) for _, f in seq]):
+            row, f = seq[w.index]
+            out.append(f"{f.name} ({row_text(row)}): {w.message}")
+    return out
 
 
 def _describe(bound, warns) -> list[str]:
     return [f"{bound[pos][1].name} ({row_text(bound[pos][0])}): {w.message}" for pos, w in warns]
 
 
-def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=(),
+def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=(), swap=(),
                  write: bool = True, out_dir=None) -> BindResult:
     """Bind the camera's photographs to the manifest rows (see the module docstring).
 
@@ -185,6 +279,9 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         Camera file names to leave out (extra shots).
     missing : iterable of int
         Manifest CSV lines that were not photographed (missed shots).
+    swap : iterable of (str, str)
+        Pairs of camera files taken the other way round: each takes the other's
+        place in the capture order.
     write : bool
         Write ``binding.json`` (False: only check and propose).
     out_dir : path-like, optional
@@ -199,7 +296,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     ------
     SessionError
         The session or camera folder is unusable, `by` is unknown, a `skip` name is
-        not a photograph of the camera folder, or a `missing` line is not a row.
+        not a photograph of the camera folder (or is skipped), or a `missing` line
+        is not a row.
     ManifestError
         manifest.csv is invalid.
     """
@@ -215,25 +313,35 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     for name in skip:
         if name not in names:
             raise SessionError(f"skip: {name!r} is not a photograph in {camera}")
+    swap = tuple((str(a), str(b)) for a, b in swap)
+    for pair in swap:
+        for name in pair:
+            if name not in names or name in skip:
+                raise SessionError(f"swap: {name!r} is not a photograph in {camera}"
+                                   + (" (it is skipped)" if name in skip else ""))
     lines = {row.line for row in rows}
     for line in missing:
         if line not in lines:
             raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
     out = output_folder(session.folder, out_dir)
-    pairs = {}
+    pairs, saturated, failed = {}, {}, {}
     with ShotMeasurer(session, out) as measurer:
         for f in files:
             shot = measurer.measure(f.path)
             pairs[f] = shot.pair
+            saturated[f] = shot.saturated_fraction
             if shot.pair is None:
-                logger.warning("%s: %s", f.name, shot.message)
+                failed[f.name] = shot.message + (" (a half-written file? it keeps its row)"
+                                                 if shot.undecodable else "")
+    sign, sign_note = _sign_diagnosis(session, _assign(rows, files, set(skip), set(missing), swap)[0], pairs)
 
-    def evaluate(sk, mi):
-        bound, left = _assign(rows, files, set(sk), set(mi))
-        return bound, left, step_warnings(session, bound, pairs)
+    def evaluate(sk, mi, sw):
+        bound, left = _assign(rows, files, set(sk), set(mi), sw)
+        return bound, left, step_warnings(session, bound, pairs, sign=sign)
 
-    bound, leftovers, warns = evaluate(skip, missing)
-    fixes, cur_skip, cur_missing, cur = [], list(skip), list(missing), (bound, warns)
+    bound, leftovers, warns = evaluate(skip, missing, swap)
+    fixes, cur_skip, cur_missing, cur_swap = [], list(skip), list(missing), list(swap)
+    cur = (bound, warns)
     unexplained: set[str] = set()  # files whose misfit no re-binding explains
     for _ in range(_MAX_FIXES):
         b, w = cur
@@ -244,22 +352,34 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         row, f = b[pos]
         candidates = []
         if first.kind in ("no_movement", "wrong_direction"):
-            candidates.append(("skip", f, row))  # an extra shot: the same load again
+            candidates.append(("skip", f, row, None))  # an extra shot: the same load again
         if first.kind in ("large_step", "wrong_direction"):
-            candidates.append(("missing", f, row))  # a missed shot: two steps in one
+            candidates.append(("missing", f, row, None))  # a missed shot: two steps in one
+        swapped = {name for pair in cur_swap for name in pair}
+        for d in (1, -1, 2, -2, 3, -3):  # two photographs taken the other way round
+            other = b[pos + d] if 0 <= pos + d < len(b) else None
+            if (other is not None and other[1] is not None and other[0].orientation_deg == row.orientation_deg
+                    and f.name not in swapped and other[1].name not in swapped):
+                candidates.append(("swap", f, row, other))
         best = None
-        for kind, file, r in candidates:
+        for kind, file, r, other in candidates:
             sk = cur_skip + [file.name] if kind == "skip" else cur_skip
             mi = cur_missing + [r.line] if kind == "missing" else cur_missing
-            nb, _, nw = evaluate(sk, mi)
+            sw = cur_swap + [(file.name, other[1].name)] if kind == "swap" else cur_swap
+            nb, _, nw = evaluate(sk, mi, sw)
             still = any(nb[p][1] is file for p, _ in nw)
             if len(nw) < len(w) and not still and (best is None or len(nw) < len(best[3])):
-                best = (kind, file, r, nw, nb, sk, mi)
+                best = (kind, file, r, nw, nb, sk, mi, sw, other)
         if best is None:
             unexplained.add(f.name)
             continue
-        kind, file, r, nw, nb, cur_skip, cur_missing = best
-        if kind == "skip":
+        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other = best
+        if kind == "swap":
+            a, b2 = sorted([(r, file), other], key=lambda t: t[0].line)
+            msg = (f"{a[1].name} and {b2[1].name} look swapped: {a[1].name} shows the load of line "
+                   f"{b2[0].line} and {b2[1].name} that of line {a[0].line} (their angle steps fit the "
+                   f"plan the other way round); exchange them (--swap {a[1].name} {b2[1].name})")
+        elif kind == "skip":
             msg = (f"{file.name} looks like an extra shot: bound to {row_text(r)}, it shows "
                    f"{first.message}; leave it out (--skip {file.name})")
         else:
@@ -276,6 +396,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
             parts += ["--skip", name]
         for line in cur_missing:
             parts += ["--missing", str(line)]
+        for a, b2 in cur_swap:
+            parts += ["--swap", a, b2]
         command = shlex.join(parts)
     binding = Binding(camera_dir=camera, by=by, skipped=skip, missing=missing,
                       images={row.image: f.name for row, f in bound if f is not None})
@@ -285,4 +407,5 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         leftovers=tuple(f.name for f in leftovers),
         unphotographed=tuple((row.line, row.image) for row, f in bound if f is None),
         ignored=listing.ignored, warnings=tuple(_describe(bound, warns)), fixes=tuple(fixes),
-        remaining=tuple(_describe(cur[0], cur[1])), command=command)
+        remaining=tuple(_describe(cur[0], cur[1])), command=command,
+        diagnoses=tuple(([sign_note] if sign_note else []) + _image_diagnoses(bound, pairs, saturated, failed)))

@@ -407,7 +407,8 @@ class Watcher:
     def _check(self, pos: int, shot) -> list[WatchEvent]:
         """The image checks of the new photograph, then its orientation's (angles,
         steps, swaps, the axis, the sign); events: its line, then the warnings
-        found now (on it, or on the image before it that it decided)."""
+        found now, in capture order (on it, or on an image before it that it
+        decided)."""
         from .shots import image_warnings
 
         b = self.bound[pos]
@@ -430,7 +431,7 @@ class Watcher:
                 + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
                 )
         events = [WatchEvent("shot", b.file, line, row.line)]
-        for p in sorted(self.bound, key=lambda q: (q != pos, self.order.index(q))):
+        for p in sorted(self.bound, key=self.order.index):
             x = self.bound[p]
             old = [] if p == pos else before.get(p, [])
             for w in x.warnings:
