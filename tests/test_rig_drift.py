@@ -69,3 +69,34 @@ def test_a_vanished_camera_folder_is_an_error_naming_it(shot, capsys):
     assert main(["process", str(session), "-q"]) == 2
     assert f"{card}: the camera folder" in capsys.readouterr().err
     assert table.read_bytes() == before  # nothing rewritten as pending
+
+
+def test_markers_of_the_other_polarity_are_measured_with_a_note(tmp_path):
+    import dataclasses
+
+    import cv2
+
+    from vision_torsion.measurements import read_measurements
+    from vision_torsion.synthetic.render import render
+
+    tiny = Scene(image=ImageSpec(320, 240), disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),
+                 markers=MarkerSpec(radius_px=10.0, distance_px=90.0, positions_deg=(10.0, 190.0)), name="tiny")
+    plan, shots = capture_script(tiny, SPEC, tmp_path / "s", seed=2)
+    bright = dataclasses.replace(tiny, markers=dataclasses.replace(tiny.markers, polarity="bright", level=240.0),
+                                 disk=dataclasses.replace(tiny.disk, background_level=60.0))
+    for s in shots:
+        data = s.png
+        if s.row == 4:  # the lights changed for this one: bright markers on a dark disk
+            _, buf = cv2.imencode(".png", render(bright, SPEC.angle_sign * s.angle_deg, seed=4).image)
+            data = buf.tobytes()
+        path = tmp_path / "s" / plan.rows[s.row]["image"]
+        path.parent.mkdir(exist_ok=True)
+        path.write_bytes(data)
+    res = process_session(tmp_path / "s", jobs=1)
+    table = read_measurements(res.measurements_path)
+    assert res.ok and list(table["status"]) == ["ok"] * 18
+    assert list(table["message"].fillna("").astype(bool)) == [k == 4 for k in range(18)]
+    assert table["message"].iloc[4] == ("note: the markers are bright here, the session's are dark (the "
+                                   "lighting changed?); measured all the same")
+    # measured correctly: the angle noise is ~0.001°; 0.01° is far below a step (0.25°)
+    assert abs(table["angle_deg"].iloc[4] - shots[4].angle_deg) < 0.01

@@ -52,6 +52,7 @@ from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
+from .shots import polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
@@ -332,11 +333,12 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
         else:
             reason = "no angle relative to the reference (marker identity lost)"
         flags = residual_flags(pairs)
-        for i, angle, flag in zip(idx, angles, flags):
+        for i, pair, angle, flag in zip(idx, pairs, angles, flags):
             if angle is not None and angle.ambiguous:
                 out[i] = (math.nan, math.nan, angle.ambiguous, "failed")
             elif angle is not None:
-                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, flag, SUSPECT if flag else "ok")
+                note = flag or polarity_note(pair, session.settings.polarity)
+                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, note, SUSPECT if flag else "ok")
             elif entries[i]["status"] == "pending":
                 out[i] = (math.nan, math.nan, entries[i]["message"], "pending")
             else:

@@ -21,7 +21,8 @@ from ..images import GreyImage
 from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
-__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "SATURATED_FRACTION", "BLUR_RATIO"]
+__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "polarity_note", "SATURATED_FRACTION",
+           "BLUR_RATIO"]
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,25 @@ def image_warnings(pair, reference, saturated: float) -> list[str]:
         out.append(f"blurred: marker edges {width:.1f} px wide against {ref:.1f} px in the "
                    "reference (camera shake, or focus?); shoot it again")
     return out
+
+
+def polarity_note(pair, polarity: str) -> str:
+    """A note when the image's markers have the other polarity than the session's.
+
+    The markers are still measured (the fit finds an edge either way); the sign of
+    their fitted contrast (negative: darker than around them) tells which they
+    are. Returns "" when they are as the session says, or unknown.
+    """
+    if pair is None:
+        return ""
+    contrasts = [getattr(m, "contrast_dn", math.nan) for m in (pair.first, pair.second)]
+    if not all(isinstance(c, (int, float)) and math.isfinite(c) for c in contrasts):
+        return ""
+    seen = "dark" if max(contrasts) < 0 else "bright" if min(contrasts) > 0 else None
+    if seen is None or seen == polarity:
+        return ""
+    return (f"note: the markers are {seen} here, the session's are {polarity} (the lighting "
+            "changed?); measured all the same")
 
 
 class ShotMeasurer:

@@ -409,7 +409,7 @@ class Watcher:
         steps, swaps, the axis, the sign); events: its line, then the warnings
         found now, in capture order (on it, or on an image before it that it
         decided)."""
-        from .shots import image_warnings
+        from .shots import image_warnings, polarity_note
 
         b = self.bound[pos]
         row = b.row
@@ -429,7 +429,7 @@ class Watcher:
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
                 + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
-                )
+                + (f"  ({note})" if (note := polarity_note(b.pair, self.session.settings.polarity)) else ""))
         events = [WatchEvent("shot", b.file, line, row.line)]
         for p in sorted(self.bound, key=self.order.index):
             x = self.bound[p]
