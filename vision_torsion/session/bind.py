@@ -46,7 +46,7 @@ from ..measurements import output_folder
 from .binding import Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
-from .steps import StepPoint, check_steps
+from .steps import StepPoint, check_steps, gear_kinks
 
 __all__ = ["BindResult", "Fix", "bind_session", "row_text", "step_warnings"]
 
@@ -148,6 +148,8 @@ def _assign(rows, files, skip, missing, swaps=()):
     order = [f for f in files if f.name not in skip]
     names = [f.name for f in order]
     for a, b in swaps:
+        if a not in names or b not in names:  # one of them skipped: nothing to exchange
+            continue
         i, j = names.index(a), names.index(b)
         order[i], order[j] = order[j], order[i]
         names[i], names[j] = names[j], names[i]
@@ -197,10 +199,11 @@ def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[in
         The angle sign to check with (the session's ``angle_sign`` by default).
     """
     sign = session.config.angle_sign if sign is None else sign
-    out = []
+    found = []
     for seq, points in _sequences(session, bound, pairs, sign):
-        out += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
-    return sorted(out, key=lambda t: t[0])
+        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
+    kinks = gear_kinks([w for _, w in found])  # the gear's own, seen twice: not mistakes
+    return sorted((x for n, x in enumerate(found) if n not in kinks), key=lambda t: t[0])
 
 
 def _sign_diagnosis(session: Session, bound, pairs):
@@ -256,6 +259,20 @@ def _image_diagnoses(bound, pairs, saturated, failed) -> list[str]:
             row, f = seq[w.index]
             out.append(f"{f.name} ({row_text(row)}): {w.message}")
     return out
+
+
+def _one_branch(session: Session, bound, lo: int, hi: int) -> bool:
+    """The rows at positions `lo` - 1 ... `hi` of `bound` are of one orientation and
+    their planned torques move one way (no reversal between them): photographs
+    taken the other way round there show as steps out of line."""
+    if lo < 1 or hi >= len(bound):
+        return False
+    rows = [bound[p][0] for p in range(lo - 1, hi + 1)]
+    if len({row.orientation_deg for row in rows}) != 1:
+        return False
+    torques = [session.torque(row).torque_nm for row in rows]
+    steps = [b - a for a, b in zip(torques, torques[1:])]
+    return all(x > 0 for x in steps) or all(x < 0 for x in steps)
 
 
 def _describe(bound, warns) -> list[str]:
@@ -348,32 +365,33 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         todo = [(pos, warning) for pos, warning in w if b[pos][1].name not in unexplained]
         if not todo:
             break
-        pos, first = todo[0]
-        row, f = b[pos]
         candidates = []
-        if first.kind in ("no_movement", "wrong_direction"):
-            candidates.append(("skip", f, row, None))  # an extra shot: the same load again
-        if first.kind in ("large_step", "wrong_direction"):
-            candidates.append(("missing", f, row, None))  # a missed shot: two steps in one
         swapped = {name for pair in cur_swap for name in pair}
-        for d in (1, -1, 2, -2, 3, -3):  # two photographs taken the other way round
-            other = b[pos + d] if 0 <= pos + d < len(b) else None
-            if (other is not None and other[1] is not None and other[0].orientation_deg == row.orientation_deg
-                    and f.name not in swapped and other[1].name not in swapped):
-                candidates.append(("swap", f, row, other))
+        for pos, warning in todo[:3]:  # the fix that explains most, of the first misfits
+            row, f = b[pos]
+            if warning.kind in ("no_movement", "wrong_direction") and f.name not in swapped:
+                candidates.append(("skip", f, row, None, warning))  # an extra shot: the same load again
+            if warning.kind in ("large_step", "wrong_direction"):
+                candidates.append(("missing", f, row, None, warning))  # a missed shot: two steps in one
+            for d in (1, -1, 2, -2, 3, -3):  # two photographs taken the other way round
+                other = b[pos + d] if 0 <= pos + d < len(b) else None
+                if (warning.kind in ("large_step", "wrong_direction") and other is not None
+                        and other[1] is not None and f.name not in swapped and other[1].name not in swapped
+                        and _one_branch(session, b, min(pos, pos + d), max(pos, pos + d))):
+                    candidates.append(("swap", f, row, other, warning))
         best = None
-        for kind, file, r, other in candidates:
+        for kind, file, r, other, warning in candidates:
             sk = cur_skip + [file.name] if kind == "skip" else cur_skip
             mi = cur_missing + [r.line] if kind == "missing" else cur_missing
             sw = cur_swap + [(file.name, other[1].name)] if kind == "swap" else cur_swap
             nb, _, nw = evaluate(sk, mi, sw)
             still = any(nb[p][1] is file for p, _ in nw)
             if len(nw) < len(w) and not still and (best is None or len(nw) < len(best[3])):
-                best = (kind, file, r, nw, nb, sk, mi, sw, other)
+                best = (kind, file, r, nw, nb, sk, mi, sw, other, warning)
         if best is None:
-            unexplained.add(f.name)
+            unexplained.add(b[todo[0][0]][1].name)
             continue
-        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other = best
+        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other, first = best
         if kind == "swap":
             a, b2 = sorted([(r, file), other], key=lambda t: t[0].line)
             msg = (f"{a[1].name} and {b2[1].name} look swapped: {a[1].name} shows the load of line "

@@ -60,7 +60,7 @@ from .bind import row_text
 from .binding import Binding, load_binding, write_binding
 from .live import LIVE_PAGE_NAME, LivePoint, live_page
 from .load import load_session
-from .steps import StepPoint, check_steps
+from .steps import StepPoint, check_steps, gear_kinks
 
 __all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult"]
 
@@ -423,8 +423,18 @@ class Watcher:
         own += image_warnings(shot.pair, reference, shot.saturated_fraction)
         b.own = own
         before = {p: list(x.warnings) for p, x in self.bound.items()}
+        derived: dict[int, list[str]] = {p: [] for p in self.bound}
+        steps: list[tuple[int, object]] = []
         for orientation in dict.fromkeys(x.row.orientation_deg for x in self.bound.values()):
-            self._analyse(orientation)
+            steps += self._analyse(orientation, derived)
+        kinks = gear_kinks([w for _, w in steps])  # the gear's own, seen twice: not mistakes
+        for n, (p, w) in enumerate(steps):
+            if n not in kinks:
+                derived[p].insert(0, w.message)
+        if self.sign_decided in derived:
+            derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
+        for p, x in self.bound.items():
+            x.warnings = x.own + derived[p]
         number = self.order.index(pos) + 1
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
@@ -440,58 +450,54 @@ class Watcher:
                                              x.row.line))
             if old and not x.warnings:
                 events.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
-                                         "not a mistake after all: the next image goes on at the new "
-                                         "stiffness (the gear switching branch)", x.row.line))
+                                         "not a mistake after all: the gear's own change of stiffness "
+                                         "(the same step elsewhere in the loop shows it too)", x.row.line))
         return events
 
     def _reference(self, orientation: float) -> int | None:
         return next((p for p in sorted(self.bound) if self.bound[p].row.orientation_deg == orientation
                      and self.bound[p].row.phase == "reference"), None)
 
-    def _analyse(self, orientation: float) -> None:
+    def _analyse(self, orientation: float, derived: dict) -> list[tuple[int, object]]:
         """Angles, step checks, swaps, the axis and the sign of one orientation's
-        photographs so far; sets each one's warnings (its own, then these)."""
+        photographs so far: the step warnings [(position, StepWarning)]; the swaps'
+        and the axis' messages are added to `derived` (position -> messages)."""
         from ..angle import pair_angle
         from .axis import check_axis
         from .steps import first_load_inverted
 
         same = [p for p in self.bound if self.bound[p].row.orientation_deg == orientation]
-        derived: dict[int, list[str]] = {p: [] for p in same}
         ref = self._reference(orientation)
-        if ref is not None and self.bound[ref].pair is not None:
-            rb = self.bound[ref]
-            seq = sorted((p for p in same if p >= ref), key=self.order.index)
-            ok = [p for p in seq if self.bound[p].pair is not None]
-            self._angles(rb, ok, pair_angle)
-            points = self._points(ok)
-            if self.sign_decided is None:
-                inverted = first_load_inverted(points)
-                if inverted is not None or any(self.torques[p] != 0 for p in ok[1:]):
-                    self.sign_decided = ok[inverted] if inverted is not None else -1
-                if inverted is not None:
-                    self.sign = -self.sign
-                    for x in self.bound.values():
-                        x.result = None
-                    self._angles(rb, ok, pair_angle)
-                    points = self._points(ok)
-            open_end = any(row.orientation_deg == orientation and i not in self.bound
-                           and row.line not in self.missing for i, row in enumerate(self.rows))
-            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
-            if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
-                self._try_swap(ok, points, warns, open_end)
+        if ref is None or self.bound[ref].pair is None:
+            return []
+        rb = self.bound[ref]
+        seq = sorted((p for p in same if p >= ref), key=self.order.index)
+        ok = [p for p in seq if self.bound[p].pair is not None]
+        self._angles(rb, ok, pair_angle)
+        points = self._points(ok)
+        if self.sign_decided is None:
+            inverted = first_load_inverted(points)
+            if inverted is not None or any(self.torques[p] != 0 for p in ok[1:]):
+                self.sign_decided = ok[inverted] if inverted is not None else -1
+            if inverted is not None:
+                self.sign = -self.sign
+                for x in self.bound.values():
+                    x.result = None
+                self._angles(rb, ok, pair_angle)
                 points = self._points(ok)
-                warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
-            for w in warns:
-                derived[ok[w.index]].append(w.message)
-            for p in ok:
-                if p in self.swapped:
-                    derived[p].append(self.swapped[p][1])
-            for w in check_axis([self.bound[p].pair for p in ok]):
-                derived[ok[w.index]].append(w.message)
-        if self.sign_decided in derived:
-            derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
-        for p in same:
-            self.bound[p].warnings = self.bound[p].own + derived[p]
+        open_end = any(row.orientation_deg == orientation and i not in self.bound
+                       and row.line not in self.missing for i, row in enumerate(self.rows))
+        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+        if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
+            self._try_swap(ok, points, warns, open_end)
+            points = self._points(ok)
+            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+        for p in ok:
+            if p in self.swapped:
+                derived[p].append(self.swapped[p][1])
+        for w in check_axis([self.bound[p].pair for p in ok]):
+            derived[ok[w.index]].append(w.message)
+        return [(ok[w.index], w) for w in warns]
 
     def _angles(self, rb, ok, pair_angle) -> None:
         """Each photograph's angle (``sign`` applied) and Δangle, in capture order;
@@ -518,8 +524,12 @@ class Watcher:
         round? If exchanging them makes their steps fit, they are recorded as swapped
         (with the ``bind`` fix) and checked that way from now on."""
         a, b = ok[-2], ok[-1]
-        if a in self.swapped or b in self.swapped:
+        before = ok[-3]
+        if a in self.swapped or b in self.swapped or warns[-1].kind != "wrong_direction":
             return
+        torques = [self.torques[p] for p in (before, a, b)]
+        if (torques[1] - torques[0]) * (torques[2] - torques[1]) <= 0:
+            return  # across a reversal of the load: a swap cannot be told from the gear there
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
         after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end)
