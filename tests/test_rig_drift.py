@@ -100,3 +100,24 @@ def test_markers_of_the_other_polarity_are_measured_with_a_note(tmp_path):
                                    "lighting changed?); measured all the same")
     # measured correctly: the angle noise is ~0.001°; 0.01° is far below a step (0.25°)
     assert abs(table["angle_deg"].iloc[4] - shots[4].angle_deg) < 0.01
+
+
+def test_a_blurred_photograph_is_suspect_in_process_by_the_rule_of_watch_and_bind(tmp_path):
+    from vision_torsion.measurements import read_measurements
+
+    tiny = Scene(image=ImageSpec(320, 240), disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),
+                 markers=MarkerSpec(radius_px=10.0, distance_px=90.0, positions_deg=(10.0, 190.0)), name="tiny")
+    plan, shots = capture_script(tiny, SPEC, tmp_path / "s", seed=6, blurred=7)
+    for s in shots:
+        path = tmp_path / "s" / plan.rows[s.row]["image"]
+        path.parent.mkdir(exist_ok=True)
+        path.write_bytes(s.png)
+    res = process_session(tmp_path / "s", jobs=1)
+    table = read_measurements(res.measurements_path)
+    assert res.suspect == (plan.rows[7]["image"],)
+    assert table["message"].iloc[7].startswith("blurred: marker edges ")
+    assert table["message"].iloc[7].endswith(" px in the reference (camera shake, or focus?); shoot it again")
+    camera = tmp_path / "camera"
+    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
+    told = bind_session(tmp_path / "s", camera, write=False).diagnoses
+    assert [t.split(": ", 2)[-1] for t in told] == [table["message"].iloc[7]]  # the same words

@@ -52,7 +52,7 @@ from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
-from .shots import polarity_note
+from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
@@ -333,7 +333,11 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
         else:
             reason = "no angle relative to the reference (marker identity lost)"
         flags = residual_flags(pairs)
+        reference = pairs[idx.index(ref)]
         for i, pair, angle, flag in zip(idx, pairs, angles, flags):
+            if angle is not None and not flag:  # blur, saturation: the rule watch and bind apply
+                flag = "; ".join(image_warnings(pair, None if i == ref else reference,
+                                                entries[i].get("saturated_fraction", math.nan)))
             if angle is not None and angle.ambiguous:
                 out[i] = (math.nan, math.nan, angle.ambiguous, "failed")
             elif angle is not None:
