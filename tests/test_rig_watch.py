@@ -298,3 +298,51 @@ def test_ctrl_c_stops_cleanly_and_keeps_everything(rig):
 
     assert len(load_binding(folder).images) >= 2
     assert "finished" in (folder / "results" / "live.html").read_text()
+
+
+def _mount_tmpfs(path, options):
+    import subprocess
+
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
+                              capture_output=True, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return done.returncode == 0
+
+
+@pytest.fixture
+def read_only_session(tmp_path, rig):
+    """The rig's session copied onto a tmpfs that is then made read-only (needs root)."""
+    import subprocess
+
+    folder, cam, plan, photos = rig
+    mount = tmp_path / "ro"
+    if not _mount_tmpfs(mount, "size=4m"):
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        shutil.copytree(folder, mount / "s")
+        if subprocess.run(["mount", "-o", "remount,ro", str(mount)], capture_output=True).returncode:
+            pytest.skip("cannot remount the tmpfs read-only")
+        yield mount / "s", cam, plan, photos
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True, timeout=20)
+
+
+def test_a_read_only_session_folder_is_refused_before_the_first_photograph(read_only_session, tmp_path):
+    from vision_torsion.errors import OutputError
+    from vision_torsion.session.bind import bind_session
+
+    folder, cam, plan, photos = read_only_session
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+    with pytest.raises(OutputError, match=re.escape(f"{folder / 'results'}: cannot create the output "
+                                                    "folder (read-only file system)")):
+        Watcher(folder, camera_dir=cam)
+    # the results elsewhere, but binding.json still goes into the session folder
+    with pytest.raises(OutputError, match=re.escape(f"{folder}: cannot write into the output folder "
+                                                    "(read-only file system)")):
+        Watcher(folder, camera_dir=cam, out_dir=tmp_path / "out")
+    with pytest.raises(OutputError, match=re.escape(f"{folder}: cannot write into the output folder")):
+        bind_session(folder, cam, out_dir=tmp_path / "out2")
+    assert not (tmp_path / "out2" / ".cache").exists()  # nothing measured

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SessionError
+from ..fileio import check_output_dir
 from ..measurements import output_folder
 from .binding import Binding, write_binding
 from .camera import list_camera_files
@@ -317,6 +318,9 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         is not a row.
     ManifestError
         manifest.csv is invalid.
+    OutputError
+        The output folder (its cache) or, with `write`, the session folder cannot
+        be written: said before anything is measured.
     """
     from .shots import ShotMeasurer
 
@@ -341,6 +345,10 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         if line not in lines:
             raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
     out = output_folder(session.folder, out_dir)
+    # before measuring: a bind must not measure everything and then fail to write
+    check_output_dir(out)  # the cache shared with process
+    if write:
+        check_output_dir(session.folder)  # binding.json
     pairs, saturated, failed = {}, {}, {}
     with ShotMeasurer(session, out) as measurer:
         for f in files:

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, check_output_dir
 from ..images import IMAGE_SUFFIXES
 from ..measure import natural_key
 from ..measurements import output_folder
@@ -145,6 +145,15 @@ class Watcher:
     clock : callable
         Monotonic clock (seconds); tests pass their own.
 
+    Raises
+    ------
+    SessionError
+        The session is unusable, the camera folder is the output folder, or
+        `settle_s` or `give_up_s` is not a finite number of seconds >= 0.
+    OutputError
+        The output folder, or with a camera folder the session folder (where
+        ``binding.json`` goes), cannot be written: said before any photograph.
+
     Use as a context manager (or call :meth:`close`): closing merges the cache.
     """
 
@@ -164,6 +173,10 @@ class Watcher:
         self.out = output_folder(folder, out_dir)
         if self.camera.resolve() == self.out.resolve():
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
+        # before the first photograph: a watch must not announce itself and then die
+        check_output_dir(self.out)  # live.html and the cache
+        if self.camera_mode:
+            check_output_dir(folder)  # binding.json
         self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
         rows = self.session.manifest.rows
         self.rows = rows
