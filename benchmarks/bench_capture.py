@@ -229,7 +229,8 @@ def main(argv=None) -> int:
     for r in missed:
         print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} (seed {r['seed']}): "
               f"watch {r['watch_detected']}, bind {r['bind_detected']}")
-    write_json(HERE / "results" / "capture.json", {"sessions": rows, "steps": args.steps, "seeds": args.seeds})
+    kept = [{k: v for k, v in r.items() if not k.endswith("_said")} for r in rows]  # messages hold temp paths
+    write_json(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds})
     return 0
 
 
