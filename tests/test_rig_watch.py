@@ -244,6 +244,13 @@ def test_the_camera_folder_is_never_written(rig):
     assert (folder / "binding.json").is_file() and (folder / "results" / "live.html").is_file()
 
 
+@pytest.mark.parametrize("option, value", [("settle_s", -1.0), ("give_up_s", float("inf"))])
+def test_times_must_be_finite_seconds(rig, option, value):
+    folder, cam, plan, photos = rig
+    with pytest.raises(SessionError, match=rf"{option} = {value!r}: expected a finite number of seconds >= 0"):
+        Watcher(folder, camera_dir=cam, **{option: value})
+
+
 def test_camera_folder_cannot_be_the_output_folder(rig):
     folder, cam, *_ = rig
     with pytest.raises(SessionError, match="the camera folder cannot be the output folder"):
