@@ -353,3 +353,20 @@ def test_a_read_only_session_folder_is_refused_before_the_first_photograph(read_
     with pytest.raises(OutputError, match=re.escape(f"{folder}: cannot write into the output folder")):
         bind_session(folder, cam, out_dir=tmp_path / "out2")
     assert not (tmp_path / "out2" / ".cache").exists()  # nothing measured
+
+
+def test_control_characters_in_file_names_are_printed_escaped(rig, capsys):
+    import threading
+
+    from vision_torsion.session.watch import watch_session
+
+    folder, cam, plan, photos = rig
+    put(cam, "IMG\x1b]0;owned\x07.png", photos[plan.rows[0]["image"]])
+    put(cam, "IMG\x1b[2J.THM", b"thumbnail")
+    stop = threading.Event()
+    threading.Timer(1.0, stop.set).start()
+    watch_session(folder, camera_dir=cam, poll_s=0.05, settle_s=0.0, stop=stop)
+    out, err = capsys.readouterr()
+    assert "\x1b" not in out + err and "\x07" not in out + err
+    assert "IMG\\x1b]0;owned\\x07.png → line 2" in out
+    assert "IMG\\x1b[2J.THM: not an image file" in err

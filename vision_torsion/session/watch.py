@@ -62,7 +62,7 @@ from .live import LIVE_PAGE_NAME, LivePoint, live_page
 from .load import load_session
 from .steps import StepPoint, check_steps, gear_kinks
 
-__all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult"]
+__all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult", "printable"]
 
 logger = logging.getLogger(__name__)
 
@@ -111,7 +111,6 @@ class _Bound:
     warnings: list
     angle: float = math.nan
     delta: float = math.nan
-    edge_width: float = math.nan
     result: object | None = None  # AngleResult against the orientation's reference
     stat: tuple | None = None  # (size, mtime_ns) of the file when it was measured
     image_hash: str = ""
@@ -377,10 +376,7 @@ class Watcher:
         return events
 
     def _bind(self, pos: int, name: str, shot, info) -> None:
-        from .shots import edge_width
-
-        edge = edge_width(shot.pair)
-        b = _Bound(self.rows[pos], name, shot.pair, shot.message, [], edge_width=edge,
+        b = _Bound(self.rows[pos], name, shot.pair, shot.message, [],
                    stat=None if info is None else (info.size, info.mtime_ns), image_hash=shot.image_hash)
         if pos not in self.bound:
             self.order.append(pos)
@@ -644,6 +640,12 @@ class WatchResult:
     interrupted: bool
 
 
+def printable(text: str) -> str:
+    """`text` with its control characters shown escaped (``\\x1b``): a camera file
+    name must not retitle the window or clear the screen it is printed on."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
+
+
 def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float = 0.5,
                   settle_s: float = 1.0, give_up_s: float = 10.0, finish=None,
                   stop=None, echo=None) -> WatchResult:
@@ -678,7 +680,7 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
         stream = sys.stderr if event.kind in ("warning", "ignored", "deleted", "folder_gone",
                                               "leftover") else sys.stdout
         prefix = {"warning": "  ! ", "retracted": "  ✓ "}.get(event.kind, "")
-        print(prefix + event.message, file=stream, flush=True)
+        print(prefix + printable(event.message), file=stream, flush=True)
 
     echo = echo or default_echo
     interrupted = False
