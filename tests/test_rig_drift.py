@@ -121,3 +121,21 @@ def test_a_blurred_photograph_is_suspect_in_process_by_the_rule_of_watch_and_bin
     ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
     told = bind_session(tmp_path / "s", camera, write=False).diagnoses
     assert [t.split(": ", 2)[-1] for t in told] == [table["message"].iloc[7]]  # the same words
+
+
+def test_bind_keeps_the_row_of_a_half_written_file_and_process_fails_it(tmp_path, capsys):
+    tiny = Scene(image=ImageSpec(320, 240), disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),
+                 markers=MarkerSpec(radius_px=10.0, distance_px=90.0, positions_deg=(10.0, 190.0)), name="tiny")
+    plan, shots = capture_script(tiny, SPEC, tmp_path / "s", seed=8)
+    camera = tmp_path / "camera"
+    photos = [s.png for s in shots]
+    photos[5] = photos[5][: len(photos[5]) // 2]  # the card stalled half-way through IMG_0006
+    ScriptedCamera(camera, photos).run(chunk_delay_s=0, photo_delay_s=0)
+    res = bind_session(tmp_path / "s", camera)
+    assert [res.binding.images[row["image"]] for row in plan.rows] == [f"IMG_{k:04d}.png" for k in range(1, 19)]
+    (said,) = [t for t in res.diagnoses if t.startswith("IMG_0006.png")]
+    assert said.startswith("IMG_0006.png (line 7: orientation 0, cycle 1, positive_unloading, step 4): "
+                           "not measured: ")
+    assert said.endswith(" (a half-written file? it keeps its row)")
+    assert not res.ok
+    assert main(["process", str(tmp_path / "s"), "-q"]) == 1  # not 0, as if all were well
