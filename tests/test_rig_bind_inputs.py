@@ -62,6 +62,30 @@ def test_skip_must_name_a_photograph(planned, tmp_path):
         bind_session(planned[0], tmp_path / "cam", skip=["IMG_9.png"])
 
 
+def test_swap_must_name_two_photographs_not_skipped(planned, tmp_path):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    write_image(cam / "IMG_1.png", draw_target(1.0))
+    write_image(cam / "IMG_2.png", draw_target(2.0))
+    with pytest.raises(SessionError, match=r"swap: 'IMG_9\.png' is not a photograph in .*cam$"):
+        bind_session(planned[0], cam, swap=[("IMG_1.png", "IMG_9.png")])
+    with pytest.raises(SessionError, match=r"swap: 'IMG_2\.png' is not a photograph in .*cam \(it is skipped\)"):
+        bind_session(planned[0], cam, skip=["IMG_2.png"], swap=[("IMG_1.png", "IMG_2.png")])
+
+
+def test_swap_exchanges_the_two_files_rows(planned, tmp_path):
+    from vision_torsion.cli import main
+
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    for k in (1, 2, 3):
+        write_image(cam / f"IMG_{k}.png", draw_target(float(k)))
+    res = bind_session(planned[0], cam, by="name", swap=[("IMG_2.png", "IMG_3.png")], write=False)
+    assert [res.binding.images[r["image"]] for r in planned[1].rows[:3]] == ["IMG_1.png", "IMG_3.png", "IMG_2.png"]
+    assert main(["bind", str(planned[0]), str(cam), "--by", "name", "--swap", "IMG_2.png", "IMG_3.png"]) == 1
+    assert load_binding(planned[0]).images[planned[1].rows[1]["image"]] == "IMG_3.png"
+
+
 def test_missing_must_name_a_row(planned, tmp_path):
     (tmp_path / "cam").mkdir()
     with pytest.raises(SessionError, match=r"missing: line 99 is not a row of .*manifest\.csv"):
@@ -159,3 +183,77 @@ def test_each_mistake_is_caught_where_it_happens(mistake, kind):
                   for j, p in enumerate(points)]
     warnings = check_steps(points, step_torque_nm=d)
     assert [(w.index, w.kind) for w in warnings][:1] == [(i, kind)]
+
+
+def test_an_undecided_step_waits_for_the_next_image_in_a_live_sequence():
+    rng = np.random.default_rng(7)
+    tau, th, d = paper_sequence(rng, variation=0.0)
+    i = 5
+    points = [StepPoint(t, a, 0.0005) for t, a in zip(tau, th)][:i + 1]
+    points[i] = StepPoint(tau[i], (th[i - 1] + th[i]) / 2, 0.0005)  # a piece forgotten
+    assert check_steps(points, step_torque_nm=d, open_end=True) == []  # the next image will tell
+    (closed,) = check_steps(points, step_torque_nm=d)
+    assert closed.kind == "small_step" and not closed.decided and closed.message.endswith(
+        "(a weight piece forgotten on a pan? or the gear stiffening: the next step will tell)")
+    points.append(StepPoint(tau[i + 1], th[i + 1], 0.0005))
+    (live,) = check_steps(points, step_torque_nm=d, open_end=True)
+    assert (live.index, live.kind, live.decided) == (i, "small_step", True)
+
+
+def test_a_kink_seen_twice_is_the_gears_a_mistake_once_is_not():
+    from vision_torsion.session.steps import StepWarning, gear_kinks
+
+    def undecided(span, ratio, kind="small_step"):
+        return StepWarning(0, kind, 0.1, span[1] - span[0], ratio, "", decided=False, torque_span_nm=span)
+
+    end_down, end_up = (-0.0589, -0.0785), (0.0589, 0.0785)  # the two ends of the loop
+    assert gear_kinks([undecided(end_down, 0.49), undecided(end_up, 0.50)]) == {0, 1}
+    assert gear_kinks([undecided(end_down, 0.49)]) == set()  # once: a forgotten piece
+    assert gear_kinks([undecided(end_down, 0.12), undecided(end_up, 0.50)]) == set()  # not alike
+    assert gear_kinks([undecided(end_down, 0.49), undecided((0.0785, 0.0589), 0.5)]) == set()  # away vs back
+    decided = StepWarning(0, "small_step", 0.1, 0.02, 0.5, "", decided=True, torque_span_nm=end_up)
+    assert gear_kinks([undecided(end_down, 0.49), decided]) == set()
+
+
+def test_the_first_load_tells_an_inverted_angle_sign():
+    from vision_torsion.session.steps import first_load_inverted
+
+    ref = StepPoint(0.0, 0.0, 0.0005)
+    assert first_load_inverted([ref, StepPoint(0.0785, -1.2, 0.0005)]) == 1
+    assert first_load_inverted([ref, StepPoint(0.0785, 1.2, 0.0005)]) is None
+    assert first_load_inverted([ref, StepPoint(0.0, 0.001, 0.0005), StepPoint(-0.0785, 1.2, 0.0005)]) == 2
+    assert first_load_inverted([ref, StepPoint(0.0785, -0.001, 0.0005)]) is None  # no movement: no verdict
+    assert first_load_inverted([ref]) is None
+
+
+def _pairs(shift_from=None, shift=(0.0, 0.0), noise=0.01, seed=3, centre=(160.3, 120.4), arm=45.0, aside=0.0):
+    """Two markers turning about the axis at `centre` through a loop of angles (their
+    midpoint `aside` px from it); the camera moved by `shift` px from image
+    `shift_from` on."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    angles = np.radians([0, 15, 14.7, 14.5, 14.2, 14.0, 10.2, 6.5, 2.7, -1.0, -0.8, -0.5, -0.3, 0.0, 3.7])
+    out = []
+    for k, a in enumerate(angles):
+        dx, dy = shift if shift_from is not None and k >= shift_from else (0.0, 0.0)
+        ends = []
+        for s in (-1, 1):
+            x = centre[0] + (s * arm + aside) * np.cos(a) + dx + rng.normal(0, noise)
+            y = centre[1] - (s * arm + aside) * np.sin(a) + dy + rng.normal(0, noise)
+            ends.append(SimpleNamespace(x_px=x, y_px=y))
+        out.append(SimpleNamespace(first=ends[0], second=ends[1]))
+    return out
+
+
+@pytest.mark.parametrize("aside", [0.0, 120.0])  # the axis between the markers, or beside them
+def test_a_camera_moved_by_one_pixel_is_seen_at_that_image(aside):
+    from vision_torsion.session.axis import check_axis
+
+    assert check_axis(_pairs(aside=aside)) == []
+    (moved,) = check_axis(_pairs(7, (0.0, 1.0), aside=aside))
+    assert moved.index == 7 and 0.8 < moved.offset_px < 1.2 and moved.threshold_px == 0.3
+    assert moved.message.startswith("the camera or the target moved: the markers are 1.0")
+    pairs = _pairs(9, (0.7, 0.7), aside=aside)
+    pairs[4] = None  # a failed image is left out, the rest still checked
+    assert [w.index for w in check_axis(pairs)] == [9]

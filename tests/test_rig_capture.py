@@ -162,13 +162,16 @@ def test_watch_flags_each_mistake_on_the_image_where_it_happens(script):
     assert "a weight piece forgotten on a pan?" in first["IMG_0004.png"]
     assert "no movement" in first["IMG_0009.png"]
     assert "(a missed shot, or an extra weight piece?" in first["IMG_0027.png"]
-    # every warning comes with the image's own event, right after it
-    for k, e in enumerate(events):
+    # every warning comes with the image's own event or the next image's (a step out
+    # of line waits for the next to tell a mistake from the gear's stiffness switching)
+    shots_so_far = []
+    for e in events:
+        if e.kind == "shot":
+            shots_so_far.append(e.file)
         if e.kind == "warning":
-            j = max(i for i in range(k) if events[i].kind == "shot")
-            assert events[j].file == e.file
-    assert not [e for e in events if e.kind == "retracted" and e.file == "IMG_0004.png"]
-    # confirmed by the next image: the page no longer says "the next step will tell"
+            assert e.file in shots_so_far[-2:]
+    assert not [e for e in events if e.kind == "retracted"]  # nothing said and withdrawn
+    # decided by the next image: the page never says "the next step will tell"
     (kept,) = [p for p in w.live_points() if p.file == "IMG_0004.png"]
     assert "forgotten on a pan?)" in kept.warnings[0] and "next step will tell" not in kept.warnings[0]
     page = (session / "results" / "live.html").read_text()

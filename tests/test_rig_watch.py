@@ -135,15 +135,70 @@ def test_the_camera_folder_disappears_and_comes_back(rig):
         assert len(w.bound) == 2
 
 
-def test_a_file_that_never_decodes_is_set_aside(rig):
+def test_a_stalled_file_holds_its_row_and_the_files_after_it_wait(rig):
     folder, cam, plan, photos = rig
-    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]][:-30])  # no IEND: cut short
+    first = photos[plan.rows[0]["image"]]
+    put(cam, "IMG_0001.png", first[:-30])  # no IEND: stalled half-way
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))  # taken after it
     clock = Clock()
     with Watcher(folder, camera_dir=cam, clock=clock, give_up_s=10.0) as w:
-        assert run(w, clock, 6) == []  # waited for: it may still be being written
-        ignored = messages(run(w, clock, 2), "ignored")
-    assert len(ignored) == 1 and ignored[0].startswith("IMG_0001.png: ") and ignored[0].endswith(
-        "; still so after 10 s: set aside, not bound")
+        assert run(w, clock, 6) == []  # waited for, and IMG_0002 waits behind it
+        events = run(w, clock, 2)
+        (stalled,) = [e.message for e in events if e.kind == "warning"]
+        assert stalled.startswith("IMG_0001.png (line 2: orientation 0, cycle 1, reference, step 0): "
+                                  "still not a complete image after 10 s (IMG_0001.png: ")
+        assert stalled.endswith("bound to this row as failed, so that the photographs after it keep "
+                                "their rows. It is measured again when it changes; if it is not a "
+                                "photograph of this row, leave it out with `vision-torsion bind "
+                                "--skip IMG_0001.png`")
+        assert [e.file for e in events if e.kind == "shot"] == ["IMG_0001.png", "IMG_0002.png"]
+        assert {b.file: b.row.line for b in w.bound.values()} == {"IMG_0001.png": 2, "IMG_0002.png": 3}
+        # the card finally delivers the rest: measured again, announced, warning gone
+        put(cam, "IMG_0001.png", first)
+        events = run(w, clock, 2)
+        assert messages(events, "replaced") == [
+            "IMG_0001.png changed after it was measured (a re-shot, or a file written late): "
+            "measured again for line 2: orientation 0, cycle 1, reference, step 0; its old "
+            "result is dropped"]
+        assert not [b for b in w.bound.values() if b.warnings]
+
+
+def test_a_stalled_file_fails_its_row_in_process(rig):
+    from vision_torsion.session import process_session
+
+    folder, cam, plan, photos = rig
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]][:-30])
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock, give_up_s=3.0) as w:
+        run(w, clock, 4)
+    res = process_session(folder, jobs=1)
+    # the reference failed, so the row after it has no angle either: not pending, failed
+    assert not res.ok and [image for image, _ in res.failures] == [plan.rows[0]["image"], plan.rows[1]["image"]]
+    assert "truncated PNG" in res.failures[0][1] and "reference image" in res.failures[1][1]
+
+
+def test_a_reshot_under_the_same_name_is_measured_again(rig):
+    folder, cam, plan, photos = rig
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock) as w:
+        run(w, clock)
+        before = w.bound[1].angle
+        write_image(cam / "IMG_0002.png", draw_target(7.0))
+        os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+        events = run(w, clock)
+        assert messages(events, "replaced") == [
+            "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
+            "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
+            "old result is dropped"]
+        assert [e.file for e in events if e.kind == "shot"] == ["IMG_0002.png"]
+        (point,) = [p for p in w.live_points() if p.file == "IMG_0002.png"]
+        assert point.angle_deg == w.bound[1].angle != before
+        assert len(w.bound) == 2
 
 
 def warnings_of(rig, second):
@@ -187,6 +242,13 @@ def test_the_camera_folder_is_never_written(rig):
         run(w, clock)
     assert tree_digest(cam) == before
     assert (folder / "binding.json").is_file() and (folder / "results" / "live.html").is_file()
+
+
+@pytest.mark.parametrize("option, value", [("settle_s", -1.0), ("give_up_s", float("inf"))])
+def test_times_must_be_finite_seconds(rig, option, value):
+    folder, cam, plan, photos = rig
+    with pytest.raises(SessionError, match=rf"{option} = {value!r}: expected a finite number of seconds >= 0"):
+        Watcher(folder, camera_dir=cam, **{option: value})
 
 
 def test_camera_folder_cannot_be_the_output_folder(rig):
@@ -243,3 +305,68 @@ def test_ctrl_c_stops_cleanly_and_keeps_everything(rig):
 
     assert len(load_binding(folder).images) >= 2
     assert "finished" in (folder / "results" / "live.html").read_text()
+
+
+def _mount_tmpfs(path, options):
+    import subprocess
+
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
+                              capture_output=True, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return done.returncode == 0
+
+
+@pytest.fixture
+def read_only_session(tmp_path, rig):
+    """The rig's session copied onto a tmpfs that is then made read-only (needs root)."""
+    import subprocess
+
+    folder, cam, plan, photos = rig
+    mount = tmp_path / "ro"
+    if not _mount_tmpfs(mount, "size=4m"):
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        shutil.copytree(folder, mount / "s")
+        if subprocess.run(["mount", "-o", "remount,ro", str(mount)], capture_output=True).returncode:
+            pytest.skip("cannot remount the tmpfs read-only")
+        yield mount / "s", cam, plan, photos
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True, timeout=20)
+
+
+def test_a_read_only_session_folder_is_refused_before_the_first_photograph(read_only_session, tmp_path):
+    from vision_torsion.errors import OutputError
+    from vision_torsion.session.bind import bind_session
+
+    folder, cam, plan, photos = read_only_session
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+    with pytest.raises(OutputError, match=re.escape(f"{folder / 'results'}: cannot create the output "
+                                                    "folder (read-only file system)")):
+        Watcher(folder, camera_dir=cam)
+    # the results elsewhere, but binding.json still goes into the session folder
+    with pytest.raises(OutputError, match=re.escape(f"{folder}: cannot write into the output folder "
+                                                    "(read-only file system)")):
+        Watcher(folder, camera_dir=cam, out_dir=tmp_path / "out")
+    with pytest.raises(OutputError, match=re.escape(f"{folder}: cannot write into the output folder")):
+        bind_session(folder, cam, out_dir=tmp_path / "out2")
+    assert not (tmp_path / "out2" / ".cache").exists()  # nothing measured
+
+
+def test_control_characters_in_file_names_are_printed_escaped(rig, capsys):
+    import threading
+
+    from vision_torsion.session.watch import watch_session
+
+    folder, cam, plan, photos = rig
+    put(cam, "IMG\x1b]0;owned\x07.png", photos[plan.rows[0]["image"]])
+    put(cam, "IMG\x1b[2J.THM", b"thumbnail")
+    stop = threading.Event()
+    threading.Timer(1.0, stop.set).start()
+    watch_session(folder, camera_dir=cam, poll_s=0.05, settle_s=0.0, stop=stop)
+    out, err = capsys.readouterr()
+    assert "\x1b" not in out + err and "\x07" not in out + err
+    assert "IMG\\x1b]0;owned\\x07.png → line 2" in out
+    assert "IMG\\x1b[2J.THM: not an image file" in err

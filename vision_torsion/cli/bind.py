@@ -19,8 +19,9 @@ def register(subparsers) -> None:
         "camera folder is only read: nothing is renamed, copied or written there). Copies "
         "and non-images are set aside; leftover files and rows without a file are listed. "
         "Every photograph is measured (sharing process's cache) and each angle step is "
-        "checked against the plan: an extra or a missed shot is found and the fix proposed, "
-        "naming the file and the row. Exit status: 0 everything fits, 1 something to look "
+        "checked against the plan: an extra or a missed shot, two swapped shots are found and the "
+        "fix proposed, naming the file and the row; an inverted angle_sign, a camera bump, "
+        "blurred, saturated or unreadable photographs are named. Exit status: 0 everything fits, 1 something to look "
         "at (leftovers, rows without a file, steps that do not fit), 2 unusable input.",
     )
     p.add_argument("session_dir", metavar="SESSION_DIR", help="the session folder")
@@ -32,6 +33,9 @@ def register(subparsers) -> None:
                    help="leave this camera file out (an extra shot); repeatable")
     p.add_argument("--missing", action="append", default=[], type=int, metavar="LINE",
                    help="this manifest line (CSV line number) was not photographed; repeatable")
+    p.add_argument("--swap", action="append", default=[], nargs=2, metavar=("FILE", "OTHER"),
+                   help="these two camera files were taken the other way round: exchange their "
+                        "places in the capture order; repeatable")
     p.add_argument("--dry-run", action="store_true", help="check and propose; write nothing")
     add_common_options(p)
     p.set_defaults(func=run)
@@ -42,7 +46,7 @@ def run(args) -> int:
     from ..session.bind import bind_session
 
     res = bind_session(args.session_dir, args.camera_dir, by=args.by, skip=args.skip,
-                       missing=args.missing, write=not args.dry_run)
+                       missing=args.missing, swap=args.swap, write=not args.dry_run)
     err = sys.stderr
     for name, why in res.ignored:
         print(f"set aside: {name}: {why}", file=err)
@@ -58,6 +62,8 @@ def run(args) -> int:
         print(f"{len(gaps)} row(s) without a photograph: "
               + ", ".join(f"line {line} ({image})" for line, image in gaps[:10])
               + (" ..." if len(gaps) > 10 else ""), file=err)
+    for text in res.diagnoses:
+        print(f"check: {text}", file=err)
     for text in res.warnings:
         print(f"step does not fit: {text}", file=err)
     for fix in res.fixes:

@@ -16,10 +16,14 @@ def register(subparsers) -> None:
         description="Follow the camera's folder (--camera-dir, else SESSION_DIR/images) while the "
         "test is shot. Each photograph is measured as soon as the camera has finished writing "
         "it, bound to the next planned row, printed (row, torque, angle, Δangle) and drawn on a "
-        "live page, OUT_DIR/live.html, that reloads itself. Warnings come at once, on the image "
-        "where it happens: no movement or the wrong direction, a step out of line with its "
-        "neighbours (a forgotten or extra weight, a missed shot), markers not found, a blurred "
-        "or saturated image. The camera folder is only read. Ctrl-C stops (run it again to "
+        "live page, OUT_DIR/live.html, that reloads itself. Warnings come at that image or the "
+        "next, naming it: no movement or the wrong direction, a step out of line with its "
+        "neighbours (a forgotten or extra weight, a missed shot; the next image tells it from the "
+        "gear's own change of stiffness), two shots swapped (with the bind fix), an inverted "
+        "angle_sign (one line), the camera or the target moved, markers not found, a blurred or "
+        "saturated image. A file still being written holds back the files after it; one that "
+        "stays incomplete for --give-up seconds keeps its row, as failed. A photograph replaced "
+        "under its name is measured again and said so. The camera folder is only read. Ctrl-C stops (run it again to "
         "resume; measurements are shared with process through its cache) and the report is "
         "written. Exit status (after Ctrl-C too): 0 no photograph had a warning, 1 some did, "
         "2 unusable input.",
@@ -32,6 +36,10 @@ def register(subparsers) -> None:
                    help="seconds between looks at the folder")
     p.add_argument("--settle", type=float, default=1.0, metavar="S",
                    help="seconds a file must stay unchanged before it is read")
+    p.add_argument("--give-up", type=float, default=10.0, metavar="S",
+                   help="seconds a settled file may stay incomplete (a slow card, a network "
+                        "share) before it is bound to its row as failed; the files after it "
+                        "wait for it meanwhile, so none takes its row")
     p.add_argument("--no-report", action="store_true", help="do not write the report at the end")
     add_common_options(p)
     p.set_defaults(func=run)
@@ -49,7 +57,7 @@ def run(args) -> int:
         return rep
 
     res = watch_session(args.session_dir, camera_dir=args.camera_dir, out_dir=args.out_dir,
-                        poll_s=args.poll, settle_s=args.settle,
+                        poll_s=args.poll, settle_s=args.settle, give_up_s=args.give_up,
                         finish=None if args.no_report else report)
     print(f"{res.n_bound} of {res.n_rows} planned images bound; {res.n_warnings} with warnings; "
           f"live page {res.page}")

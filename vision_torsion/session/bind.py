@@ -17,25 +17,37 @@ out; a step twice as large as its neighbours (or in the wrong direction) may be 
 missed shot, so the row is marked as not photographed. A fix is proposed, naming
 the file and the row, with the command line that applies it, when it removes that
 misfit and leaves fewer misfits in the whole session; then the next misfit, and so
-on. Misfits no re-binding explains (a step half as large as its neighbours: a
-weight piece forgotten on a pan) are listed with the file and the row.
+on. Two photographs taken the other way round are found the same way (exchanging
+them, ``swap``, makes their steps fit). Misfits no re-binding explains (a step
+half as large as its neighbours: a weight piece forgotten on a pan) are listed
+with the file and the row.
+
+Besides the steps, what the photographs themselves show is diagnosed, one line
+each: an ``angle_sign`` inverted (the first loaded image of most orientations
+turned against its torque: said once, and the steps are checked with the right
+sign, so no good photograph is proposed for skipping), a photograph that could
+not be measured (a half-written file keeps its row: nothing after it shifts), a
+saturated or blurred one (the rule ``watch`` applies,
+:func:`~vision_torsion.session.shots.image_warnings`), and a bumped camera or a
+loosened target (:mod:`.axis`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import shlex
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import check_replaceable
+from ..fileio import check_output_dir, check_replaceable
 from ..measurements import output_folder
 from .binding import BINDING_NAME, Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
-from .steps import StepPoint, check_steps
+from .steps import StepPoint, check_steps, gear_kinks
 
 __all__ = ["BindResult", "Fix", "bind_session", "row_text", "step_warnings"]
 
@@ -50,8 +62,9 @@ class Fix:
     Attributes
     ----------
     kind : str
-        "skip" (leave the camera file out: an extra shot) or "missing" (the row was
-        not photographed: a missed shot).
+        "skip" (leave the camera file out: an extra shot), "missing" (the row was
+        not photographed: a missed shot) or "swap" (this file and the next one were
+        taken the other way round).
     file : str
         The camera file (the extra shot, or the first file after the gap).
     line : int
@@ -94,6 +107,12 @@ class BindResult:
         same as `warnings` when no fix is proposed).
     command : str or None
         The ``vision-torsion bind`` command line applying the fixes.
+    diagnoses : tuple of str
+        What the photographs themselves show, one line each, naming file and row:
+        an inverted ``angle_sign`` (one line; the steps are then checked with the
+        right sign, so it proposes no fix), photographs not measured (a stalled,
+        half-written file keeps its row), saturated or blurred ones, and the first
+        camera or target move of each orientation.
     """
 
     binding: Binding
@@ -107,14 +126,15 @@ class BindResult:
     fixes: tuple[Fix, ...]
     remaining: tuple[str, ...]
     command: str | None
+    diagnoses: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
-        """Every row has a file (or was declared missing), every file a row, and
-        every step fits the plan. Files set aside (copies, non-images) are listed
-        but do not count."""
+        """Every row has a file (or was declared missing), every file a row, every
+        step fits the plan and no photograph needs a look (`diagnoses`). Files set
+        aside (copies, non-images) are listed but do not count."""
         declared = set(self.binding.missing)
-        return not (self.leftovers or self.warnings
+        return not (self.leftovers or self.warnings or self.diagnoses
                     or any(line not in declared for line, _ in self.unphotographed))
 
 
@@ -124,31 +144,27 @@ def row_text(row) -> str:
             f"{row.phase}, step {row.step}")
 
 
-def _assign(rows, files, skip, missing):
+def _assign(rows, files, skip, missing, swaps=()):
     """[(row, file or None)] in row order, and the files left over."""
-    usable = iter([f for f in files if f.name not in skip])
+    order = [f for f in files if f.name not in skip]
+    names = [f.name for f in order]
+    for a, b in swaps:
+        if a not in names or b not in names:  # one of them skipped: nothing to exchange
+            continue
+        i, j = names.index(a), names.index(b)
+        order[i], order[j] = order[j], order[i]
+        names[i], names[j] = names[j], names[i]
+    usable = iter(order)
     out = []
     for row in rows:
         out.append((row, None if row.line in missing else next(usable, None)))
     return out, list(usable)
 
 
-def step_warnings(session: Session, bound, pairs) -> list[tuple[int, object]]:
-    """Step warnings of a bound session: [(position in `bound`, StepWarning)].
-
-    Parameters
-    ----------
-    session : Session
-    bound : sequence of (ManifestRow, object or None)
-        Rows in manifest order with what was photographed for them (None: nothing).
-    pairs : mapping
-        What was photographed -> its PairMeasurement (or None when it failed).
-    """
+def _sequences(session: Session, bound, pairs, sign):
+    """Per orientation: (positions in `bound` from its reference on, their StepPoints)."""
     from ..angle import sequence_angles
 
-    sign = session.config.angle_sign
-    proto, rig = session.config.protocol, session.config.rig
-    step_torque = 2.0 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m
     groups = defaultdict(list)
     for pos, (row, shot) in enumerate(bound):
         if shot is not None and pairs.get(shot) is not None:
@@ -161,15 +177,110 @@ def step_warnings(session: Session, bound, pairs) -> list[tuple[int, object]]:
         points = [StepPoint(session.torque(bound[p][0]).torque_nm,
                             None if a is None else sign * a.angle_deg,
                             0.0 if a is None else a.angle_std_deg) for p, a in zip(seq, angles)]
-        out += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=step_torque)]
-    return sorted(out, key=lambda t: t[0])
+        out.append((seq, points))
+    return out
+
+
+def _step_torque(session: Session) -> float:
+    proto, rig = session.config.protocol, session.config.rig
+    return 2.0 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m
+
+
+def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[int, object]]:
+    """Step warnings of a bound session: [(position in `bound`, StepWarning)].
+
+    Parameters
+    ----------
+    session : Session
+    bound : sequence of (ManifestRow, object or None)
+        Rows in manifest order with what was photographed for them (None: nothing).
+    pairs : mapping
+        What was photographed -> its PairMeasurement (or None when it failed).
+    sign : {1, -1}, optional
+        The angle sign to check with (the session's ``angle_sign`` by default).
+    """
+    sign = session.config.angle_sign if sign is None else sign
+    found = []
+    for seq, points in _sequences(session, bound, pairs, sign):
+        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
+    kinks = gear_kinks([w for _, w in found])  # the gear's own, seen twice: not mistakes
+    return sorted((x for n, x in enumerate(found) if n not in kinks), key=lambda t: t[0])
+
+
+def _sign_diagnosis(session: Session, bound, pairs):
+    """(the sign to check with, the one-line diagnosis or None): the session's
+    ``angle_sign`` is inverted when the first loaded image turned against its
+    torque in most orientations (:func:`~.steps.first_load_inverted`)."""
+    from .steps import first_load_inverted
+
+    sign = session.config.angle_sign
+    verdicts = []
+    for seq, points in _sequences(session, bound, pairs, sign):
+        i = first_load_inverted(points)
+        loaded = any(p.torque_nm != 0 and p.angle_deg is not None for p in points[1:])
+        if loaded:
+            verdicts.append(None if i is None else (seq[i], points[i]))
+    against = [v for v in verdicts if v is not None]
+    if not against or 2 * len(against) <= len(verdicts):
+        return sign, None
+    pos, point = against[0]
+    row, f = bound[pos]
+    return -sign, (f"angle_sign is inverted: the first loaded image turned against the torque in "
+                   f"{len(against)} of {len(verdicts)} orientation(s) ({f.name}, {row_text(row)}: "
+                   f"{point.angle_deg:+.4f}° under {point.torque_nm:+.5f} N·m); set angle_sign = "
+                   f"{-sign:+d} in {session.folder / 'session.toml'} (the steps are checked with it)")
+
+
+def _image_diagnoses(bound, pairs, saturated, failed) -> list[str]:
+    """Per photograph: not measured, saturated, blurred (:func:`~.shots.image_warnings`,
+    the rule ``watch`` applies), and the first camera or target move of each
+    orientation (:func:`~.axis.check_axis`)."""
+    from .axis import check_axis
+    from .shots import image_warnings
+
+    out = []
+    refs = {}
+    for row, f in bound:
+        if f is not None and row.phase == "reference":
+            refs.setdefault(row.orientation_deg, f)
+    sequences = defaultdict(list)
+    for row, f in bound:
+        if f is None:
+            continue
+        where = f"{f.name} ({row_text(row)})"
+        if f.name in failed:
+            out.append(f"{where}: not measured: {failed[f.name]}")
+        ref = refs.get(row.orientation_deg)
+        reference = pairs.get(ref) if ref is not None and ref is not f else None
+        out += [f"{where}: {w}" for w in image_warnings(pairs.get(f), reference, saturated.get(f, math.nan))]
+        if ref is not None:
+            sequences[row.orientation_deg].append((row, f))
+    for seq in sequences.values():
+        for w in check_axis([pairs.get(f) for _, f in seq]):
+            row, f = seq[w.index]
+            out.append(f"{f.name} ({row_text(row)}): {w.message}")
+    return out
+
+
+def _one_branch(session: Session, bound, lo: int, hi: int) -> bool:
+    """The rows at positions `lo` - 1 ... `hi` of `bound` are of one orientation and
+    their planned torques move one way (no reversal between them): photographs
+    taken the other way round there show as steps out of line."""
+    if lo < 1 or hi >= len(bound):
+        return False
+    rows = [bound[p][0] for p in range(lo - 1, hi + 1)]
+    if len({row.orientation_deg for row in rows}) != 1:
+        return False
+    torques = [session.torque(row).torque_nm for row in rows]
+    steps = [b - a for a, b in zip(torques, torques[1:])]
+    return all(x > 0 for x in steps) or all(x < 0 for x in steps)
 
 
 def _describe(bound, warns) -> list[str]:
     return [f"{bound[pos][1].name} ({row_text(bound[pos][0])}): {w.message}" for pos, w in warns]
 
 
-def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=(),
+def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=(), swap=(),
                  write: bool = True, out_dir=None) -> BindResult:
     """Bind the camera's photographs to the manifest rows (see the module docstring).
 
@@ -186,6 +297,9 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         Camera file names to leave out (extra shots).
     missing : iterable of int
         Manifest CSV lines that were not photographed (missed shots).
+    swap : iterable of (str, str)
+        Pairs of camera files taken the other way round: each takes the other's
+        place in the capture order.
     write : bool
         Write ``binding.json`` (False: only check and propose).
     out_dir : path-like, optional
@@ -200,9 +314,13 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     ------
     SessionError
         The session or camera folder is unusable, `by` is unknown, a `skip` name is
-        not a photograph of the camera folder, or a `missing` line is not a row.
+        not a photograph of the camera folder (or is skipped), or a `missing` line
+        is not a row.
     ManifestError
         manifest.csv is invalid.
+    OutputError
+        The output folder (its cache) or, with `write`, the session folder cannot
+        be written: said before anything is measured.
     """
     from .shots import ShotMeasurer
 
@@ -218,51 +336,78 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     for name in skip:
         if name not in names:
             raise SessionError(f"skip: {name!r} is not a photograph in {camera}")
+    swap = tuple((str(a), str(b)) for a, b in swap)
+    for pair in swap:
+        for name in pair:
+            if name not in names or name in skip:
+                raise SessionError(f"swap: {name!r} is not a photograph in {camera}"
+                                   + (" (it is skipped)" if name in skip else ""))
     lines = {row.line for row in rows}
     for line in missing:
         if line not in lines:
             raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
     out = output_folder(session.folder, out_dir)
-    pairs = {}
+    # before measuring: a bind must not measure everything and then fail to write
+    check_output_dir(out)  # the cache shared with process
+    if write:
+        check_output_dir(session.folder)  # binding.json
+    pairs, saturated, failed = {}, {}, {}
     with ShotMeasurer(session, out) as measurer:
         for f in files:
             shot = measurer.measure(f.path)
             pairs[f] = shot.pair
+            saturated[f] = shot.saturated_fraction
             if shot.pair is None:
-                logger.warning("%s: %s", f.name, shot.message)
+                failed[f.name] = shot.message + (" (a half-written file? it keeps its row)"
+                                                 if shot.undecodable else "")
+    sign, sign_note = _sign_diagnosis(session, _assign(rows, files, set(skip), set(missing), swap)[0], pairs)
 
-    def evaluate(sk, mi):
-        bound, left = _assign(rows, files, set(sk), set(mi))
-        return bound, left, step_warnings(session, bound, pairs)
+    def evaluate(sk, mi, sw):
+        bound, left = _assign(rows, files, set(sk), set(mi), sw)
+        return bound, left, step_warnings(session, bound, pairs, sign=sign)
 
-    bound, leftovers, warns = evaluate(skip, missing)
-    fixes, cur_skip, cur_missing, cur = [], list(skip), list(missing), (bound, warns)
+    bound, leftovers, warns = evaluate(skip, missing, swap)
+    fixes, cur_skip, cur_missing, cur_swap = [], list(skip), list(missing), list(swap)
+    cur = (bound, warns)
     unexplained: set[str] = set()  # files whose misfit no re-binding explains
     for _ in range(_MAX_FIXES):
         b, w = cur
         todo = [(pos, warning) for pos, warning in w if b[pos][1].name not in unexplained]
         if not todo:
             break
-        pos, first = todo[0]
-        row, f = b[pos]
         candidates = []
-        if first.kind in ("no_movement", "wrong_direction"):
-            candidates.append(("skip", f, row))  # an extra shot: the same load again
-        if first.kind in ("large_step", "wrong_direction"):
-            candidates.append(("missing", f, row))  # a missed shot: two steps in one
+        swapped = {name for pair in cur_swap for name in pair}
+        for pos, warning in todo[:3]:  # the fix that explains most, of the first misfits
+            row, f = b[pos]
+            if warning.kind in ("no_movement", "wrong_direction") and f.name not in swapped:
+                candidates.append(("skip", f, row, None, warning))  # an extra shot: the same load again
+            if warning.kind in ("large_step", "wrong_direction"):
+                candidates.append(("missing", f, row, None, warning))  # a missed shot: two steps in one
+            for d in (1, -1, 2, -2, 3, -3):  # two photographs taken the other way round
+                other = b[pos + d] if 0 <= pos + d < len(b) else None
+                if (warning.kind in ("large_step", "wrong_direction") and other is not None
+                        and other[1] is not None and f.name not in swapped and other[1].name not in swapped
+                        and _one_branch(session, b, min(pos, pos + d), max(pos, pos + d))):
+                    candidates.append(("swap", f, row, other, warning))
         best = None
-        for kind, file, r in candidates:
+        for kind, file, r, other, warning in candidates:
             sk = cur_skip + [file.name] if kind == "skip" else cur_skip
             mi = cur_missing + [r.line] if kind == "missing" else cur_missing
-            nb, _, nw = evaluate(sk, mi)
+            sw = cur_swap + [(file.name, other[1].name)] if kind == "swap" else cur_swap
+            nb, _, nw = evaluate(sk, mi, sw)
             still = any(nb[p][1] is file for p, _ in nw)
             if len(nw) < len(w) and not still and (best is None or len(nw) < len(best[3])):
-                best = (kind, file, r, nw, nb, sk, mi)
+                best = (kind, file, r, nw, nb, sk, mi, sw, other, warning)
         if best is None:
-            unexplained.add(f.name)
+            unexplained.add(b[todo[0][0]][1].name)
             continue
-        kind, file, r, nw, nb, cur_skip, cur_missing = best
-        if kind == "skip":
+        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other, first = best
+        if kind == "swap":
+            a, b2 = sorted([(r, file), other], key=lambda t: t[0].line)
+            msg = (f"{a[1].name} and {b2[1].name} look swapped: {a[1].name} shows the load of line "
+                   f"{b2[0].line} and {b2[1].name} that of line {a[0].line} (their angle steps fit the "
+                   f"plan the other way round); exchange them (--swap {a[1].name} {b2[1].name})")
+        elif kind == "skip":
             msg = (f"{file.name} looks like an extra shot: bound to {row_text(r)}, it shows "
                    f"{first.message}; leave it out (--skip {file.name})")
         else:
@@ -279,6 +424,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
             parts += ["--skip", name]
         for line in cur_missing:
             parts += ["--missing", str(line)]
+        for a, b2 in cur_swap:
+            parts += ["--swap", a, b2]
         command = shlex.join(parts)
     binding = Binding(camera_dir=camera, by=by, skipped=skip, missing=missing,
                       images={row.image: f.name for row, f in bound if f is not None})
@@ -288,4 +435,5 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         leftovers=tuple(f.name for f in leftovers),
         unphotographed=tuple((row.line, row.image) for row, f in bound if f is None),
         ignored=listing.ignored, warnings=tuple(_describe(bound, warns)), fixes=tuple(fixes),
-        remaining=tuple(_describe(cur[0], cur[1])), command=command)
+        remaining=tuple(_describe(cur[0], cur[1])), command=command,
+        diagnoses=tuple(([sign_note] if sign_note else []) + _image_diagnoses(bound, pairs, saturated, failed)))

@@ -69,6 +69,26 @@ class Binding:
         name = self.images.get(image)
         return None if name is None else self.camera_dir / name
 
+    def check_camera_dir(self, binding_path) -> None:
+        """Raise when photographs are bound but the camera folder is not there.
+
+        A removed card, an unmounted share or a renamed folder must not turn every
+        bound row into "not photographed yet": that would rewrite a table of
+        measured rows as pending and exit as if nothing were wrong.
+
+        Raises
+        ------
+        SessionError
+            reason ``"camera_dir_missing"``: `camera_dir` is not a folder while
+            `images` binds rows to files in it.
+        """
+        if self.images and not self.camera_dir.is_dir():
+            raise SessionError(
+                f"{self.camera_dir}: the camera folder named in {binding_path} is not there "
+                f"(a card removed, a share not mounted, a folder renamed?); {len(self.images)} "
+                "row(s) are bound to files in it. Put it back, or run `vision-torsion bind` "
+                "with its new place", reason="camera_dir_missing")
+
     def to_dict(self) -> dict:
         return {"format": _FORMAT, "camera_dir": str(self.camera_dir), "by": self.by,
                 "images": dict(self.images), "skipped": list(self.skipped),

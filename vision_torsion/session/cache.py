@@ -30,6 +30,7 @@ own, not ``.cache``, so ``-o ~`` does not write into a user's ``~/.cache``.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
@@ -42,7 +43,8 @@ from ..fileio import atomic_write_text, is_ours, record_created
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "cache_line", "CACHE_DIRNAME"]
+__all__ = ["CacheLog", "read_cache", "read_logs", "merge_cache", "count_entries", "cache_line", "cache_key",
+           "CACHE_DIRNAME"]
 
 #: Name of the cache folder inside the output folder.
 CACHE_DIRNAME = ".vision-torsion-cache"
@@ -55,6 +57,18 @@ _DONE = ("ok", "failed")
 
 def _checksum(key: str, entry_json: str) -> str:
     return xxhash.xxh3_64_hexdigest(f"{key} {entry_json}".encode("utf-8"))
+
+
+def cache_key(image_hash: str, settings_key: str) -> str:
+    """The cache key of one image: SHA-256 (hex, 64 digits) of its bytes' XXH3-128
+    hash and `settings_key` (the JSON of the settings, the measuring code and the
+    cache format).
+
+    The one place a key is made: ``process``, ``bind`` and ``watch`` all measure an
+    image through :func:`~vision_torsion.session.worker.finish_task` with the same
+    candidates, so one key stands for one result whichever command measured first.
+    """
+    return hashlib.sha256(f"{image_hash}\n{settings_key}".encode()).hexdigest()
 
 
 def cache_line(key: str, entry_json: str) -> str:

@@ -32,7 +32,7 @@ from ..errors import ManifestError
 from ..images import IMAGE_SUFFIXES
 from ..measurements import MANIFEST_COLUMNS, MANIFEST_OPTIONAL_COLUMNS, PHASES, ZERO_TORQUE_PHASES
 from ..textfiles import csv_delimiter, decode_utf8
-from .binding import load_binding
+from .binding import BINDING_NAME, load_binding
 
 __all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
            "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
@@ -369,12 +369,17 @@ def load_manifest(path, *, check_files: bool = True, missing: str = "error") -> 
         step), steps out of order within a phase, a second reference row of an
         orientation, or no rows at all. Every problem is listed, one line each,
         with its CSV line number.
+    SessionError
+        binding.json is unusable, or (with `check_files`) the camera folder it
+        binds rows to is not there (:meth:`~.binding.Binding.check_camera_dir`).
     """
     if missing not in ("error", "pending"):
         raise ValueError(f"missing must be 'error' or 'pending', got {missing!r}")
     path = Path(path)
     columns, records = _read_records(path)
     binding = load_binding(path.parent)  # SessionError when binding.json is unusable
+    if check_files and binding is not None:
+        binding.check_camera_dir(path.parent / BINDING_NAME)
     check = _RowChecker(path.parent, binding=binding, missing=missing)
     has = set(columns)
     rows: list[ManifestRow] = []

@@ -52,6 +52,7 @@ from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
+from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
@@ -61,8 +62,9 @@ logger = logging.getLogger(__name__)
 #: Columns added after the manifest's own (whose torque_nm/torque_std_nm, if any,
 #: are replaced by these): :data:`vision_torsion.measurements.RESULT_COLUMNS`.
 OUTPUT_COLUMNS = RESULT_COLUMNS
-#: Bump when the cache entry layout changes; part of every cache key.
-_CACHE_FORMAT = 5
+#: Bump when the cache entry layout, or the way an entry is measured, changes; part of
+#: every cache key.
+_CACHE_FORMAT = 6
 #: Up to this many jobs run as threads of the calling process (jobs threads read,
 #: decode and find candidates, the calling thread measures); more run as worker
 #: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
@@ -331,11 +333,16 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
         else:
             reason = "no angle relative to the reference (marker identity lost)"
         flags = residual_flags(pairs)
-        for i, angle, flag in zip(idx, angles, flags):
+        reference = pairs[idx.index(ref)]
+        for i, pair, angle, flag in zip(idx, pairs, angles, flags):
+            if angle is not None and not flag:  # blur, saturation: the rule watch and bind apply
+                flag = "; ".join(image_warnings(pair, None if i == ref else reference,
+                                                entries[i].get("saturated_fraction", math.nan)))
             if angle is not None and angle.ambiguous:
                 out[i] = (math.nan, math.nan, angle.ambiguous, "failed")
             elif angle is not None:
-                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, flag, SUSPECT if flag else "ok")
+                note = flag or polarity_note(pair, session.settings.polarity)
+                out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, note, SUSPECT if flag else "ok")
             elif entries[i]["status"] == "pending":
                 out[i] = (math.nan, math.nan, entries[i]["message"], "pending")
             else:

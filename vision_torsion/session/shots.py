@@ -11,17 +11,18 @@ is never measured again by ``process`` or ``report``, and the other way round.
 from __future__ import annotations
 
 import json
+import math
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import ImageReadError
-from ..images import GreyImage, decode_image
-from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
+from ..images import GreyImage
+from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
-__all__ = ["Shot", "ShotMeasurer"]
+__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "polarity_note", "SATURATED_FRACTION",
+           "BLUR_RATIO"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,8 @@ class Shot:
         image); nothing was cached for it.
     timings : dict
         Seconds spent: ``read`` (file read and hash), ``decode``, ``measure``.
+    saturated_fraction : float
+        Fraction of the pixels at full scale (NaN when not known: not decoded).
     """
 
     path: Path
@@ -56,6 +59,72 @@ class Shot:
     timings: dict = field(default_factory=dict)
     undecodable: bool = False
     image_hash: str = ""
+    saturated_fraction: float = math.nan
+
+
+#: An image with more than this fraction of its pixels at full scale is saturated.
+SATURATED_FRACTION = 0.005
+#: Marker edges this many times as wide as in the orientation's reference: blurred.
+BLUR_RATIO = 1.5
+
+
+def edge_width(pair) -> float:
+    """Mean fitted edge width of the pair's two markers (px; NaN when unknown)."""
+    if pair is None:
+        return math.nan
+    widths = [getattr(m, "edge_width_px", math.nan) for m in (pair.first, pair.second)]
+    widths = [w for w in widths if isinstance(w, (int, float)) and math.isfinite(w)]
+    return sum(widths) / len(widths) if widths else math.nan
+
+
+def image_warnings(pair, reference, saturated: float) -> list[str]:
+    """The image checks of ``watch`` and ``bind``, one rule for both.
+
+    Parameters
+    ----------
+    pair : PairMeasurement or None
+        The image's target.
+    reference : PairMeasurement or None
+        Its orientation's reference image's target (None: the image is the
+        reference, or the reference failed: no blur check).
+    saturated : float
+        Fraction of its pixels at full scale (:attr:`Shot.saturated_fraction`).
+
+    Returns
+    -------
+    list of str
+        "saturated: ..." when more than :data:`SATURATED_FRACTION` of the pixels
+        are at full scale; "blurred: ..." when the markers' edges are more than
+        :data:`BLUR_RATIO` times as wide as the reference's (camera shake, focus).
+    """
+    out = []
+    if math.isfinite(saturated) and saturated > SATURATED_FRACTION:
+        out.append(f"saturated: {100 * saturated:.1f} % of the pixels at full scale "
+                   "(shorten the exposure or dim the light)")
+    width, ref = edge_width(pair), edge_width(reference)
+    if reference is not None and math.isfinite(width) and math.isfinite(ref) and width > BLUR_RATIO * ref:
+        out.append(f"blurred: marker edges {width:.1f} px wide against {ref:.1f} px in the "
+                   "reference (camera shake, or focus?); shoot it again")
+    return out
+
+
+def polarity_note(pair, polarity: str) -> str:
+    """A note when the image's markers have the other polarity than the session's.
+
+    The markers are still measured (the fit finds an edge either way); the sign of
+    their fitted contrast (negative: darker than around them) tells which they
+    are. Returns "" when they are as the session says, or unknown.
+    """
+    if pair is None:
+        return ""
+    contrasts = [getattr(m, "contrast_dn", math.nan) for m in (pair.first, pair.second)]
+    if not all(isinstance(c, (int, float)) and math.isfinite(c) for c in contrasts):
+        return ""
+    seen = "dark" if max(contrasts) < 0 else "bright" if min(contrasts) > 0 else None
+    if seen is None or seen == polarity:
+        return ""
+    return (f"note: the markers are {seen} here, the session's are {polarity} (the lighting "
+            "changed?); measured all the same")
 
 
 class ShotMeasurer:
@@ -72,11 +141,12 @@ class ShotMeasurer:
     """
 
     def __init__(self, session: Session, out_dir, *, measure=None):
+        from ..pair import measure_pair
         from .process import _settings_key, _valid_entry  # process's cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
-        self.key = _settings_key(self.settings)
+        self.key = _settings_key(self.settings, measure_pair if measure is None else measure)
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
         self._check = _valid_entry
         self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
@@ -105,9 +175,8 @@ class ShotMeasurer:
         Never raises for a bad image: an unreadable, undecodable or unmeasurable
         file gives a Shot with ``pair=None`` and the reason.
         """
-        from ..markers import find_candidates
         from ..pair import PairMeasurement
-        from .worker import ReadImage, content_hash, digest, finish_task
+        from .worker import content_hash, finish_task, prepare_task
 
         path = Path(path)
         t0 = time.perf_counter()
@@ -116,33 +185,35 @@ class ShotMeasurer:
         except OSError as exc:
             return Shot(path, None, f"{path.name}: cannot be read ({exc.strerror or exc})")
         image_hash = content_hash(data)
-        key = digest(f"{image_hash}\n{self.key}".encode())
+        key = cache_key(image_hash, self.key)
         t1 = time.perf_counter()
         entry = self.cached.get(key)
         image, cached = None, entry is not None
         t2 = t1
         if entry is None:
+            # process's own steps (decode, candidates, measure): one key, one result
             task = (str(path), self.settings_json, self.key)
-            try:
-                image = decode_image(data, name=str(path), keep_integers=True)
-            except ImageReadError as exc:  # not cached: it may be a file still being written
-                message = str(exc).replace(str(path), path.name)
-                return Shot(path, None, message, undecodable=True, image_hash=image_hash,
-                            timings={"read": t1 - t0, "decode": time.perf_counter() - t1, "measure": 0.0})
+            read = prepare_task(data, task)
             t2 = time.perf_counter()
-            try:
-                read = ReadImage(key, image_hash, image=image,
-                                 candidates=find_candidates(image.data, self.settings))
-            except Exception as exc:  # noqa: BLE001 - finish_task reports it as a failure
-                read = ReadImage(key, image_hash, error=exc)
-            _, text, _ = finish_task(read, task)
-            entry = json.loads(text)
-            if entry["status"] == "ok":
-                self.cached[key] = entry
+            if read.undecodable:  # not cached: it may be a file still being written
+                message = str(read.error).replace(str(path), path.name)
+                return Shot(path, None, message, undecodable=True, image_hash=image_hash,
+                            timings={"read": t1 - t0, "decode": t2 - t1, "measure": 0.0})
+            image = read.image
+            if read.result is not None:  # cached by another Shot of this run
+                entry = self.cached.get(key)
+            if entry is None:
+                _, text, _ = finish_task(read, task)
+                entry = json.loads(text)
+                if entry["status"] == "ok":
+                    self.cached[key] = entry
         t3 = time.perf_counter()
         timings = {"read": t1 - t0, "decode": t2 - t1, "measure": t3 - t2}
+        saturated = entry.get("saturated_fraction", math.nan)
+        saturated = float(saturated) if isinstance(saturated, (int, float)) else math.nan
         if entry["status"] != "ok":
             message = entry.get("message", "").replace(str(path), path.name)
-            return Shot(path, None, message, image, cached, timings, image_hash=image_hash)
+            return Shot(path, None, message, image, cached, timings, image_hash=image_hash,
+                        saturated_fraction=saturated)
         return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings,
-                    image_hash=image_hash)
+                    image_hash=image_hash, saturated_fraction=saturated)

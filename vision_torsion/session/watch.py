@@ -13,15 +13,19 @@ A tick:
    Says so once, and waits for it to come back.
 2. A file is complete when its size and modification time have not changed for
    `settle_s` (a camera writes in chunks) and it decodes (a PNG without its IEND
-   chunk, a JPEG without its end marker is waited for, not measured). A file
-   that stays undecodable for `give_up_s` is reported and set aside. Files whose
+   chunk, a JPEG without its end marker is waited for, not measured). Files whose
    time is already older than `settle_s` when first seen (a resumed watch) are
    complete at once.
 3. Each complete file, in capture order (file time, then natural name order), is
    measured (:class:`~.shots.ShotMeasurer`: ``process``'s cache, shared) and bound
    to the next planned row not yet photographed (with no ``--camera-dir``, a file
-   saved under a row's planned name is bound to that row). Non-images, copies
-   (the same bytes as an earlier file) and files beyond the last row are set
+   saved under a row's planned name is bound to that row). A file not complete yet
+   holds back every file after it in capture order, so none takes its row; one that
+   stays undecodable for `give_up_s` (stalled half-way: a slow card, a network
+   share) is bound to its row as failed, with a warning naming it, and ``process``
+   fails that row. A bound file that changes (a re-shot under the same name, a
+   stalled file finished late) is measured again and announced. Non-images,
+   copies (the same bytes as an earlier file) and files beyond the last row are set
    aside with a message naming them; nothing is ever written in the camera folder.
 4. Its angle (against its orientation's reference image, ``angle_sign`` applied),
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
@@ -41,15 +45,14 @@ from __future__ import annotations
 import logging
 import math
 import os
+import shlex
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import SessionError
-from ..fileio import atomic_write_text
+from ..fileio import atomic_write_text, check_output_dir
 from ..images import IMAGE_SUFFIXES
 from ..measure import natural_key
 from ..measurements import output_folder
@@ -57,14 +60,12 @@ from .bind import row_text
 from .binding import Binding, load_binding, write_binding
 from .live import LIVE_PAGE_NAME, LivePoint, live_page
 from .load import load_session
-from .steps import StepPoint, check_steps
+from .steps import StepPoint, check_steps, gear_kinks
 
-__all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult"]
+__all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult", "printable"]
 
 logger = logging.getLogger(__name__)
 
-_BLUR_RATIO = 1.5
-_SATURATED_FRACTION = 0.005
 
 
 @dataclass(frozen=True)
@@ -75,8 +76,9 @@ class WatchEvent:
     ----------
     kind : str
         "shot" (a photograph bound and measured), "warning" (about a photograph),
-        "retracted" (a warning the next image showed to be the gear), "ignored" (a
-        file set aside), "leftover" (a photograph beyond the last row), "deleted",
+        "retracted" (a warning the next image showed to be the gear), "replaced" (a
+        bound file changed: measured again), "ignored" (a file set aside), "leftover"
+        (a photograph beyond the last row), "deleted",
         "folder_gone", "folder_back", "complete" (every row has its photograph).
     file : str
         The file concerned ("" for folder events).
@@ -109,8 +111,11 @@ class _Bound:
     warnings: list
     angle: float = math.nan
     delta: float = math.nan
-    edge_width: float = math.nan
     result: object | None = None  # AngleResult against the orientation's reference
+    stat: tuple | None = None  # (size, mtime_ns) of the file when it was measured
+    image_hash: str = ""
+    stalled: str | None = None  # why a file that never completed holds its row
+    own: list = field(default_factory=list)  # the image's own warnings (not its steps')
 
 
 class Watcher:
@@ -127,7 +132,10 @@ class Watcher:
     settle_s : float
         Seconds a file's size and time must stay the same before it is read.
     give_up_s : float
-        Seconds a settled file may stay undecodable before it is set aside.
+        Seconds a settled file may stay undecodable (half-written: a slow card, a
+        network share) before it is bound to its row as failed, with a warning
+        naming it; the files after it in capture order wait for it meanwhile, so
+        none of them takes its row. It is measured again when it changes.
     page : bool
         Write the live page (after every tick that took in a photograph).
     binding_every_s : float
@@ -135,6 +143,15 @@ class Watcher:
         its photograph, and on closing).
     clock : callable
         Monotonic clock (seconds); tests pass their own.
+
+    Raises
+    ------
+    SessionError
+        The session is unusable, the camera folder is the output folder, or
+        `settle_s` or `give_up_s` is not a finite number of seconds >= 0.
+    OutputError
+        The output folder, or with a camera folder the session folder (where
+        ``binding.json`` goes), cannot be written: said before any photograph.
 
     Use as a context manager (or call :meth:`close`): closing merges the cache.
     """
@@ -144,6 +161,10 @@ class Watcher:
                  clock=time.monotonic):
         from .shots import ShotMeasurer
 
+        for what, value in (("settle_s", settle_s), ("give_up_s", give_up_s)):
+            if not (isinstance(value, (int, float)) and 0 <= value < math.inf):
+                raise SessionError(f"{what} = {value!r}: expected a finite number of seconds >= 0",
+                                   reason="bad_option")
         self.session = load_session(session_dir, check_files=False)
         folder = self.session.folder
         self.camera_mode = camera_dir is not None
@@ -151,6 +172,10 @@ class Watcher:
         self.out = output_folder(folder, out_dir)
         if self.camera.resolve() == self.out.resolve():
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
+        # before the first photograph: a watch must not announce itself and then die
+        check_output_dir(self.out)  # live.html and the cache
+        if self.camera_mode:
+            check_output_dir(folder)  # binding.json
         self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
         rows = self.session.manifest.rows
         self.rows = rows
@@ -171,6 +196,9 @@ class Watcher:
         cfg = self.session.config
         self.step_torque = 2.0 * cfg.protocol.step_mass_kg * cfg.rig.gravity_m_per_s2 * cfg.rig.arm_radius_m
         self.torques = [self.session.torque(row).torque_nm for row in rows]
+        self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
+        self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)
+        self.swapped: dict[int, tuple[int, str]] = {}  # position -> (its partner, the diagnosis)
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
         self._closed = False
         self.binding_every_s = binding_every_s
@@ -235,13 +263,13 @@ class Watcher:
             elif info is not None:
                 events.append(self._notice("deleted", name, f"{name} was deleted before it was "
                                            "complete; not bound"))
-        ready = []
+        ready, unsettled, changed_bound = [], [], []
         wall = time.time()
         for e in entries:
             name = e.name
-            if name in self.done or name in self.set_aside:
+            if name in self.set_aside:
                 continue
-            if Path(name).suffix.lower() not in IMAGE_SUFFIXES:
+            if name not in self.done and Path(name).suffix.lower() not in IMAGE_SUFFIXES:
                 self.set_aside[name] = "not an image"
                 events.append(self._notice("ignored", name, f"{name}: not an image file (expected "
                                            f"{', '.join(IMAGE_SUFFIXES)}); not bound"))
@@ -249,19 +277,42 @@ class Watcher:
             if name in self.skipped:
                 self.set_aside[name] = "skipped"
                 continue
-            st = e.stat()
+            try:
+                st = e.stat()
+            except OSError:  # vanished meanwhile: the next tick says so
+                continue
             info = self.seen.get(name)
             if info is None or (info.size, info.mtime_ns) != (st.st_size, st.st_mtime_ns):
                 old = wall - st.st_mtime > self.settle_s
                 self.seen[name] = info = _Seen(st.st_size, st.st_mtime_ns,
                                                -math.inf if old else now)
-            if st.st_size > 0 and now - info.since >= self.settle_s:
-                ready.append((st.st_mtime_ns, natural_key(name), name))
+            settled = now - info.since >= self.settle_s
+            order = (st.st_mtime_ns, natural_key(name), name)
+            if name in self.done:
+                pos = self._position(name)
+                if pos is not None and self.bound[pos].stat != (st.st_size, st.st_mtime_ns) and settled:
+                    changed_bound.append((pos, name))
+            elif settled:
+                ready.append(order)
+            else:
+                unsettled.append(order)
         changed = False
-        for _, _, name in sorted(ready):
+        for pos, name in changed_bound:
+            new = self._remeasure(pos, name, now)
+            changed = changed or bool(new)
+            events += new
+        # capture order is binding order: a file still being written (or stalled
+        # half-way) holds back every file after it, so none takes its row
+        first_unsettled = min(unsettled, default=None)
+        for order in sorted(ready):
+            if first_unsettled is not None and order > first_unsettled:
+                break
+            name = order[2]
             new = self._handle(name, now)
             changed = changed or bool(new)
             events += new
+            if name not in self.done and name not in self.set_aside:
+                break  # waited for (not decodable yet): the files after it wait too
         if changed and self.complete:
             events.append(WatchEvent("complete", "", f"all {len(self.rows)} planned images are in"))
         if changed:
@@ -274,29 +325,37 @@ class Watcher:
         self.notices.append(message)
         return WatchEvent(kind, name, message, line)
 
+    def _position(self, name: str) -> int | None:
+        return next((p for p, b in self.bound.items() if b.file == name), None)
+
     def _handle(self, name: str, now: float) -> list[WatchEvent]:
-        """A file that looks complete: measure it and bind it, or wait, or set it aside."""
+        """A file that looks complete: measure it and bind it, or wait."""
         t0 = time.perf_counter()
         path = self.camera / name
         shot = self.measurer.measure(path)
         info = self.seen.get(name)
+        stalled = None
         if shot.undecodable:
             if info is not None and info.first_undecodable is None:
                 info.first_undecodable = now
             if info is not None and now - info.first_undecodable < self.give_up_s:
                 return []  # still being written, most likely: wait
-            self.set_aside[name] = "undecodable"
-            return [self._notice("ignored", name, f"{shot.message}; still so after "
-                                 f"{self.give_up_s:g} s: set aside, not bound")]
-        if not shot.image_hash:
+            # stalled half-written (a slow card, a network share): it takes its row
+            # as a failed image, so the photographs after it keep theirs
+            stalled = (f"still not a complete image after {self.give_up_s:g} s ({shot.message}); "
+                       "bound to this row as failed, so that the photographs after it keep "
+                       "their rows. It is measured again when it changes; if it is not a "
+                       f"photograph of this row, leave it out with `vision-torsion bind "
+                       f"--skip {name}`")
+        elif not shot.image_hash:
             return []  # unreadable: deleted meanwhile (the next tick says so), or no access
         digest = shot.image_hash
-        if digest in self.hashes:
+        if stalled is None and digest in self.hashes:
             self.set_aside[name] = "copy"
             return [self._notice("ignored", name, f"{name}: the same bytes as {self.hashes[digest]} "
                                  "(a copy, not a new photograph); not bound")]
-        self.hashes[digest] = name
-        self.done.add(name)
+        if stalled is None:
+            self.hashes[digest] = name
         pos = None
         if not self.camera_mode:
             row = self.by_name.get(f"images/{name}")
@@ -304,88 +363,206 @@ class Watcher:
         if pos is None:
             nxt = self.next_row()
             if nxt is None:
+                self.done.add(name)
                 return [self._notice("leftover", name, f"{name}: every planned row already has its "
                                      f"photograph ({len(self.rows)} rows); not bound (an extra shot?)")]
             pos = nxt[0]
-        row = self.rows[pos]
-        edge = math.nan
-        if shot.pair is not None:
-            widths = [getattr(m, "edge_width_px", math.nan) for m in (shot.pair.first, shot.pair.second)]
-            edge = float(np.nanmean(widths)) if np.isfinite(widths).any() else math.nan
-        b = _Bound(row, name, shot.pair, shot.message, [], edge_width=edge)
-        self.bound[pos] = b
-        self.order.append(pos)
+        self.done.add(name)
+        self._bind(pos, name, shot, info)
+        self.bound[pos].stalled = stalled
         events = self._check(pos, shot)
         self.timings.append({**shot.timings, "live": time.perf_counter() - t0 - shot.timings.get("decode", 0.0),
                              "file": name, "cached": shot.cached})
         return events
 
+    def _bind(self, pos: int, name: str, shot, info) -> None:
+        b = _Bound(self.rows[pos], name, shot.pair, shot.message, [],
+                   stat=None if info is None else (info.size, info.mtime_ns), image_hash=shot.image_hash)
+        if pos not in self.bound:
+            self.order.append(pos)
+        self.bound[pos] = b
+
+    def _remeasure(self, pos: int, name: str, now: float) -> list[WatchEvent]:
+        """A bound file whose size or time changed (a re-shot under the same name, or
+        a stalled file finished late): measured again, and said so."""
+        old = self.bound[pos]
+        info = self.seen.get(name)
+        shot = self.measurer.measure(self.camera / name)
+        if shot.undecodable:
+            if info is not None and info.first_undecodable is None:
+                info.first_undecodable = now
+            if info is not None and now - info.first_undecodable < self.give_up_s:
+                return []  # being rewritten: wait for it
+        if not shot.image_hash:
+            return []
+        if shot.image_hash == old.image_hash:  # touched, not changed
+            old.stat = None if info is None else (info.size, info.mtime_ns)
+            return []
+        if self.hashes.get(old.image_hash) == name:
+            del self.hashes[old.image_hash]
+        if not shot.undecodable:
+            self.hashes.setdefault(shot.image_hash, name)
+        self._bind(pos, name, shot, info)
+        b = self.bound[pos]
+        b.stalled = None if not shot.undecodable else old.stalled
+        for x in self.bound.values():  # the reference may be the one replaced: angles again
+            if x.row.orientation_deg == b.row.orientation_deg:
+                x.result = None
+        notice = self._notice("replaced", name, f"{name} changed after it was measured (a re-shot, "
+                              "or a file written late): measured again for "
+                              f"{row_text(b.row)}; its old result is dropped", b.row.line)
+        return [notice] + self._check(pos, shot)
+
     def _check(self, pos: int, shot) -> list[WatchEvent]:
-        """Angles of the orientation, the step checks, the image checks; events."""
-        from ..angle import pair_angle
+        """The image checks of the new photograph, then its orientation's (angles,
+        steps, swaps, the axis, the sign); events: its line, then the warnings
+        found now, in capture order (on it, or on an image before it that it
+        decided)."""
+        from .shots import image_warnings, polarity_note
 
         b = self.bound[pos]
         row = b.row
-        warnings: list[str] = []
-        if shot.pair is None:
-            warnings.append(f"marker not found: {shot.message}")
-        if shot.image is not None:
-            data = shot.image.data
-            frac = np.count_nonzero(data >= shot.image.full_scale) / data.size
-            if frac > _SATURATED_FRACTION:
-                warnings.append(f"saturated: {100 * frac:.1f} % of the pixels at full scale "
-                                "(shorten the exposure or dim the light)")
-        same = sorted(p for p, x in self.bound.items() if x.row.orientation_deg == row.orientation_deg)
-        ref = next((p for p in same if self.bound[p].row.phase == "reference"), None)
-        retracted: list[WatchEvent] = []
-        if ref is not None and self.bound[ref].pair is not None:
-            rb = self.bound[ref]
-            if (pos != ref and math.isfinite(b.edge_width) and math.isfinite(rb.edge_width)
-                    and b.edge_width > _BLUR_RATIO * rb.edge_width):
-                warnings.append(f"blurred: marker edges {b.edge_width:.1f} px wide against "
-                                f"{rb.edge_width:.1f} px in the reference (camera shake, or focus?)")
-            seq = [p for p in same if p >= ref]
-            seq.sort(key=self.order.index)
-            ok = [p for p in seq if self.bound[p].pair is not None]
-            # incremental: the new photograph is the last of its orientation in capture
-            # order, so only its angle is new (the recurrence of sequence_angles)
-            sign = self.session.config.angle_sign
-            prev = math.nan
-            for p in ok:
-                x = self.bound[p]
-                if x.result is None:
-                    near = 0.0 if not math.isfinite(prev) else sign * prev
-                    x.result = pair_angle(rb.pair, x.pair, near_deg=near)
-                    x.angle = sign * x.result.angle_deg
-                x.delta = x.angle - prev
-                prev = x.angle
-            angles = [self.bound[p].result for p in ok]
-            points = [StepPoint(self.torques[p], self.bound[p].angle,
-                                0.0 if a is None else a.angle_std_deg) for p, a in zip(ok, angles)]
-            current = {ok[w.index]: w for w in check_steps(points, step_torque_nm=self.step_torque)}
-            for p in ok:
-                x = self.bound[p]
-                old = [w for w in x.warnings if w.startswith("step:")]
-                if p != pos and old and p in current:  # confirmed by the next image: no hedge now
-                    x.warnings = [w for w in x.warnings if not w.startswith("step:")] + [
-                        "step: " + current[p].message]
-                if p != pos and old and p not in current:
-                    x.warnings = [w for w in x.warnings if not w.startswith("step:")]
-                    retracted.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
-                                                "not a mistake after all: the next image goes on at "
-                                                "the new stiffness (the gear switching branch)", x.row.line))
-            if pos in current:
-                warnings.append("step: " + current[pos].message)
-        b.warnings = warnings
+        own: list[str] = []
+        if b.stalled is not None:
+            own.append(b.stalled)
+        elif shot.pair is None:
+            own.append(f"marker not found: {shot.message}")
+        ref = self._reference(row.orientation_deg)
+        reference = self.bound[ref].pair if ref is not None and ref != pos else None
+        own += image_warnings(shot.pair, reference, shot.saturated_fraction)
+        b.own = own
+        before = {p: list(x.warnings) for p, x in self.bound.items()}
+        derived: dict[int, list[str]] = {p: [] for p in self.bound}
+        steps: list[tuple[int, object]] = []
+        for orientation in dict.fromkeys(x.row.orientation_deg for x in self.bound.values()):
+            steps += self._analyse(orientation, derived)
+        kinks = gear_kinks([w for _, w in steps])  # the gear's own, seen twice: not mistakes
+        for n, (p, w) in enumerate(steps):
+            if n not in kinks:
+                derived[p].insert(0, w.message)
+        if self.sign_decided in derived:
+            derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
+        for p, x in self.bound.items():
+            x.warnings = x.own + derived[p]
         number = self.order.index(pos) + 1
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
                 + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
-                )
-        events = [WatchEvent("shot", b.file, line, row.line)] + retracted
-        events += [WatchEvent("warning", b.file, f"{b.file} ({row_text(row)}): {w.removeprefix('step: ')}",
-                              row.line) for w in warnings]
+                + (f"  ({note})" if (note := polarity_note(b.pair, self.session.settings.polarity)) else ""))
+        events = [WatchEvent("shot", b.file, line, row.line)]
+        for p in sorted(self.bound, key=self.order.index):
+            x = self.bound[p]
+            old = [] if p == pos else before.get(p, [])
+            for w in x.warnings:
+                if w not in old:
+                    events.append(WatchEvent("warning", x.file, f"{x.file} ({row_text(x.row)}): {w}",
+                                             x.row.line))
+            if old and not x.warnings:
+                events.append(WatchEvent("retracted", x.file, f"{x.file} ({row_text(x.row)}): "
+                                         "not a mistake after all: the gear's own change of stiffness "
+                                         "(the same step elsewhere in the loop shows it too)", x.row.line))
         return events
+
+    def _reference(self, orientation: float) -> int | None:
+        return next((p for p in sorted(self.bound) if self.bound[p].row.orientation_deg == orientation
+                     and self.bound[p].row.phase == "reference"), None)
+
+    def _analyse(self, orientation: float, derived: dict) -> list[tuple[int, object]]:
+        """Angles, step checks, swaps, the axis and the sign of one orientation's
+        photographs so far: the step warnings [(position, StepWarning)]; the swaps'
+        and the axis' messages are added to `derived` (position -> messages)."""
+        from ..angle import pair_angle
+        from .axis import check_axis
+        from .steps import first_load_inverted
+
+        same = [p for p in self.bound if self.bound[p].row.orientation_deg == orientation]
+        ref = self._reference(orientation)
+        if ref is None or self.bound[ref].pair is None:
+            return []
+        rb = self.bound[ref]
+        seq = sorted((p for p in same if p >= ref), key=self.order.index)
+        ok = [p for p in seq if self.bound[p].pair is not None]
+        self._angles(rb, ok, pair_angle)
+        points = self._points(ok)
+        if self.sign_decided is None:
+            inverted = first_load_inverted(points)
+            if inverted is not None or any(self.torques[p] != 0 for p in ok[1:]):
+                self.sign_decided = ok[inverted] if inverted is not None else -1
+            if inverted is not None:
+                self.sign = -self.sign
+                for x in self.bound.values():
+                    x.result = None
+                self._angles(rb, ok, pair_angle)
+                points = self._points(ok)
+        open_end = any(row.orientation_deg == orientation and i not in self.bound
+                       and row.line not in self.missing for i, row in enumerate(self.rows))
+        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+        if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
+            self._try_swap(ok, points, warns, open_end)
+            points = self._points(ok)
+            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+        for p in ok:
+            if p in self.swapped:
+                derived[p].append(self.swapped[p][1])
+        for w in check_axis([self.bound[p].pair for p in ok]):
+            derived[ok[w.index]].append(w.message)
+        return [(ok[w.index], w) for w in warns]
+
+    def _angles(self, rb, ok, pair_angle) -> None:
+        """Each photograph's angle (``sign`` applied) and Δangle, in capture order;
+        only the new ones are measured (the recurrence of sequence_angles)."""
+        prev = math.nan
+        for p in ok:
+            x = self.bound[p]
+            if x.result is None:
+                near = 0.0 if not math.isfinite(prev) else self.sign * prev
+                x.result = pair_angle(rb.pair, x.pair, near_deg=near)
+            x.angle = self.sign * x.result.angle_deg
+            x.delta = x.angle - prev
+            prev = x.angle
+
+    def _points(self, ok) -> list[StepPoint]:
+        """The step points, the angles of two photographs found swapped exchanged."""
+        def angle(p):
+            return self.bound[self.swapped[p][0] if p in self.swapped else p].angle
+
+        return [StepPoint(self.torques[p], angle(p), self.bound[p].result.angle_std_deg) for p in ok]
+
+    def _try_swap(self, ok, points, warns, open_end) -> None:
+        """The newest photograph warned: were it and the one before taken the other way
+        round? If exchanging them makes their steps fit, they are recorded as swapped
+        (with the ``bind`` fix) and checked that way from now on."""
+        a, b = ok[-2], ok[-1]
+        before = ok[-3]
+        if a in self.swapped or b in self.swapped or warns[-1].kind != "wrong_direction":
+            return
+        torques = [self.torques[p] for p in (before, a, b)]
+        if (torques[1] - torques[0]) * (torques[2] - torques[1]) <= 0:
+            return  # across a reversal of the load: a swap cannot be told from the gear there
+        trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
+                               StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end)
+        if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
+            return
+        fa, fb = self.bound[a].file, self.bound[b].file
+        if self.camera_mode:
+            fix = ("fix: " + shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera),
+                                         "--swap", fa, fb]))
+        else:
+            fix = f"fix: exchange the names of {fa} and {fb}"
+        text = (f"{fa} and {fb} look swapped: {fa} shows the load of line {self.bound[b].row.line} "
+                f"and {fb} that of line {self.bound[a].row.line} (their angle steps fit the plan the "
+                f"other way round); {fix}")
+        self.swapped[a] = (b, text)
+        self.swapped[b] = (a, text)
+
+    def sign_message(self, pos: int) -> str:
+        """The one line saying the session's angle_sign is inverted (at `pos`, the
+        first loaded photograph)."""
+        x = self.bound[pos]
+        return (f"angle_sign is inverted: this first loaded image turned {-x.angle:+.4f}° under "
+                f"{self.torques[pos]:+.5f} N·m; set angle_sign = {self.sign:+d} in "
+                f"{self.session.folder / 'session.toml'} (watch checks the angles with it from here on)")
 
     # -- outputs -----------------------------------------------------------------
 
@@ -463,6 +640,12 @@ class WatchResult:
     interrupted: bool
 
 
+def printable(text: str) -> str:
+    """`text` with its control characters shown escaped (``\\x1b``): a camera file
+    name must not retitle the window or clear the screen it is printed on."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
+
+
 def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float = 0.5,
                   settle_s: float = 1.0, give_up_s: float = 10.0, finish=None,
                   stop=None, echo=None) -> WatchResult:
@@ -497,7 +680,7 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
         stream = sys.stderr if event.kind in ("warning", "ignored", "deleted", "folder_gone",
                                               "leftover") else sys.stdout
         prefix = {"warning": "  ! ", "retracted": "  ✓ "}.get(event.kind, "")
-        print(prefix + event.message, file=stream, flush=True)
+        print(prefix + printable(event.message), file=stream, flush=True)
 
     echo = echo or default_echo
     interrupted = False

@@ -23,6 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import cv2
+import numpy as np
 import xxhash
 from threadpoolctl import threadpool_limits
 
@@ -30,11 +31,13 @@ from ..batch import attempt
 from ..images import GreyImage, decode_image
 from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
-from .cache import CacheLog
+from .cache import CacheLog, cache_key
 
 __all__ = [
     "measure_task",
     "read_task",
+    "prepare_task",
+    "saturated_fraction",
     "finish_task",
     "ReadImage",
     "digest",
@@ -102,6 +105,8 @@ class ReadImage:
         Why it could not be decoded.
     result : tuple or None
         The task's result when it needs no measuring: cached, or unreadable.
+    undecodable : bool
+        The bytes could not be decoded as an image (`error` says why).
     """
 
     key: str
@@ -110,6 +115,7 @@ class ReadImage:
     candidates: object | None = None
     error: Exception | None = None
     result: tuple[str, str | None, str] | None = None
+    undecodable: bool = False
 
 
 def read_task(task: tuple[str, str, str]) -> ReadImage:
@@ -122,21 +128,32 @@ def read_task(task: tuple[str, str, str]) -> ReadImage:
     (:func:`finish_task`). Detecting here, while the image is still in this core's
     caches, costs about half as much as in the measuring thread.
     """
-    path, settings_json, settings_key = task
+    path = task[0]
     try:
         data = Path(path).read_bytes()
     except OSError as exc:
         why = json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"})
         return ReadImage("", result=("", why, "unread"))
+    return prepare_task(data, task)
+
+
+def prepare_task(data: bytes, task: tuple[str, str, str]) -> ReadImage:
+    """:func:`read_task` on bytes already read: hash, and unless cached, decode and
+    find the candidates. ``bind`` and ``watch`` (:mod:`.shots`) use it too, so an
+    image is measured from the same candidates whichever command measures it."""
+    path, settings_json, settings_key = task
     image_hash = content_hash(data)
-    key = digest(f"{image_hash}\n{settings_key}".encode())
+    key = cache_key(image_hash, settings_key)
     if key in _Cache.known:
         return ReadImage(key, image_hash, result=(key, None, "cached"))
     try:
         image = decode_image(data, name=path, keep_integers=True)
+    except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
+        return ReadImage(key, image_hash, error=exc, undecodable=True)
+    try:
         candidates = pair_candidates(image.data, _settings_from(settings_json))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
-        return ReadImage(key, image_hash, error=exc)
+        return ReadImage(key, image_hash, image=image, error=exc)
     return ReadImage(key, image_hash, image=image, candidates=candidates)
 
 
@@ -160,6 +177,8 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         return key, json.dumps({"status": "failed", "message": done.message}), "measured"
     entry = {"status": "ok", "pair": done.value.to_dict()} if done.ok else {"status": "failed", "message": done.message}
     entry["image_xxh3_128"] = read.image_hash
+    if read.image is not None:
+        entry["saturated_fraction"] = saturated_fraction(read.image)
     text = json.dumps(entry, sort_keys=True)
     if _Cache.log is not None:
         try:
@@ -167,6 +186,14 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         except OSError as exc:  # the result stands; only a re-run would measure it again
             logger.warning("%s: result not cached (%s)", path, exc)
     return key, text, "measured"
+
+
+def saturated_fraction(image: GreyImage) -> float:
+    """Fraction of `image`'s pixels at its full scale (0-1): kept with its cached
+    result, so ``watch``, ``bind`` and ``process`` judge saturation from the same
+    number whichever measured it (:func:`~.shots.image_warnings`)."""
+    data = image.data
+    return float(np.count_nonzero(data >= image.full_scale)) / data.size
 
 
 def measure_task(task: tuple[str, str, str]) -> tuple[str, str | None, str]:

@@ -9,7 +9,10 @@ with the capture mistakes of the rig on request:
   step for that photograph, and right again at the next row;
 - ``extra_after=j``: after row ``j``'s photograph, a second one of the same load
   (new noise: a new exposure, not a copy);
-- ``missed=m``: row ``m``'s load was applied but not photographed.
+- ``missed=m``: row ``m``'s load was applied but not photographed;
+- ``swapped=s``: rows ``s`` and ``s + 1`` photographed the other way round;
+- ``bumped=(b, dx, dy, turn)``: the camera knocked before row ``b``'s photograph;
+- ``blurred=u``: row ``u``'s photograph out of focus.
 
 Angles follow the paper's bilinear model (:func:`~vision_torsion.analysis.models.bilinear_response`)
 for the nominal torque sequence of every row (a missed row's load was applied),
@@ -22,6 +25,7 @@ own polling without waiting), :meth:`ScriptedCamera.run` sleeps between chunks.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass
@@ -65,7 +69,8 @@ class CameraShot:
 
 
 def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=None,
-                   extra_after=None, missed=None):
+                   extra_after=None, missed=None, swapped=None, bumped=None, blurred=None,
+                   response=None):
     """Plan a session into `session_dir` and render its photographs with mistakes.
 
     Parameters
@@ -80,6 +85,19 @@ def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=
         Seed of the image noise.
     forgotten, extra_after, missed : int, optional
         Row indices of the mistakes (module docstring).
+    swapped : int, optional
+        The photographs of rows ``swapped`` and ``swapped + 1`` are taken the other
+        way round (the second load photographed first).
+    bumped : (int, float, float, float), optional
+        ``(row, dx_px, dy_px, turn_deg)``: the camera is knocked before that row's
+        photograph: the view moves by (dx, dy) px and turns by `turn_deg` from then
+        on.
+    blurred : int, optional
+        Row index of a photograph taken out of focus (blur σ three times the scene's,
+        and at least 3 px).
+    response : callable, optional
+        ``response(torque_nm) -> angle_rad`` of one orientation's torque sequence
+        (the gear); the bilinear model of `spec` by default.
 
     Returns
     -------
@@ -106,14 +124,25 @@ def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=
     orient = np.array([float(r["orientation_deg"]) for r in rows])
     for o in dict.fromkeys(orient):
         idx = np.flatnonzero(orient == o)
-        th = np.degrees(bilinear_response(actual[idx], k_u=spec.k_u_nm_per_rad,
-                                          k_l=spec.k_l_nm_per_rad, tau_c=spec.tau_c_nm))
+        if response is None:
+            th = np.degrees(bilinear_response(actual[idx], k_u=spec.k_u_nm_per_rad,
+                                              k_l=spec.k_l_nm_per_rad, tau_c=spec.tau_c_nm))
+        else:
+            th = np.degrees(np.asarray(response(actual[idx]), float))
         angles[idx] = th - th[0]
     rngs = np.random.SeedSequence(seed).spawn(len(rows) + 1)
     shots = []
 
     def shoot(i, kind, rng):
-        r = render(scene, spec.angle_sign * angles[i], seed=np.random.default_rng(rng))
+        view, turn = scene, 0.0
+        if bumped is not None and i >= bumped[0]:
+            disk = dataclasses.replace(scene.disk, center_x=scene.disk.center_x + bumped[1],
+                                       center_y=scene.disk.center_y + bumped[2])
+            view, turn = dataclasses.replace(scene, disk=disk), bumped[3]
+        if i == blurred:
+            sigma = max(3.0 * scene.optics.blur_sigma_px, 3.0)
+            view = dataclasses.replace(view, optics=dataclasses.replace(scene.optics, blur_sigma_px=sigma))
+        r = render(view, spec.angle_sign * angles[i] + turn, seed=np.random.default_rng(rng))
         ok, buf = cv2.imencode(".png", r.image)
         shots.append(CameraShot(i, kind, float(actual[i]), float(angles[i]), buf.tobytes()))
 
@@ -122,6 +151,9 @@ def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=
             shoot(i, "forgotten" if i == forgotten else "planned", rngs[i])
         if i == extra_after:
             shoot(i, "extra", rngs[-1])
+    if swapped is not None:
+        k = next(n for n, shot in enumerate(shots) if shot.row == swapped)
+        shots[k], shots[k + 1] = shots[k + 1], shots[k]
     return plan, shots
 
 
