@@ -23,7 +23,7 @@ import pandas as pd
 from ..errors import AnalysisError
 
 __all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
-           "describe_withheld", "angle_sign_advice"]
+           "describe_withheld", "angle_sign_advice", "spec_limits", "identity"]
 
 logger = logging.getLogger(__name__)
 
@@ -154,12 +154,47 @@ _LABELS = {
     ("gear", "t1_nm"): "catalogue T1 (N·m)",
     ("gear", "t2_nm"): "catalogue T2 (N·m)",
     ("test", "operator"): "operator",
+    ("test", "date"): "test date",
     ("test", "temperature_c"): "temperature (°C)",
     ("test", "notes"): "notes",
     ("test", "lost_motion_fractions"): "lost motion at (fractions of T_R)",
     ("test", "secant_interval_nm"): "secant interval (N·m)",
     ("test", "fit_breaks"): "fit break torques",
 }
+
+
+def spec_limits(config, figures=()) -> list:
+    """The :class:`~vision_torsion.analysis.conformity.Limit` list of session.toml's
+    ``[spec]`` table, in the analysis' units (N·m/rad, degrees).
+
+    The lost-motion maximum applies to every lost-motion figure among `figures`
+    (the analysis' figure names: one per ``[test] lost_motion_fractions``, ±3 % and
+    ±4 % of T_R by default).
+    """
+    from ..analysis.conformity import Limit
+
+    spec = config.spec
+    out = [Limit(f"k{i}", "min", v) for i, v in
+           enumerate((spec.k1_min_nm_per_rad, spec.k2_min_nm_per_rad, spec.k3_min_nm_per_rad), start=1)
+           if v is not None]
+    if spec.lost_motion_max_arcmin is not None:
+        out += [Limit(f, "max", spec.lost_motion_max_arcmin / 60.0) for f in figures if f.startswith("lost_motion_")]
+    if spec.hysteresis_loss_max_arcmin is not None:
+        out.append(Limit("hysteresis_loss", "max", spec.hysteresis_loss_max_arcmin / 60.0))
+    return out
+
+
+def identity(config) -> dict:
+    """Who, what, when: ``{"gear", "serial", "operator", "date", "notes"}`` from
+    session.toml's ``[gear]``/``[test]``, the entries given only."""
+    if config is None:
+        return {}
+    out = {"gear": config.gear.name, "serial": config.gear.serial, "operator": config.test.operator,
+           "date": config.test.date, "notes": config.test.notes}
+    return {k: v for k, v in out.items() if v}
+
+
+_IDENTITY_KEYS = {("gear", "name"), ("gear", "serial"), ("test", "operator"), ("test", "date"), ("test", "notes")}
 
 
 def _read_table(table) -> tuple[pd.DataFrame, str]:
@@ -240,6 +275,11 @@ def analyze_table(
         if str(exc).startswith(name):
             raise
         raise type(exc)(f"{name}: {exc}", reason=getattr(exc, "reason", None)) from None
+    verdicts = None
+    if config is not None and config.spec:
+        from ..analysis.conformity import conformity
+
+        verdicts = conformity(analysis.summary, spec_limits(config, analysis.summary))
     meta = test_metadata(config) if config is not None else {}
     analysis.settings["test_metadata"] = meta
     cond = dict(conditions) if conditions is not None else {"table": name}
@@ -253,7 +293,9 @@ def analyze_table(
             }
         )
     # the header of the report shows the test's metadata (gear, serial, operator, ...)
-    metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()}
+    # (who, what and when lead page 1 and summary.json's "identity": not repeated here)
+    metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()
+                if (t, k) not in _IDENTITY_KEYS}
     if out_dir is None:
         if isinstance(table, pd.DataFrame):
             raise AnalysisError("out_dir is needed when the table is a DataFrame")
@@ -271,6 +313,8 @@ def analyze_table(
             extra_sections=sections,
             title=title,
             metadata=metadata,
+            identity=identity(config),
+            verdicts=verdicts,
         )
     f = analysis.figures
     by_kind = withheld_by_kind(analysis)

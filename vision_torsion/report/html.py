@@ -32,6 +32,10 @@ figure{margin:6px 0}figure img{max-width:100%;border:1px solid #e3e6eb}figcaptio
 .ok{color:#1a7f37;font-weight:600}.bad{color:#b42318;font-weight:600}
 .note{background:#fff8e6;border-left:4px solid #f0b429;padding:8px 12px;font-size:13px}
 .scroll{max-height:420px;overflow:auto;border:1px solid #e3e6eb}
+.who{border-collapse:collapse;font-size:15px;margin:6px 0 4px;width:auto!important}
+.who th,.who td{border:0;padding:2px 14px 2px 0;text-align:left;background:none!important}
+.who th{color:#5b6575;font-weight:600}
+.pass{color:#1a7f37;font-weight:700}.fail{color:#b42318;font-weight:700}.undecided{color:#9a6700;font-weight:700}
 .meta{display:flex;flex-wrap:wrap;gap:4px 22px;margin:8px 0 4px;font-size:13px}.meta b{color:#5b6575;font-weight:600}
 td{overflow-wrap:break-word}
 @page{size:A4;margin:12mm 11mm 14mm}
@@ -195,6 +199,77 @@ def _header(metadata) -> str:
     )
 
 
+_IDENTITY_LABELS = (("gear", "Gear"), ("serial", "Serial number"), ("operator", "Operator"), ("date", "Test date"),
+                    ("notes", "Notes"))
+
+
+def _identity(identity) -> str:
+    """Who, what, when: the first lines of page 1 (a missing entry says how to give it;
+    None, the caller knows no session: nothing)."""
+    if identity is None:
+        return ""
+    rows = []
+    for key, label in _IDENTITY_LABELS:
+        value = identity.get(key)
+        if value:
+            rows.append(f"<tr><th>{label}</th><td>{html.escape(str(value))}</td></tr>")
+        elif key != "notes":
+            rows.append(f'<tr><th>{label}</th><td class="muted">not given (plan --{key}, or session.toml '
+                        f'[{"gear" if key in ("gear", "serial") else "test"}])</td></tr>')
+    return f'<table class="who">{"".join(rows)}</table>'
+
+
+_DECISION_WORDS = {"pass": ("PASS", "pass"), "fail": ("FAIL", "fail"),
+                   "not_decidable": ("not decidable within U", "undecided"), "no_value": ("no value", "undecided")}
+
+
+def _verdicts(verdicts) -> str:
+    """The conformity table of page 1: one row per catalogue limit (``[spec]``)."""
+    from ..analysis.conformity import DECISION_RULE
+    from .tables import FIGURE_VOCABULARY
+
+    if verdicts is None:
+        return ('<p class="muted">No catalogue limits given, so no verdict: add a <code>[spec]</code> table to '
+                "session.toml (k1_min_nm_per_rad, k2_min_nm_per_rad, k3_min_nm_per_rad, lost_motion_max_arcmin, "
+                "hysteresis_loss_max_arcmin).</p>")
+    rows = []
+    for v in verdicts:
+        label, unit, scale = FIGURE_VOCABULARY.get(v.limit.figure, (v.limit.figure, "", 1.0))
+        if unit == "deg":  # catalogue angles are in arcmin
+            unit, scale = "arcmin", 60.0
+        word, css = _DECISION_WORDS[v.decision]
+        measured = "—" if v.value is None else (
+            fmt_value(v.value * scale, (v.u95 or 0) * scale)
+            + ("" if v.coverage_factor is None else f" (k = {v.coverage_factor:.2g})"))
+        why = v.reason + (f"; {v.flagged}" if v.flagged else "")
+        rows.append(
+            f'<tr><td class="l">{html.escape(label)}</td><td>{"≥" if v.limit.kind == "min" else "≤"} '
+            f"{v.limit.value * scale:.4g} {html.escape(unit)}</td><td>{html.escape(measured)} {html.escape(unit)}"
+            f'</td><td class="l {css}">{word}</td><td class="l">{html.escape(why)}</td></tr>'
+        )
+    n = {d: sum(v.decision == d for v in verdicts) for d in _DECISION_WORDS}
+    overall = ("FAIL" if n["fail"] else "PASS" if n["pass"] == len(verdicts) and verdicts else "not decided")
+    css = {"FAIL": "fail", "PASS": "pass"}.get(overall, "undecided")
+    return (
+        f'<p>Overall: <span class="{css}">{overall}</span> — {n["pass"]} pass, {n["fail"]} fail, '
+        f'{n["not_decidable"]} not decidable within the uncertainty, {n["no_value"]} without a value.</p>'
+        '<table><thead><tr><th class="l">figure</th><th>catalogue limit</th><th>measured: session mean ± U95</th>'
+        '<th class="l">verdict</th><th class="l">why</th></tr></thead><tbody>' + "".join(rows) + "</tbody></table>"
+        f'<p class="muted">Decision rule: {html.escape(DECISION_RULE)}</p>'
+    )
+
+
+def _flag_counts(analysis, issues: pd.DataFrame, n_failed: int) -> str:
+    """How many things need a look, each linked to its section further down."""
+    n_withheld = int((issues["withheld because"] != _ISSUE_WORDS["flagged"]).sum()) if len(issues) else 0
+    n_flagged = int((issues["withheld because"] == _ISSUE_WORDS["flagged"]).sum()) if len(issues) else 0
+    items = [f'<a href="#failed-images">{n_failed} image(s) not usable</a>',
+             f'<a href="#withheld">{n_withheld} figure(s) withheld</a>',
+             f'<a href="#withheld">{n_flagged} flagged</a>']
+    css = "ok" if not (n_failed or n_withheld or n_flagged) else "muted"
+    return f'<p class="{css}">Flags: {", ".join(items)}; details after the results.</p>'
+
+
 #: How the report names each kind of issue (:data:`vision_torsion.analysis.session.ISSUE_KINDS`).
 _ISSUE_WORDS = {
     "rejected": "does not fit its data",
@@ -225,7 +300,8 @@ def _withheld_intro(issues: pd.DataFrame) -> str:
 
 
 def render_html(
-    *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None
+    *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None,
+    identity=None, verdicts=None,
 ) -> str:
     """Assemble the report page.
 
@@ -235,6 +311,10 @@ def render_html(
         The test's metadata shown under the title (e.g. gear, serial, operator,
         temperature, notes from session.toml's ``[test]``/``[gear]`` tables); None
         or blank values are left out. The software version and date are always shown.
+    identity : dict, optional
+        ``gear``, ``serial``, ``operator``, ``date``, ``notes``: the first lines of the page.
+    verdicts : sequence of Verdict, optional
+        The conformity table of page 1 (:mod:`vision_torsion.analysis.conformity`).
     figures : dict
         ``{"overlay": svg, "residuals": svg, "stiffness": svg, "orientation": svg}`` (SVG bytes).
     failed : pandas.DataFrame
@@ -267,6 +347,7 @@ def render_html(
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
     parts = [
         f"<h1>{html.escape(title)}</h1>",
+        _identity(identity),
         _header(metadata),
         (
             '<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml (or 1, if it is -1 now) '
@@ -274,9 +355,15 @@ def render_html(
             if (getattr(analysis, "checks", None) or {}).get("angle_sign_inverted")
             else ""
         ),
+        "<h2>Verdict against the catalogue</h2>",
+        _verdicts(verdicts),
+        _flag_counts(analysis, issues, len(failed)),
         '<p class="muted">Torsional stiffness and hysteresis report generated by vision-torsion. '
-        "Uncertainties are 1σ standard uncertainties (±) unless marked u95 (expanded: k = 2, or Student's t "
-        "where a part rests on few loops or a flagged fit; the budget table gives each k).</p>",
+        "Uncertainties are 1σ standard uncertainties (±) unless marked u95 or U95 (expanded: k = 2, or Student's "
+        "t where a part rests on few loops or a flagged fit; the budget table gives each k). Angles are those "
+        "of the shaft carrying the torque disk and the target (the input side when a gear ratio is given); "
+        "each angle is in one unit throughout: hysteresis in degrees, hysteresis loss and lost motion in "
+        "arcmin, stiffness in N·m/rad.</p>",
         "<h2>Test conditions</h2>",
         _conditions(conditions, analysis, len(failed)),
         "<h2>Hysteresis loops</h2>",
@@ -307,11 +394,11 @@ def render_html(
         f"source, seed {s['seed']}.</li>"
         "<li>Fit uncertainties reflect measurement noise only; compare the residual RMS of a model with the "
         "angle uncertainty to judge whether the model describes the data.</li></ul>",
-        "<h2>Failed images</h2>",
+        '<h2 id="failed-images">Failed images</h2>',
         _table(failed_view, left=("image", "phase", "message"))
         if len(failed)
         else '<p class="ok">None: every image was measured.</p>',
-        "<h2>Figures withheld or flagged, and why</h2>",
+        '<h2 id="withheld">Figures withheld or flagged, and why</h2>',
         _withheld_intro(issues),
         (
             f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "withheld because", "why"))}'
