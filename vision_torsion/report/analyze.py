@@ -46,6 +46,8 @@ class AnalyzeResult:
     angle_sign_advice : str
         What to set when the angle falls as the torque rises (:func:`angle_sign_advice`),
         empty otherwise.
+    import_notes : tuple of str
+        What reading a table from elsewhere did (:attr:`~vision_torsion.table_import.ImportedTable.notes`).
     """
 
     files: object
@@ -57,6 +59,7 @@ class AnalyzeResult:
     n_flagged: int
     withheld_by_kind: dict = field(default_factory=dict)
     angle_sign_advice: str = ""
+    import_notes: tuple = ()
 
 
 def angle_sign_advice(angle_sign: int = 1) -> str:
@@ -197,14 +200,14 @@ def identity(config) -> dict:
 _IDENTITY_KEYS = {("gear", "name"), ("gear", "serial"), ("test", "operator"), ("test", "date"), ("test", "notes")}
 
 
-def _read_table(table) -> tuple[pd.DataFrame, str]:
-    from ..measurements import read_measurements
-
+def _read_table(table, **import_options) -> tuple[pd.DataFrame, str, tuple]:
     if isinstance(table, pd.DataFrame):
-        return table, "table"
-    path = Path(table)
-    # the one reader of the table: every bad row listed by its CSV line (MeasurementsError)
-    return read_measurements(path, name=str(path)), str(path)
+        return table, "table", ()
+    from ..table_import import import_table
+
+    # the one reader of a table file: a measurements.csv as it is, any other through the import
+    imported = import_table(table, name=str(table), **import_options)
+    return imported.frame, str(table), imported.notes
 
 
 def analyze_table(
@@ -218,6 +221,10 @@ def analyze_table(
     title="Torsional stiffness and hysteresis report",
     n_draws=400,
     seed=0,
+    columns=None,
+    units=None,
+    angle_std_deg=None,
+    torque_std_nm=None,
 ):
     """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
 
@@ -240,6 +247,12 @@ def analyze_table(
     title : str
     n_draws, seed : int
         Monte Carlo settings of the analysis.
+    columns, units : dict, optional
+        For a table from elsewhere: quantity -> header, and quantity -> unit
+        (:func:`vision_torsion.table_import.import_table`; separators, decimal
+        commas, units in headers and a plain torque/angle record are handled there).
+    angle_std_deg, torque_std_nm : float, optional
+        1σ of every angle and torque, for a table without uncertainty columns.
 
     Returns
     -------
@@ -257,7 +270,8 @@ def analyze_table(
     from ..fileio import output_set
     from . import write_report
 
-    df, name = _read_table(table)
+    df, name, import_notes = _read_table(table, column_map=columns, units=units, angle_std_deg=angle_std_deg,
+                                         torque_std_nm=torque_std_nm)
     if "status" in df.columns:
         df = df[df["status"].astype(str) != "pending"].reset_index(drop=True)
     config = None
@@ -283,6 +297,8 @@ def analyze_table(
     meta = test_metadata(config) if config is not None else {}
     analysis.settings["test_metadata"] = meta
     cond = dict(conditions) if conditions is not None else {"table": name}
+    if import_notes:
+        cond["table import"] = "; ".join(import_notes)
     if conditions is None and config is not None:
         cond.update(
             {
@@ -330,4 +346,5 @@ def analyze_table(
         withheld_by_kind=by_kind,
         angle_sign_advice=angle_sign_advice(config.angle_sign if config is not None else 1)
         if analysis.checks.get("angle_sign_inverted") else "",
+        import_notes=tuple(import_notes),
     )
