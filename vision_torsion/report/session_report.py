@@ -302,6 +302,7 @@ def run_demo(
         if rendered is not None and not force:
             logger.info("%s: rendered with seed %d; rendering it again with seed %d", session_dir, rendered, seed)
         scene, spec = demo_scene()
+        logger.info("rendering the synthetic session into %s", session_dir)
         write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True)
         atomic_write_text(stamp, json.dumps({"seed": seed}) + "\n")
     else:
