@@ -144,3 +144,30 @@ def test_old_session_toml_without_identity_still_reports(tmp_path):
     summary = json.loads(res.files.summary_json.read_text())
     assert summary["identity"] == {} and "conformity" not in summary and res.files.export_html is None
     assert "not given (plan --serial" in res.files.report_html.read_text()
+
+
+def test_printed_report_page_one_shows_identity_and_verdict(tmp_path):
+    import shutil
+    import subprocess
+
+    from vision_torsion.session.sheet import find_chromium
+
+    exe = find_chromium()
+    if exe is None or shutil.which("pdftotext") is None:
+        pytest.skip("no Chromium or pdftotext on this machine")
+    doc = {**BASE, "gear": {"name": "CSF-17-100", "serial": "A-123", "t1_nm": 0.05, "t2_nm": 0.2,
+                            "rated_torque_nm": 5.0},
+           "test": {"operator": "J. Doe", "date": "2026-11-27"},
+           "spec": {"k3_min_nm_per_rad": 4.0, "hysteresis_loss_max_arcmin": 3000.0}}
+    df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0, 60), rng=np.random.default_rng(9))
+    res = analyze_table(df, session=config_from_dict(doc), out_dir=tmp_path / "out", n_draws=50)
+    pdf = tmp_path / "report.pdf"
+    subprocess.run([exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                    f"--user-data-dir={tmp_path / 'profile'}", f"--print-to-pdf={pdf}",
+                    res.files.report_html.resolve().as_uri()], capture_output=True, timeout=120, check=True)
+    text = subprocess.run(["pdftotext", "-layout", "-f", "1", "-l", "1", str(pdf), "-"], capture_output=True,
+                          text=True, check=True).stdout
+    for expected in ("CSF-17-100", "A-123", "J. Doe", "2026-11-27", "Verdict against the catalogue", "K3",
+                     "Hysteresis loss", "Decision rule: ISO 14253-1", "Flags:"):
+        assert expected in text, expected

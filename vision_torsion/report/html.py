@@ -104,22 +104,16 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
     return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
 
 
-def _stiffness_cell(r) -> str:
-    """The phase's straight-line stiffness, or, where that line does not fit, its two
-    stiffnesses and the switch torque."""
-    if np.isfinite(r.stiffness_nm_per_rad):
-        return fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)
-    if np.isfinite(r.stiffness_below_nm_per_rad) and np.isfinite(r.stiffness_above_nm_per_rad):
-        below = fmt_value(r.stiffness_below_nm_per_rad, r.stiffness_below_std_nm_per_rad)
-        above = fmt_value(r.stiffness_above_nm_per_rad, r.stiffness_above_std_nm_per_rad)
-        switch = abs(r.switch_torque_nm)
-        return f"straight line does not fit: {below} below, {above} above the switch at {switch:.3g} N·m"
-    return "—"
-
-
 def _table1(stiff: pd.DataFrame) -> str:
+    """The paper's Table 1, one number per cell: a phase whose straight line fits has
+    its stiffness; one whose stiffness switches has its stiffnesses below and above
+    the switch and the switch torque instead (the straight line withheld, —)."""
     if stiff.empty:
         return '<p class="muted">No stiffness could be computed.</p>'
+
+    def values(v, u):
+        return [fmt_value(a, b) if np.isfinite(a) else "—" for a, b in zip(stiff[v], stiff[u])]
+
     out = pd.DataFrame(
         {
             "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
@@ -128,19 +122,22 @@ def _table1(stiff: pd.DataFrame) -> str:
                 f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
                 for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])
             ],
-            "stiffness k (N·m/rad)": [_stiffness_cell(r) for r in stiff.itertuples(index=False)],
-            "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
-            "secant (N·m/rad)": [
-                fmt_value(v, s) for v, s in zip(stiff["secant_nm_per_rad"], stiff["secant_std_nm_per_rad"])
-            ],
-            "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
+            "k, one line (N·m/rad)": values("stiffness_nm_per_rad", "stiffness_std_nm_per_rad"),
+            "k below the switch (N·m/rad)": values("stiffness_below_nm_per_rad", "stiffness_below_std_nm_per_rad"),
+            "k above the switch (N·m/rad)": values("stiffness_above_nm_per_rad", "stiffness_above_std_nm_per_rad"),
+            "switch at |τ| (N·m)": [f"{abs(v):.3g}" if np.isfinite(v) else "—" for v in stiff["switch_torque_nm"]],
+            "secant (N·m/rad)": values("secant_nm_per_rad", "secant_std_nm_per_rad"),
+            "hysteresis (deg)": values("hysteresis_deg", "hysteresis_std_deg"),
             "cycles": stiff["n_cycles"].astype(str),
         }
     )
-    return _table(out, left=("orientation", "phase", "stiffness k (N·m/rad)"))
+    return (_table(out, left=("orientation", "phase"))
+            + '<p class="muted">A phase whose stiffness switches is not one straight line: its "one line" '
+            "stiffness is withheld (—) and its stiffnesses below and above the switch are given. Stiffness in "
+            "N·m/rad throughout (N·m/arcmin in stiffness_table.csv).</p>")
 
 
-def _metrics(mt: pd.DataFrame, orients) -> str:
+def _metrics(mt: pd.DataFrame, orients, *, one_loop: bool = False) -> str:
     if mt.empty:
         return '<p class="muted">No loop figure could be computed.</p>'
     cols = {"figure": mt["label"], "unit": mt["unit"]}
@@ -162,6 +159,10 @@ def _metrics(mt: pd.DataFrame, orients) -> str:
         )
         notes += f"<li>{html.escape(where)}: {html.escape(text)}</li>"
     out = _table(pd.DataFrame(cols), left=("figure", "unit"))
+    if one_loop:
+        out = ('<p class="note">One loop per orientation: each orientation mean is that loop\'s value, and its '
+               "uncertainty holds the measurement only (the repeatability between loops is not observed; measure "
+               "more cycles to observe it). † marks a value whose loop figure is itself flagged.</p>" + out)
     if notes:
         out += '<p class="note">† Orientation means shown with a flag:</p><ul class="note">' + notes + "</ul>"
     return out
@@ -381,7 +382,8 @@ def render_html(
         "the same orientation; p &lt; 0.05 means the orientation effect is larger than that repeatability. "
         "With one cycle per orientation there is no such scatter: the test is not made (—), and the spread "
         "of the orientation means is given instead (sd between loops).</p>",
-        _metrics(metrics, orients),
+        _metrics(metrics, orients, one_loop=bool(len(analysis.per_orientation))
+                 and int(analysis.per_orientation["n_cycles"].max()) == 1),
         f"<figure>{_img(figures['orientation'], 'orientation effect')}</figure>",
         "<h2>Uncertainty</h2>",
         "<ul><li>Angles: independent per image (given <code>angle_std_deg</code>); the common reference-image "
