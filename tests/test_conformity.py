@@ -71,7 +71,7 @@ def test_spec_round_trip_and_limits_in_analysis_units():
            "spec": {"k1_min_nm_per_rad": 0.2, "lost_motion_max_arcmin": 30.0, "hysteresis_loss_max_arcmin": 6.0}}
     cfg = config_from_dict(doc)
     assert config_from_dict(config_to_dict(cfg)) == cfg
-    limits = spec_limits(cfg, ["k1", "lost_motion_3pct", "lost_motion_4pct", "hysteresis"])
+    limits = spec_limits(cfg.spec, ["k1", "lost_motion_3pct", "lost_motion_4pct", "hysteresis"])
     assert [(x.figure, x.kind, x.value) for x in limits] == [
         ("k1", "min", 0.2), ("lost_motion_3pct", "max", 0.5), ("lost_motion_4pct", "max", 0.5),
         ("hysteresis_loss", "max", 0.1)]
@@ -171,3 +171,61 @@ def test_printed_report_page_one_shows_identity_and_verdict(tmp_path):
     for expected in ("CSF-17-100", "A-123", "J. Doe", "2026-11-27", "Verdict against the catalogue", "K3",
                      "Hysteresis loss", "Decision rule: ISO 14253-1", "Flags:"):
         assert expected in text, expected
+
+
+CATALOGUE = """[gear]
+name = "CSF-17-100"
+rated_torque_nm = 5.0
+t1_nm = 0.05
+t2_nm = 0.2
+
+[spec]
+k3_min_nm_per_rad = 4.0
+lost_motion_max_arcmin = 1.0
+"""
+
+
+def test_catalogue_file_for_a_table_without_session(tmp_path):
+    cat = tmp_path / "csf17.toml"
+    cat.write_text(CATALOGUE)
+    df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), rng=np.random.default_rng(2))
+    res = analyze_table(df, out_dir=tmp_path / "o", n_draws=30, catalogue=cat)
+    summary = json.loads(res.files.summary_json.read_text())
+    assert summary["identity"] == {"gear": "CSF-17-100"}
+    assert summary["settings"]["catalogue_breaks_nm"] == [0.05, 0.2]  # K1-K3 at the catalogue's breaks
+    assert {v["figure"] for v in summary["conformity"]["verdicts"]} == {"k3", "lost_motion_3pct", "lost_motion_4pct"}
+
+
+def test_plan_copies_the_catalogue_into_session_toml(tmp_path):
+    cat = tmp_path / "csf17.toml"
+    cat.write_text(CATALOGUE)
+    plan_session(tmp_path / "s", max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,),
+                 catalogue=cat, header={"serial": "A-1"}, pdf=False)
+    cfg = load_config(tmp_path / "s" / "session.toml")
+    assert (cfg.gear.name, cfg.gear.serial, cfg.gear.rated_torque_nm, cfg.gear.t2_nm) == ("CSF-17-100", "A-1", 5.0, 0.2)
+    assert cfg.spec.lost_motion_max_arcmin == 1.0 and cfg.spec.k3_min_nm_per_rad == 4.0
+    with pytest.raises(SessionError, match=r"rated_torque_nm 6 differs from the catalogue file's 5"):
+        plan_session(tmp_path / "t", max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
+                     catalogue=cat, rated_torque_nm=6.0, pdf=False)
+
+
+def test_catalogue_conflicting_with_session_toml(tmp_path):
+    cat = tmp_path / "c.toml"
+    cat.write_text("[gear]\nratio = 100.0\n")
+    df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), rng=np.random.default_rng(2))
+    cfg = config_from_dict({**BASE, "gear": {"ratio": 50.0}})
+    with pytest.raises(SessionError, match=r"gear.ratio: session.toml gives 50.0, the catalogue file .* gives 100.0"):
+        analyze_table(df, session=cfg, out_dir=tmp_path / "o", n_draws=30, catalogue=cat)
+
+
+@pytest.mark.parametrize(("text", "match"), [
+    ("[rig]\narm_radius_m = 1.0\n", r"rig: unknown key"),
+    ("[spec]\nk1_min_nm_per_rad = 1.0\n", r"spec.k1_min_nm_per_rad: needs gear.t1_nm and gear.t2_nm"),
+])
+def test_catalogue_file_validation(tmp_path, text, match):
+    from vision_torsion.session.config import load_catalogue
+
+    cat = tmp_path / "c.toml"
+    cat.write_text(text)
+    with pytest.raises(SessionError, match=match):
+        load_catalogue(cat)

@@ -21,6 +21,9 @@ def register(sub) -> None:
     )
     p.add_argument("table", metavar="TABLE.csv")
     p.add_argument("--session", metavar="FILE.toml", help="session.toml with the rig and the optional [gear]/[test]")
+    p.add_argument("--catalogue", metavar="FILE.toml",
+                   help="catalogue values of the gear type ([gear] and [spec]): K1-K3 at its T1/T2, lost motion "
+                        "at its T_R, and the conformity verdict against its [spec] limits")
     t = p.add_argument_group("a table from elsewhere (comma, semicolon with decimal comma, or tab; units from the "
                              "headers; without a phase column, phases and cycles from the torque reversals)")
     t.add_argument("--columns", metavar="MAP", help="which header is which: torque=Torque [N m],angle=Angle [arcmin] "
@@ -41,7 +44,7 @@ def run(args) -> int:
     units = parse_column_map(args.units, what="--units") if args.units else None
     res = analyze_table(args.table, session=args.session, out_dir=args.out_dir,
                         columns=parse_column_map(args.columns) if args.columns else None, units=units,
-                        angle_std_deg=args.angle_std, torque_std_nm=args.torque_std)
+                        angle_std_deg=args.angle_std, torque_std_nm=args.torque_std, catalogue=args.catalogue)
     for note in res.import_notes:
         print(f"table: {note}")
     withheld = ("every figure withheld until the angle sign is right" if res.angle_sign_advice

@@ -23,7 +23,8 @@ import pandas as pd
 from ..errors import AnalysisError
 
 __all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
-           "describe_withheld", "angle_sign_advice", "spec_limits", "identity"]
+           "describe_withheld", "angle_sign_advice", "spec_limits", "identity", "gear_options",
+           "merge_catalogue"]
 
 logger = logging.getLogger(__name__)
 
@@ -120,16 +121,13 @@ def analysis_options(config) -> dict:
     torque; ``[gear]`` the rated torque, catalogue T1/T2 and gear ratio; ``[test]`` the
     lost-motion fractions, the secant interval and whether to fit the breaks.
     """
-    proto, gear, test = config.protocol, config.gear, config.test
+    proto, test = config.protocol, config.test
     kw = dict(
         max_torque_nm=proto.max_torque_nm,
         rig=config.torque_rig,
-        rated_torque_nm=gear.rated_torque_nm,
-        gear_ratio=gear.ratio,
         fit_breaks=test.fit_breaks,
+        **gear_options(config.gear),
     )
-    if gear.t1_nm is not None and gear.t2_nm is not None:
-        kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
     if test.lost_motion_fractions is not None:
         kw["lost_motion_fractions"] = tuple(test.lost_motion_fractions)
     if test.secant_interval_nm is not None:
@@ -137,10 +135,64 @@ def analysis_options(config) -> dict:
     return kw
 
 
-def test_metadata(config) -> dict:
-    """The ``[gear]`` and ``[test]`` entries that were given, for the report and summary.json."""
+def gear_options(gear) -> dict:
+    """Keyword arguments of :func:`~vision_torsion.analysis.analyze_session` from a
+    ``[gear]`` table: the rated torque, the gear ratio and the catalogue T1/T2."""
+    kw = dict(rated_torque_nm=gear.rated_torque_nm, gear_ratio=gear.ratio)
+    if gear.t1_nm is not None and gear.t2_nm is not None:
+        kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
+    return kw
+
+
+def merge_catalogue(config, catalogue):
+    """`config` (a SessionConfig, or None for a table without one) with a catalogue
+    file's ``[gear]`` and ``[spec]`` filling what it does not give.
+
+    Returns
+    -------
+    (gear, test, spec)
+        GearConfig, TestConfig, SpecConfig to analyse and report with.
+
+    Raises
+    ------
+    SessionError
+        The catalogue file is invalid, or it and session.toml give one key different
+        values (both named).
+    """
+    import dataclasses
+
+    from ..errors import SessionError
+    from ..session.config import GearConfig, SpecConfig, TestConfig, load_catalogue
+
+    gear, test, spec = ((config.gear, config.test, config.spec) if config is not None
+                        else (GearConfig(), TestConfig(), SpecConfig()))
+    if catalogue is None:
+        return gear, test, spec
+    cat_gear, cat_spec = load_catalogue(catalogue)
+    merged = []
+    for table, mine, theirs in (("gear", gear, cat_gear), ("spec", spec, cat_spec)):
+        changes = {}
+        for f in dataclasses.fields(mine):
+            a, b = getattr(mine, f.name), getattr(theirs, f.name)
+            if b is None:
+                continue
+            if a is not None and a != b:
+                raise SessionError(f"{table}.{f.name}: session.toml gives {a!r}, the catalogue file {catalogue} "
+                                   f"gives {b!r}; keep one", reason="conflict")
+            changes[f.name] = b
+        merged.append(dataclasses.replace(mine, **changes))
+    return merged[0], test, merged[1]
+
+
+def test_metadata(config=None, *, gear=None, test=None) -> dict:
+    """The ``[gear]`` and ``[test]`` entries that were given, for the report and
+    summary.json: of `config`, or of the `gear` and `test` tables given."""
+    if config is not None:
+        gear, test = config.gear, config.test
     out = {}
-    for table, obj in (("gear", config.gear), ("test", config.test)):
+    for table, obj in (("gear", gear), ("test", test)):
+        if obj is None:
+            continue
         d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(obj).items() if v is not None}
         if table == "test" and d.get("fit_breaks") is True:
             d.pop("fit_breaks")
@@ -166,9 +218,10 @@ _LABELS = {
 }
 
 
-def spec_limits(config, figures=()) -> list:
-    """The :class:`~vision_torsion.analysis.conformity.Limit` list of session.toml's
-    ``[spec]`` table, in the analysis' units (N·m/rad, degrees).
+def spec_limits(spec, figures=()) -> list:
+    """The :class:`~vision_torsion.analysis.conformity.Limit` list of a ``[spec]``
+    table (:class:`~vision_torsion.session.config.SpecConfig`), in the analysis'
+    units (N·m/rad, degrees).
 
     The lost-motion maximum applies to every lost-motion figure among `figures`
     (the analysis' figure names: one per ``[test] lost_motion_fractions``, ±3 % and
@@ -176,7 +229,6 @@ def spec_limits(config, figures=()) -> list:
     """
     from ..analysis.conformity import Limit
 
-    spec = config.spec
     out = [Limit(f"k{i}", "min", v) for i, v in
            enumerate((spec.k1_min_nm_per_rad, spec.k2_min_nm_per_rad, spec.k3_min_nm_per_rad), start=1)
            if v is not None]
@@ -187,13 +239,11 @@ def spec_limits(config, figures=()) -> list:
     return out
 
 
-def identity(config) -> dict:
-    """Who, what, when: ``{"gear", "serial", "operator", "date", "notes"}`` from
-    session.toml's ``[gear]``/``[test]``, the entries given only."""
-    if config is None:
-        return {}
-    out = {"gear": config.gear.name, "serial": config.gear.serial, "operator": config.test.operator,
-           "date": config.test.date, "notes": config.test.notes}
+def identity(gear, test) -> dict:
+    """Who, what, when: ``{"gear", "serial", "operator", "date", "notes"}`` from the
+    ``[gear]`` and ``[test]`` tables (Gear-/TestConfig), the entries given only."""
+    out = {"gear": gear.name, "serial": gear.serial, "operator": test.operator, "date": test.date,
+           "notes": test.notes}
     return {k: v for k, v in out.items() if v}
 
 
@@ -225,6 +275,7 @@ def analyze_table(
     units=None,
     angle_std_deg=None,
     torque_std_nm=None,
+    catalogue=None,
 ):
     """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
 
@@ -253,6 +304,10 @@ def analyze_table(
         commas, units in headers and a plain torque/angle record are handled there).
     angle_std_deg, torque_std_nm : float, optional
         1σ of every angle and torque, for a table without uncertainty columns.
+    catalogue : path-like, optional
+        A catalogue file (``[gear]`` and ``[spec]``,
+        :func:`~vision_torsion.session.config.load_catalogue`): with or without a
+        session, the catalogue values and the conformity verdict.
 
     Returns
     -------
@@ -264,7 +319,8 @@ def analyze_table(
         The table is missing, unreadable, or lacks a column (named), or has no usable
         row; the message starts with the file name.
     SessionError
-        The session.toml is invalid (every problem listed).
+        The session.toml or the catalogue file is invalid (every problem listed),
+        or the two give one key different values.
     """
     from ..analysis import analyze_session
     from ..fileio import output_set
@@ -282,7 +338,12 @@ def analyze_table(
             from ..session.config import load_config
 
             config = load_config(session)
-    kw = analysis_options(config) if config is not None else {}
+    gear, test, spec = merge_catalogue(config, catalogue)
+    if config is not None:
+        import dataclasses
+
+        config = dataclasses.replace(config, gear=gear, spec=spec)
+    kw = analysis_options(config) if config is not None else gear_options(gear)
     try:
         analysis = analyze_session(df, n_draws=n_draws, seed=seed, **kw)
     except AnalysisError as exc:
@@ -290,11 +351,11 @@ def analyze_table(
             raise
         raise type(exc)(f"{name}: {exc}", reason=getattr(exc, "reason", None)) from None
     verdicts = None
-    if config is not None and config.spec:
+    if spec:
         from ..analysis.conformity import conformity
 
-        verdicts = conformity(analysis.summary, spec_limits(config, analysis.summary))
-    meta = test_metadata(config) if config is not None else {}
+        verdicts = conformity(analysis.summary, spec_limits(spec, analysis.summary))
+    meta = test_metadata(gear=gear, test=test)
     analysis.settings["test_metadata"] = meta
     cond = dict(conditions) if conditions is not None else {"table": name}
     if import_notes:
@@ -329,7 +390,7 @@ def analyze_table(
             extra_sections=sections,
             title=title,
             metadata=metadata,
-            identity=identity(config),
+            identity=identity(gear, test),
             verdicts=verdicts,
         )
     f = analysis.figures

@@ -35,6 +35,7 @@ __all__ = [
     "SpecConfig",
     "SessionConfig",
     "load_config",
+    "load_catalogue",
     "write_config",
     "config_from_dict",
     "config_to_dict",
@@ -495,6 +496,28 @@ def load_config(path) -> SessionConfig:
     p = Path(path)
     data = read_toml(p, what=f"the session description (a session folder needs {CONFIG_NAME})", error=SessionError)
     return config_from_dict(data, source=str(p))
+
+
+def load_catalogue(path) -> tuple[GearConfig, SpecConfig]:
+    """Read a gear type's catalogue file: its ``[gear]`` and ``[spec]`` tables, with
+    the keys and checks of session.toml (the same file serves every serial number of
+    the type; ``plan --catalogue`` copies it into session.toml, ``analyze
+    --catalogue`` uses it directly).
+
+    Raises
+    ------
+    SessionError
+        The file is missing or not TOML, has another table, or invalid keys (all
+        listed, named ``gear.t1_nm``, ``spec.k1_min_nm_per_rad``, ...).
+    """
+    p = Path(path)
+    data = read_toml(p, what="a catalogue file ([gear] and [spec] tables)", error=SessionError)
+    problems = _Problems()
+    _unknown(data, ("gear", "spec"), "", problems)
+    gear = _gear_from(_table(data, "gear", problems, required=False), problems)
+    spec = _spec_from(_table(data, "spec", problems, required=False), gear, problems)
+    problems.raise_if_any(str(p))
+    return gear, spec
 
 
 def config_to_dict(config: SessionConfig) -> dict:

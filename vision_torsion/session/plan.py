@@ -418,6 +418,7 @@ def plan_session(
     header: dict | None = None,
     pdf: bool = False,
     rated_torque_nm: float | None = None,
+    catalogue=None,
 ) -> SessionPlan:
     """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
 
@@ -476,6 +477,11 @@ def plan_session(
         ±3 % and ±4 % of it, realised by whole numbers of step masses (see
         :func:`lost_motion_levels`; refused when they cannot be); written to
         session.toml as ``[gear] rated_torque_nm``.
+    catalogue : path-like, optional
+        The gear type's catalogue file (``[gear]`` ratio, rated torque, T1/T2 and
+        ``[spec]`` limits, :func:`~vision_torsion.session.config.load_catalogue`),
+        copied into session.toml; its rated torque names the lost-motion levels
+        when `rated_torque_nm` is not given (a different one is refused).
 
     Returns
     -------
@@ -533,6 +539,19 @@ def plan_session(
             "cycles": cycles,
         },
     }
+    if catalogue is not None:
+        from .config import load_catalogue
+
+        cat_gear, cat_spec = load_catalogue(catalogue)
+        if rated_torque_nm is not None and cat_gear.rated_torque_nm not in (None, float(rated_torque_nm)):
+            raise SessionError(f"plan_session: rated_torque_nm {rated_torque_nm:g} differs from the catalogue file's "
+                               f"{cat_gear.rated_torque_nm:g} ({catalogue}); give one")
+        if rated_torque_nm is None:
+            rated_torque_nm = cat_gear.rated_torque_nm
+        for table, entries in (("gear", cat_gear), ("spec", cat_spec)):
+            given = {k: v for k, v in vars(entries).items() if v is not None}
+            if given:
+                doc.setdefault(table, {}).update(given)
     header = {k: v for k, v in (header or {}).items() if v is not None and str(v).strip()}
     unknown = sorted(set(header) - set(HEADER_KEYS))
     if unknown:
