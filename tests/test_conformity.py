@@ -229,3 +229,18 @@ def test_catalogue_file_validation(tmp_path, text, match):
     cat.write_text(text)
     with pytest.raises(SessionError, match=match):
         load_catalogue(cat)
+
+
+def test_analyze_command_prints_the_verdict_and_the_report_to_send(tmp_path, capsys):
+    from vision_torsion.cli import main
+
+    cat = tmp_path / "csf17.toml"
+    cat.write_text(CATALOGUE)
+    table = tmp_path / "t.csv"
+    simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,),
+                          rng=np.random.default_rng(2)).to_csv(table, index=False)
+    assert main(["analyze", str(table), "--catalogue", str(cat), "-o", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    # lost motion here is tens of degrees against a 1 arcmin limit: the gear fails
+    assert "verdict against the catalogue: FAIL: " in out and " 2 fail," in out
+    assert f"report to send: {tmp_path / 'o' / 'CSF-17-100_report.html'}" in out

@@ -16,7 +16,8 @@ undoes, and says what it did (:attr:`ImportedTable.notes`):
   ``angle_rad``; torque in N·m or mN·m, angles in deg, arcmin, arcsec, rad or
   mrad, converted to N·m and degrees. A torque or angle column without a unit is
   refused (a radian read as a degree is a factor 57): write the unit in the header
-  or give it (``units={"angle": "arcmin"}``).
+  or give it (``units={"angle": "arcmin"}``). An uncertainty column without a unit
+  is in the unit of its value's column.
 - **optional columns**: ``status`` (``ok``), ``message`` (blank), ``image`` (the
   CSV line, ``line 12``), ``orientation_deg`` (0), uncertainties from the
   instrument's 1σ (``angle_std_deg``, ``torque_std_nm`` arguments) when the table
@@ -388,8 +389,7 @@ def import_table(path, *, column_map=None, units=None, angle_std_deg=None, torqu
             if head == col:
                 unit = "N m" if quantity == "torque" else "deg"
             else:
-                unit = units.get(key) or units.get(quantity if key == quantity else "", None) \
-                    or _split_name_unit(head)[1]
+                unit = units.get(key) or _split_name_unit(head)[1]
                 if unit is None and key != quantity:  # an uncertainty in the value's unit
                     unit = units.get(quantity) or _split_name_unit(found.get(_MAP_KEYS[quantity], ""))[1]
             scale, unit = _factor(quantity, unit, column=head, name=name)

@@ -32,7 +32,8 @@ from dataclasses import dataclass
 
 from ..errors import AnalysisError
 
-__all__ = ["Limit", "Verdict", "judge", "conformity", "DECISION_RULE", "DECISIONS"]
+__all__ = ["Limit", "Verdict", "judge", "conformity", "overall", "describe", "decision_counts", "DECISION_RULE",
+           "DECISIONS"]
 
 #: The decision rule in one sentence, for the report and summary.json.
 DECISION_RULE = (
@@ -172,3 +173,39 @@ def conformity(summary: dict, limits) -> tuple[Verdict, ...]:
                            decision=decision, reason=reason,
                            flagged=str(s.get("flag") or "") if decision != "no_value" else ""))
     return tuple(out)
+
+
+def overall(verdicts) -> str:
+    """The gear's verdict over all its limits: ``"fail"`` when any figure fails,
+    ``"pass"`` when every figure passes, else ``"not_decided"`` (a figure not
+    decidable within its uncertainty, or without a value, and none failing).
+
+    Examples
+    --------
+    >>> v = lambda d: Verdict(Limit("k1", "min", 1.0), 1.0, 0.1, 2.0, d, "")
+    >>> overall([v("pass"), v("not_decidable")]), overall([v("pass"), v("fail")]), overall([v("pass")])
+    ('not_decided', 'fail', 'pass')
+    """
+    decisions = [v.decision for v in verdicts]
+    if "fail" in decisions:
+        return "fail"
+    return "pass" if decisions and all(d == "pass" for d in decisions) else "not_decided"
+
+
+def describe(verdicts) -> str:
+    """One line: the overall verdict and the count of each decision.
+
+    Examples
+    --------
+    >>> v = lambda d: Verdict(Limit("k1", "min", 1.0), 1.0, 0.1, 2.0, d, "")
+    >>> describe([v("pass"), v("not_decidable")])
+    'NOT DECIDED: 1 pass, 0 fail, 1 not decidable within the uncertainty, 0 without a value'
+    """
+    return f"{overall(verdicts).replace('_', ' ').upper()}: {decision_counts(verdicts)}"
+
+
+def decision_counts(verdicts) -> str:
+    """``"1 pass, 0 fail, 1 not decidable within the uncertainty, 0 without a value"``."""
+    n = {d: sum(v.decision == d for v in verdicts) for d in DECISIONS}
+    return (f"{n['pass']} pass, {n['fail']} fail, {n['not_decidable']} not decidable within the uncertainty, "
+            f"{n['no_value']} without a value")

@@ -52,6 +52,9 @@ def run(args) -> int:
     print(f"{res.n_rows} rows, {res.n_failed} image(s) not usable; {withheld}")
     if res.angle_sign_advice:
         print(res.angle_sign_advice)
+    from .report import print_verdict
+
+    print_verdict(res)
     print(f"report: {res.files.report_html}")
     return 1 if res.n_failed else 0
 

@@ -49,6 +49,8 @@ class AnalyzeResult:
         empty otherwise.
     import_notes : tuple of str
         What reading a table from elsewhere did (:attr:`~vision_torsion.table_import.ImportedTable.notes`).
+    verdicts : tuple of Verdict or None
+        The conformity verdicts against the ``[spec]`` limits (None without any).
     """
 
     files: object
@@ -61,6 +63,7 @@ class AnalyzeResult:
     withheld_by_kind: dict = field(default_factory=dict)
     angle_sign_advice: str = ""
     import_notes: tuple = ()
+    verdicts: tuple | None = None
 
 
 def angle_sign_advice(angle_sign: int = 1) -> str:
@@ -408,4 +411,5 @@ def analyze_table(
         angle_sign_advice=angle_sign_advice(config.angle_sign if config is not None else 1)
         if analysis.checks.get("angle_sign_inverted") else "",
         import_notes=tuple(import_notes),
+        verdicts=None if verdicts is None else tuple(verdicts),
     )

@@ -226,7 +226,7 @@ _DECISION_WORDS = {"pass": ("PASS", "pass"), "fail": ("FAIL", "fail"),
 
 def _verdicts(verdicts) -> str:
     """The conformity table of page 1: one row per catalogue limit (``[spec]``)."""
-    from ..analysis.conformity import DECISION_RULE
+    from ..analysis.conformity import DECISION_RULE, decision_counts, overall
     from .tables import FIGURE_VOCABULARY
 
     if verdicts is None:
@@ -248,12 +248,11 @@ def _verdicts(verdicts) -> str:
             f"{v.limit.value * scale:.4g} {html.escape(unit)}</td><td>{html.escape(measured)} {html.escape(unit)}"
             f'</td><td class="l {css}">{word}</td><td class="l">{html.escape(why)}</td></tr>'
         )
-    n = {d: sum(v.decision == d for v in verdicts) for d in _DECISION_WORDS}
-    overall = ("FAIL" if n["fail"] else "PASS" if n["pass"] == len(verdicts) and verdicts else "not decided")
-    css = {"FAIL": "fail", "PASS": "pass"}.get(overall, "undecided")
+    verdict = overall(verdicts)
+    css = {"fail": "fail", "pass": "pass"}.get(verdict, "undecided")
     return (
-        f'<p>Overall: <span class="{css}">{overall}</span> — {n["pass"]} pass, {n["fail"]} fail, '
-        f'{n["not_decidable"]} not decidable within the uncertainty, {n["no_value"]} without a value.</p>'
+        f'<p>Overall: <span class="{css}">{verdict.replace("_", " ").upper()}</span> — '
+        f"{html.escape(decision_counts(verdicts))}.</p>"
         '<table><thead><tr><th class="l">figure</th><th>catalogue limit</th><th>measured: session mean ± U95</th>'
         '<th class="l">verdict</th><th class="l">why</th></tr></thead><tbody>' + "".join(rows) + "</tbody></table>"
         f'<p class="muted">Decision rule: {html.escape(DECISION_RULE)}</p>'

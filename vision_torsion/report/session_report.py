@@ -47,6 +47,8 @@ class SessionReport:
         Withheld figures by kind (:func:`~vision_torsion.report.analyze.withheld_by_kind`).
     angle_sign_advice : str
         Non-empty when the angle sign looks inverted: what to set.
+    verdicts : tuple of Verdict or None
+        The conformity verdicts against session.toml's ``[spec]`` (None without one).
     """
 
     files: ReportFiles
@@ -58,6 +60,7 @@ class SessionReport:
     unlisted: tuple = ()
     withheld_by_kind: dict = field(default_factory=dict)
     angle_sign_advice: str = ""
+    verdicts: tuple | None = None
 
 
 def _g6(x: float) -> float:
@@ -245,6 +248,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         unlisted=result.unlisted,
         withheld_by_kind=res.withheld_by_kind,
         angle_sign_advice=res.angle_sign_advice,
+        verdicts=res.verdicts,
     )
 
 
