@@ -191,3 +191,22 @@ def test_analyze_command_reads_a_semicolon_table_with_a_column_map(tmp_path, tab
     assert "angle_deg from 'Angle [arcmin]' (arcmin → deg)" in out
     code = main(["analyze", str(path), "-o", str(tmp_path / "o"), "--units", "phase=x"])
     assert code == 2 and "--units: unknown key 'phase'" in capsys.readouterr().err
+
+
+def test_uncertainty_columns_found_by_name_in_the_value_unit(tmp_path, table):
+    path = tmp_path / "t.csv"
+    pd.DataFrame({"Torque [mN m]": table["torque_nm"] * 1000, "u(torque)": table["torque_std_nm"] * 1000,
+                  "Angle [arcmin]": table["angle_deg"] * 60, "angle_std": table["angle_std_deg"] * 60,
+                  "phase": table["phase"], "cycle": table["cycle"], "step": table["step"],
+                  "orientation_deg": table["orientation_deg"]}).to_csv(path, index=False)
+    got = import_table(path).frame
+    np.testing.assert_allclose(got["torque_std_nm"], table["torque_std_nm"], rtol=1e-12)
+    np.testing.assert_allclose(got["angle_std_deg"], table["angle_std_deg"], rtol=1e-12)
+    assert list(got["phase"]) == list(table["phase"])
+
+
+def test_two_candidate_uncertainty_columns_are_refused(tmp_path):
+    path = tmp_path / "t.csv"
+    path.write_text("torque [N m],angle [deg],angle_std [deg],sigma angle [deg]\n0,0,1,1\n")
+    with pytest.raises(MeasurementsError, match=r"could each be the angle uncertainty; name one \(--columns angle_std"):
+        import_table(path)

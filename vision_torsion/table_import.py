@@ -11,7 +11,8 @@ undoes, and says what it did (:attr:`ImportedTable.notes`):
 - **column names**: the measurements' own names are taken as they are; otherwise a
   column map (``{"torque": "Torque [N m]", "angle": "Angle [arcmin]"}``, the
   ``--columns`` option) or, without one, a header whose name before its unit is a
-  known word (torque, moment; angle, rotation, twist, theta) names the column.
+  known word (torque, moment; angle, rotation, twist, theta) names the column, and
+  ``angle_std``, ``u(angle)``, ``sigma angle`` (the same for torque) its uncertainty.
 - **units** from the header: ``Torque [N m]``, ``Torque (mN·m)``, ``Angle [arcmin]``,
   ``angle_rad``; torque in N·m or mN·m, angles in deg, arcmin, arcsec, rad or
   mrad, converted to N·m and degrees. A torque or angle column without a unit is
@@ -143,6 +144,8 @@ def _delimiter(header: str) -> str:
 def _split_name_unit(header: str) -> tuple[str, str | None]:
     """``"Torque [N m]"`` -> ``("torque", "N m")``; ``"angle_rad"`` -> ``("angle", "rad")``."""
     h = header.strip()
+    if re.match(r"^u\s*\([^()]*\)$", h, flags=re.IGNORECASE):  # "u(angle)": an uncertainty's name, no unit
+        return h.lower().replace(" ", ""), None
     m = re.match(r"^(.*?)\s*[\[(]\s*(.*?)\s*[\])]\s*$", h)
     if m:
         return m.group(1).strip().lower(), m.group(2)
@@ -171,6 +174,24 @@ def _factor(quantity: str, unit: str | None, *, column: str, name: str) -> tuple
     return table[key], unit
 
 
+#: How a header names the uncertainty of a quantity ("angle_std", "u(angle)", ...).
+_STD_FORMS = ("{}_std", "{} std", "u({})", "u {}", "sigma {}", "σ{}", "σ {}")
+
+
+def _detect(key, words, header, found, name) -> None:
+    """Claim the one header whose name (before its unit) is one of `words` for `key`."""
+    target = _MAP_KEYS[key]
+    if target in found:
+        return
+    hits = [h for h in header if h not in found.values() and _split_name_unit(h)[0] in words]
+    if len(hits) > 1:
+        raise MeasurementsError(f"{name}: columns {', '.join(map(repr, hits))} could each be the "
+                                f"{key.replace('_std', ' uncertainty')}; name one (--columns {key}=HEADER)",
+                                reason="ambiguous_column")
+    if hits:
+        found[target] = hits[0]
+
+
 def _find_columns(header: list[str], column_map: dict, *, name: str) -> dict:
     """Measurements column -> the file's header it comes from."""
     found = {}
@@ -182,16 +203,9 @@ def _find_columns(header: list[str], column_map: dict, *, name: str) -> dict:
     for col in MEASUREMENT_COLUMNS + ("torque_common_std_nm",):
         if col in header and col not in found and col not in found.values():
             found[col] = col
-    for quantity, words in _WORDS.items():
-        target = _MAP_KEYS[quantity]
-        if target in found:
-            continue
-        hits = [h for h in header if h not in found.values() and _split_name_unit(h)[0] in words]
-        if len(hits) > 1:
-            raise MeasurementsError(f"{name}: columns {', '.join(map(repr, hits))} could each be the {quantity}; "
-                                    f"name one (--columns {quantity}=HEADER)", reason="ambiguous_column")
-        if hits:
-            found[target] = hits[0]
+    for quantity, words in _WORDS.items():  # the uncertainties too: "angle_std", "u(angle)", "sigma torque"
+        _detect(quantity, words, header, found, name)
+        _detect(f"{quantity}_std", tuple(f.format(w) for w in words for f in _STD_FORMS), header, found, name)
     missing = [q for q in ("torque", "angle") if _MAP_KEYS[q] not in found]
     if missing:
         raise MeasurementsError(
