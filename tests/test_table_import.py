@@ -210,3 +210,18 @@ def test_two_candidate_uncertainty_columns_are_refused(tmp_path):
     path.write_text("torque [N m],angle [deg],angle_std [deg],sigma angle [deg]\n0,0,1,1\n")
     with pytest.raises(MeasurementsError, match=r"could each be the angle uncertainty; name one \(--columns angle_std"):
         import_table(path)
+
+
+def test_a_labelled_loop_run_the_other_way_round_is_noted(tmp_path, table):
+    d = table[table["orientation_deg"] == 0].copy()
+    swap = {"positive_unloading": "positive_loading", "positive_loading": "positive_unloading",
+            "negative_loading": "negative_unloading", "negative_unloading": "negative_loading"}
+    path = tmp_path / "t.csv"
+    foreign(d).to_csv(path, index=False)
+    assert not any("other way round" in n for n in import_table(path, column_map=parse_column_map(MAP)).notes)
+    # each branch labelled as its partner, in the reverse order: the same points, the loop run backwards
+    d["step"] = d.groupby(["cycle", "phase"])["step"].transform(lambda st: st.max() - st)
+    d["phase"] = d["phase"].map(lambda p: swap.get(p, p))
+    foreign(d).to_csv(path, index=False)
+    notes = import_table(path, column_map=parse_column_map(MAP)).notes
+    assert any(n.startswith("orientation_deg 0, cycle 1: ∮τ dθ ≤ 0") for n in notes)

@@ -432,6 +432,8 @@ def import_table(path, *, column_map=None, units=None, angle_std_deg=None, torqu
         notes.append(f"{col} = {value:g} for every row (given)")
     if "phase" not in out.columns:
         out = _phases(out, notes, name)
+    else:
+        notes += _direction_notes(out)
     defaults = {"orientation_deg": 0.0, "mass_kg": np.nan, "status": "ok", "message": ""}
     filled = [c for c in defaults if c not in out.columns]
     for col in filled:
@@ -489,6 +491,27 @@ def _phases(out, notes, name):
                  "torque reversals" + (f"; {n_left} row(s) outside a complete loop left out (the first loading "
                                        "from zero, a last incomplete sweep)" if n_left else ""))
     return pd.concat(parts)
+
+
+def _direction_notes(out) -> list[str]:
+    """A note for each orientation whose labelled loops run the other way round:
+    ∮τ dθ ≤ 0 over the loop phases in protocol order (cycle, phase, step)."""
+    from .measurements import CYCLE_PHASES
+
+    order = {p: i for i, p in enumerate(CYCLE_PHASES)}
+    loops = out[out["phase"].astype(str).isin(order)].copy()
+    if loops.empty:
+        return []
+    loops["_order"] = loops["phase"].map(order)
+    keys = [k for k in ("orientation_deg", "cycle") if k in loops.columns]
+    notes = []
+    for key, sub in (loops.groupby(keys, sort=True) if keys else [((), loops)]):
+        sub = sub.sort_values(["_order", "step"] if "step" in sub.columns else ["_order"], kind="stable")
+        if _signed_area(sub) <= 0:
+            where = ", ".join(f"{k} {v:g}" for k, v in zip(keys, key if isinstance(key, tuple) else (key,)))
+            notes.append(f"{where or 'the table'}: ∮τ dθ ≤ 0 over its phases in protocol order: the loop runs the "
+                         "other way round (phases labelled against the torque's path, or the columns swapped)")
+    return notes
 
 
 def _signed_area(sub) -> float:
