@@ -237,7 +237,7 @@ def test_analyze_command(tmp_path, capsys, cli_logging):
     assert "J. Doe" in (tmp_path / "out" / "report.html").read_text()
     bilinear_table.drop(columns=["torque_nm"]).to_csv(tmp_path / "bad.csv", index=False)
     assert main(["analyze", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "o2")]) == 2
-    assert "bad.csv: missing column(s): torque_nm" in capsys.readouterr().err
+    assert "bad.csv: no torque column found among 'image'" in capsys.readouterr().err
     assert math.isfinite(d["summary"]["hysteresis"]["mean"])
 
 

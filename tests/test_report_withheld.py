@@ -42,7 +42,16 @@ def test_table1_gives_a_switching_phase_as_its_two_stiffnesses_and_secant(switch
     assert nl["switch_torque_nm"] == pytest.approx(0.15, rel=0.05)
     assert np.isfinite(nl["secant_nm_per_rad"]) and nl["n_cycles"] == 1
     page = write_report(df, a, conditions={}, out_dir=tmp_path).report_html.read_text()
-    assert "straight line does not fit: 0.3" in page
+    import re
+
+    table1 = page[page.index("Stiffness per phase and orientation"):]
+    table1 = table1[:table1.index("</table>")]
+    rows = [re.findall(r"<td[^>]*>(.*?)</td>", r) for r in re.findall(r"<tr>(.*?)</tr>", table1)]
+    nl_row = next(r for r in rows if r and r[1] == "negative loading")
+    # one number per cell: the straight line withheld, the two stiffnesses and the switch in their columns
+    assert nl_row[3] == "—" and nl_row[4].startswith(("0.29", "0.30")) and nl_row[5].startswith(("4.3", "4.4"))
+    assert float(nl_row[6]) == pytest.approx(0.15, rel=0.05)
+    assert all(len(cell) <= 24 for r in rows for cell in r)  # no prose in Table 1
     assert "could not be computed" not in page and "not computed" not in page
     assert "does not fit its data" in page and "not applicable to these data" in page
 
@@ -77,5 +86,12 @@ def test_orientation_means_of_one_cycle_are_flagged_in_the_report(switching, tmp
     assert (po["n_cycles"] == 1).all() and with_u.sum() >= 40
     assert po["flag"][with_u].str.contains("mean of one loop").all() and (po["flag"][~with_u] == "").all()
     page = write_report(df, a, conditions={}, out_dir=tmp_path).report_html.read_text()
-    assert "† Orientation means shown with a flag:" in page
+    # said once for the table (issue 28: a † on every value said nothing), not on every cell
+    assert page.count("One loop per orientation: each orientation mean is that loop's value") == 1
     assert "repeatability between loops is not observed" in page
+    from vision_torsion.report.tables import metrics_table
+
+    flagged_cells = sum(len(fl) for fl in metrics_table(a)["flags"])
+    table = page[page.index("Catalogue metrics and model fits"):]
+    table = table[:table.index("</table>")]
+    assert table.count("†</td>") == flagged_cells < with_u.sum()  # † only where the loop value is flagged

@@ -262,3 +262,40 @@ def test_cli_rated_torque(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "Rated torque T_R = 6 N·m (session.toml: [gear] rated_torque_nm)" in out
     assert "±4 % → 12 × 20 g per pan = ±0.23544 N·m (3.92 % of T_R)" in out
+
+
+def test_capture_sheet_pages_carry_their_head_and_a_camera_file_column(tmp_path):
+    import re
+
+    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                 preconditioning_cycles=1, closing=True, header={"gear": "CSF-20-100", "serial": "S/N 9"}, pdf=False)
+    page = (tmp_path / "capture_sheet.html").read_text()
+    heads = re.findall(r"<thead>(.*?)</thead>", page, flags=re.S)
+    assert len(heads) == 2 and "Orientation 0° — CSF-20-100, S/N 9" in heads[0] and "Orientation 60°" in heads[1]
+    assert all("camera file no.</th>" in h for h in heads)
+    bodies = re.findall(r"<tbody>(.*?)</tbody>", page, flags=re.S)
+    for body in bodies:  # every row fills the ten columns (one spanning five)
+        for row in re.findall(r"<tr[^>]*>(.*?)</tr>", body, flags=re.S):
+            cells = re.findall(r"<td(?: colspan=\"(\d+)\")?[^>]*>", row)
+            assert sum(int(c) if c else 1 for c in cells) == 10, row
+    assert 'counter(page) " of " counter(pages)' in page and 'content: "Capture sheet — CSF-20-100, S/N 9"' in page
+
+
+def test_printed_capture_sheet_repeats_the_head_and_numbers_every_page(tmp_path):
+    import shutil
+    import subprocess
+
+    from vision_torsion.session.sheet import find_chromium
+
+    if find_chromium() is None or shutil.which("pdftotext") is None:
+        pytest.skip("no Chromium or pdftotext on this machine")
+    plan_session(tmp_path, steps=18, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), pdf=True,
+                 header={"gear": "CSF-20-100"})
+    text = subprocess.run(["pdftotext", "-layout", str(tmp_path / "capture_sheet.pdf"), "-"], capture_output=True,
+                          text=True, check=True).stdout
+    pages = [p for p in text.split("\f") if p.strip()]
+    assert len(pages) >= 3  # the header page and a 74-row orientation over two pages
+    for number, p in enumerate(pages, start=1):
+        assert f"page {number} of {len(pages)}" in p
+        if number > 1:  # every page of the orientation: its title and the column names
+            assert "Orientation 0° — CSF-20-100" in p and "save as" in p and "camera" in p

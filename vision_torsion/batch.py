@@ -116,9 +116,9 @@ def measure_each(measure: Callable[[Any], Any], items: Iterable, *, names: Itera
     items = list(items)
     names = [str(i) for i in items] if names is None else list(names)
     out = []
-    from tqdm.auto import tqdm  # here: its asyncio import costs every command ~30 ms
+    from .progress import track
 
-    for item, name in tqdm(list(zip(items, names)), desc=desc, unit="image", disable=not progress):
+    for item, name in track(list(zip(items, names)), desc=desc, unit="image", enabled=progress):
         done = attempt(measure, item, name=name)
         if not done.ok and not done.unexpected:
             logger.debug("%s", done.message)

@@ -28,7 +28,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
-__all__ = ["read_toml", "parse_toml", "TOMLDecodeError", "decode_utf8", "csv_delimiter", "CSV_DELIMITERS"]
+__all__ = ["read_toml", "read_text", "parse_toml", "TOMLDecodeError", "decode_utf8", "csv_delimiter",
+           "CSV_DELIMITERS"]
 
 #: The TOML parser's error (``tomllib.TOMLDecodeError`` or ``tomli.TOMLDecodeError``).
 TOMLDecodeError = tomllib.TOMLDecodeError
@@ -124,10 +125,24 @@ def read_toml(path, *, what: str, error: type[VisionTorsionError] = VisionTorsio
     vision_torsion.errors.SessionError: /nonexistent/session.toml: no such file; expected a session description
     """
     p = Path(path)
+    return parse_toml(read_text(p, what=what, error=error), source=p, error=error)
+
+
+def read_text(path, *, what: str, error: type[VisionTorsionError] = VisionTorsionError, name=None) -> str:
+    """A UTF-8 text file's contents (a byte-order mark dropped).
+
+    Raises
+    ------
+    error
+        ``NAME: no such file; expected WHAT`` (reason ``not_found``), ``NAME: cannot
+        be read (why)`` (``unreadable``), or not UTF-8 (``not_utf8``,
+        :func:`decode_utf8`); NAME is `name`, the path by default.
+    """
+    name = path if name is None else name
     try:
-        data = p.read_bytes()
+        data = Path(path).read_bytes()
     except FileNotFoundError:
-        raise error(f"{p}: no such file; expected {what}", reason="not_found") from None
+        raise error(f"{name}: no such file; expected {what}", reason="not_found") from None
     except OSError as exc:
-        raise error(f"{p}: cannot be read ({exc.strerror or exc})", reason="unreadable") from None
-    return parse_toml(decode_utf8(data, name=p, error=error, what=what), source=p, error=error)
+        raise error(f"{name}: cannot be read ({exc.strerror or exc})", reason="unreadable") from None
+    return decode_utf8(data, name=name, error=error, what=what)

@@ -126,8 +126,9 @@ def _version() -> str:
 
 
 def progress_enabled(args) -> bool:
-    """Progress bars show on a terminal unless --quiet was given."""
-    return not getattr(args, "quiet", False) and sys.stderr.isatty()
+    """Progress shows unless --quiet was given: a bar on a terminal, a line every few
+    seconds in a log or a pipe (:mod:`vision_torsion.progress`)."""
+    return not getattr(args, "quiet", False)
 
 
 def failure_line(image: str, message: str, *, status: str = "failed") -> str:

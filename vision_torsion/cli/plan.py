@@ -69,8 +69,12 @@ def register(subparsers) -> None:
                    help="the gear's rated torque T_R, N·m: names the lost-motion levels at ±3 %% "
                         "and ±4 %% of it (whole numbers of step masses; refused when the pieces "
                         "cannot realise them)")
-    g = p.add_argument_group("capture sheet header (blank lines on the sheet when not given)")
-    for key in ("gear", "serial", "operator", "date"):
+    p.add_argument("--catalogue", metavar="FILE.toml",
+                   help="the gear type's catalogue values: [gear] ratio, rated_torque_nm, t1_nm, t2_nm and [spec] "
+                        "limits, copied into session.toml (the report judges the gear against them)")
+    g = p.add_argument_group("the test's identity: on the capture sheet (blank lines when not given), in "
+                             "session.toml's [gear]/[test], the report and summary.json")
+    for key in ("gear", "serial", "operator", "date", "notes"):
         g.add_argument(f"--{key}", metavar="TEXT")
     p.add_argument("--no-pdf", action="store_true",
                    help="write capture_sheet.html only (default: also capture_sheet.pdf when "
@@ -96,9 +100,9 @@ def run(args) -> int:
         angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
         target=args.target,
         steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
-        header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date")
+        header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date", "notes")
                 if getattr(args, k)},
-        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque)
+        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque, catalogue=args.catalogue)
     print(f"{plan.folder}: {len(plan.rows)} images in "
           f"{len(plan.config.protocol.orientations_deg)} orientations, "
           f"{plan.steps_per_phase} steps per phase, max torque "

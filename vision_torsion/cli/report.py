@@ -37,7 +37,18 @@ def print_summary(rep) -> None:
         print(rep.angle_sign_advice)
     for name in rep.unlisted:
         print(f"not in the manifest: {name}")
+    print_verdict(rep)
     print(f"report: {rep.files.report_html}")
+
+
+def print_verdict(res) -> None:
+    """The conformity verdict (when session.toml has a [spec]) and the report's copy to send."""
+    if res.verdicts is not None:
+        from ..analysis.conformity import describe
+
+        print(f"verdict against the catalogue: {describe(res.verdicts)}")
+    if res.files.export_html is not None:
+        print(f"report to send: {res.files.export_html}")
 
 
 def run(args) -> int:

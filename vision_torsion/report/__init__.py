@@ -19,7 +19,7 @@ from . import figures as _fig
 from .html import render_html
 from .tables import STIFFNESS_TABLE_COLUMNS, metrics_table, stiffness_table
 
-__all__ = ["ReportFiles", "write_report", "stiffness_table", "STIFFNESS_TABLE_COLUMNS"]
+__all__ = ["ReportFiles", "write_report", "stiffness_table", "STIFFNESS_TABLE_COLUMNS", "export_name"]
 
 _FAILED_COLUMNS = ["image", "orientation_deg", "cycle", "phase", "step", "message"]
 
@@ -33,6 +33,30 @@ class ReportFiles:
     stiffness_table_csv: Path
     report_html: Path
     figures: tuple
+    export_html: Path | None = None
+
+
+def export_name(identity: dict | None) -> str | None:
+    """The file name of the report to send out, from the test's identity:
+    ``<gear>_<serial>_<date>_report.html`` with the entries given (None without
+    any), each reduced to letters, digits, ``-`` and ``.`` so it is a safe file name
+    on every system.
+
+    Examples
+    --------
+    >>> export_name({"gear": "HFUC-20-100", "serial": "SN 123/45", "date": "2026-11-27"})
+    'HFUC-20-100_SN-123-45_2026-11-27_report.html'
+    >>> export_name({}) is None
+    True
+    """
+    import re
+
+    parts = []
+    for key in ("gear", "serial", "date"):
+        text = re.sub(r"[^A-Za-z0-9.-]+", "-", str((identity or {}).get(key) or "")).strip("-.")
+        if text:
+            parts.append(text[:60])
+    return "_".join(parts) + "_report.html" if parts else None
 
 
 def _failures(analysis, failures) -> pd.DataFrame:
@@ -49,7 +73,8 @@ def _failures(analysis, failures) -> pd.DataFrame:
 
 
 def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failures=None, extra_sections=None,
-                 title="Torsional stiffness and hysteresis report", metadata=None) -> ReportFiles:
+                 title="Torsional stiffness and hysteresis report", metadata=None, identity=None,
+                 verdicts=None) -> ReportFiles:
     """Write summary.json, stiffness_table.csv, figures/*.svg and report.html.
 
     Parameters
@@ -75,6 +100,15 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
         The test's metadata (gear, serial, operator, temperature, notes, ...) shown
         at the top of the page with the software version and date, and stored
         under ``metadata`` in summary.json.
+    identity : dict, optional
+        Who, what, when (keys ``gear``, ``serial``, ``operator``, ``date``,
+        ``notes``; :func:`~vision_torsion.report.analyze.identity`): the first lines of
+        page 1, ``identity`` in summary.json, and the name of a copy of the page to
+        send out (:func:`export_name`).
+    verdicts : sequence of vision_torsion.analysis.conformity.Verdict, optional
+        The conformity verdicts against the catalogue (``[spec]``): the table on
+        page 1 and ``conformity`` in summary.json with the decision rule. None: no
+        specification was given.
 
     Returns
     -------
@@ -105,19 +139,30 @@ def write_report(measurements_df, analysis, *, conditions: dict, out_dir, failur
     summary["software"] = {"name": "vision-torsion", "version": __version__}
     summary["conditions"] = dict(conditions)
     summary["metadata"] = {k: v for k, v in (metadata or {}).items() if v is not None}
+    summary["identity"] = dict(identity or {})
+    if verdicts is not None:
+        from ..analysis.conformity import DECISION_RULE
+
+        summary["conformity"] = {"rule": DECISION_RULE, "verdicts": [v.to_dict() for v in verdicts]}
+    export = export_name(identity)
     summary["counts"]["images"] = int(len(measurements_df))
     summary["counts"]["images_failed"] = int(len(failed))
     summary["failed_images"] = failed.to_dict(orient="records")
     summary["files"] = {"stiffness_table": "stiffness_table.csv", "report": "report.html",
                         "figures": [f"figures/{p.name}" for p in fig_paths]}
+    if export:
+        summary["files"]["export"] = export
     summary_path = write_json(out / "summary.json", summary)
     table_path = write_csv(out / "stiffness_table.csv", stiff)
     page = render_html(
         title=title, conditions=conditions, analysis=analysis, stiffness=stiff, metrics=metrics,
         figures={"overlay": svgs["loops_overlay.svg"], "stiffness": svgs["phase_stiffness.svg"],
                  "orientation": svgs["orientation_effect.svg"], "residuals": svgs["fit_residuals.svg"]},
-        failed=failed, extra_sections=extra_sections or (), metadata=metadata,
+        failed=failed, extra_sections=extra_sections or (), metadata=metadata, identity=identity,
+        verdicts=verdicts,
     )
     html_path = atomic_write_text(out / "report.html", page)
+    # the same page under the gear's name, to send out: report.html stays the name links use
+    export_path = atomic_write_text(out / export, page) if export else None
     return ReportFiles(out_dir=out, summary_json=summary_path, stiffness_table_csv=table_path,
-                       report_html=html_path, figures=fig_paths)
+                       report_html=html_path, figures=fig_paths, export_html=export_path)

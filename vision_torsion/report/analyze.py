@@ -23,7 +23,8 @@ import pandas as pd
 from ..errors import AnalysisError
 
 __all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
-           "describe_withheld", "angle_sign_advice"]
+           "describe_withheld", "angle_sign_advice", "spec_limits", "identity", "gear_options",
+           "merge_catalogue"]
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +47,10 @@ class AnalyzeResult:
     angle_sign_advice : str
         What to set when the angle falls as the torque rises (:func:`angle_sign_advice`),
         empty otherwise.
+    import_notes : tuple of str
+        What reading a table from elsewhere did (:attr:`~vision_torsion.table_import.ImportedTable.notes`).
+    verdicts : tuple of Verdict or None
+        The conformity verdicts against the ``[spec]`` limits (None without any).
     """
 
     files: object
@@ -57,6 +62,8 @@ class AnalyzeResult:
     n_flagged: int
     withheld_by_kind: dict = field(default_factory=dict)
     angle_sign_advice: str = ""
+    import_notes: tuple = ()
+    verdicts: tuple | None = None
 
 
 def angle_sign_advice(angle_sign: int = 1) -> str:
@@ -117,16 +124,13 @@ def analysis_options(config) -> dict:
     torque; ``[gear]`` the rated torque, catalogue T1/T2 and gear ratio; ``[test]`` the
     lost-motion fractions, the secant interval and whether to fit the breaks.
     """
-    proto, gear, test = config.protocol, config.gear, config.test
+    proto, test = config.protocol, config.test
     kw = dict(
         max_torque_nm=proto.max_torque_nm,
         rig=config.torque_rig,
-        rated_torque_nm=gear.rated_torque_nm,
-        gear_ratio=gear.ratio,
         fit_breaks=test.fit_breaks,
+        **gear_options(config.gear),
     )
-    if gear.t1_nm is not None and gear.t2_nm is not None:
-        kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
     if test.lost_motion_fractions is not None:
         kw["lost_motion_fractions"] = tuple(test.lost_motion_fractions)
     if test.secant_interval_nm is not None:
@@ -134,10 +138,64 @@ def analysis_options(config) -> dict:
     return kw
 
 
-def test_metadata(config) -> dict:
-    """The ``[gear]`` and ``[test]`` entries that were given, for the report and summary.json."""
+def gear_options(gear) -> dict:
+    """Keyword arguments of :func:`~vision_torsion.analysis.analyze_session` from a
+    ``[gear]`` table: the rated torque, the gear ratio and the catalogue T1/T2."""
+    kw = dict(rated_torque_nm=gear.rated_torque_nm, gear_ratio=gear.ratio)
+    if gear.t1_nm is not None and gear.t2_nm is not None:
+        kw["catalogue_breaks_nm"] = (gear.t1_nm, gear.t2_nm)
+    return kw
+
+
+def merge_catalogue(config, catalogue):
+    """`config` (a SessionConfig, or None for a table without one) with a catalogue
+    file's ``[gear]`` and ``[spec]`` filling what it does not give.
+
+    Returns
+    -------
+    (gear, test, spec)
+        GearConfig, TestConfig, SpecConfig to analyse and report with.
+
+    Raises
+    ------
+    SessionError
+        The catalogue file is invalid, or it and session.toml give one key different
+        values (both named).
+    """
+    import dataclasses
+
+    from ..errors import SessionError
+    from ..session.config import GearConfig, SpecConfig, TestConfig, load_catalogue
+
+    gear, test, spec = ((config.gear, config.test, config.spec) if config is not None
+                        else (GearConfig(), TestConfig(), SpecConfig()))
+    if catalogue is None:
+        return gear, test, spec
+    cat_gear, cat_spec = load_catalogue(catalogue)
+    merged = []
+    for table, mine, theirs in (("gear", gear, cat_gear), ("spec", spec, cat_spec)):
+        changes = {}
+        for f in dataclasses.fields(mine):
+            a, b = getattr(mine, f.name), getattr(theirs, f.name)
+            if b is None:
+                continue
+            if a is not None and a != b:
+                raise SessionError(f"{table}.{f.name}: session.toml gives {a!r}, the catalogue file {catalogue} "
+                                   f"gives {b!r}; keep one", reason="conflict")
+            changes[f.name] = b
+        merged.append(dataclasses.replace(mine, **changes))
+    return merged[0], test, merged[1]
+
+
+def test_metadata(config=None, *, gear=None, test=None) -> dict:
+    """The ``[gear]`` and ``[test]`` entries that were given, for the report and
+    summary.json: of `config`, or of the `gear` and `test` tables given."""
+    if config is not None:
+        gear, test = config.gear, config.test
     out = {}
-    for table, obj in (("gear", config.gear), ("test", config.test)):
+    for table, obj in (("gear", gear), ("test", test)):
+        if obj is None:
+            continue
         d = {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(obj).items() if v is not None}
         if table == "test" and d.get("fit_breaks") is True:
             d.pop("fit_breaks")
@@ -154,6 +212,7 @@ _LABELS = {
     ("gear", "t1_nm"): "catalogue T1 (N·m)",
     ("gear", "t2_nm"): "catalogue T2 (N·m)",
     ("test", "operator"): "operator",
+    ("test", "date"): "test date",
     ("test", "temperature_c"): "temperature (°C)",
     ("test", "notes"): "notes",
     ("test", "lost_motion_fractions"): "lost motion at (fractions of T_R)",
@@ -162,14 +221,46 @@ _LABELS = {
 }
 
 
-def _read_table(table) -> tuple[pd.DataFrame, str]:
-    from ..measurements import read_measurements
+def spec_limits(spec, figures=()) -> list:
+    """The :class:`~vision_torsion.analysis.conformity.Limit` list of a ``[spec]``
+    table (:class:`~vision_torsion.session.config.SpecConfig`), in the analysis'
+    units (N·m/rad, degrees).
 
+    The lost-motion maximum applies to every lost-motion figure among `figures`
+    (the analysis' figure names: one per ``[test] lost_motion_fractions``, ±3 % and
+    ±4 % of T_R by default).
+    """
+    from ..analysis.conformity import Limit
+
+    out = [Limit(f"k{i}", "min", v) for i, v in
+           enumerate((spec.k1_min_nm_per_rad, spec.k2_min_nm_per_rad, spec.k3_min_nm_per_rad), start=1)
+           if v is not None]
+    if spec.lost_motion_max_arcmin is not None:
+        out += [Limit(f, "max", spec.lost_motion_max_arcmin / 60.0) for f in figures if f.startswith("lost_motion_")]
+    if spec.hysteresis_loss_max_arcmin is not None:
+        out.append(Limit("hysteresis_loss", "max", spec.hysteresis_loss_max_arcmin / 60.0))
+    return out
+
+
+def identity(gear, test) -> dict:
+    """Who, what, when: ``{"gear", "serial", "operator", "date", "notes"}`` from the
+    ``[gear]`` and ``[test]`` tables (Gear-/TestConfig), the entries given only."""
+    out = {"gear": gear.name, "serial": gear.serial, "operator": test.operator, "date": test.date,
+           "notes": test.notes}
+    return {k: v for k, v in out.items() if v}
+
+
+_IDENTITY_KEYS = {("gear", "name"), ("gear", "serial"), ("test", "operator"), ("test", "date"), ("test", "notes")}
+
+
+def _read_table(table, **import_options) -> tuple[pd.DataFrame, str, tuple]:
     if isinstance(table, pd.DataFrame):
-        return table, "table"
-    path = Path(table)
-    # the one reader of the table: every bad row listed by its CSV line (MeasurementsError)
-    return read_measurements(path, name=str(path)), str(path)
+        return table, "table", ()
+    from ..table_import import import_table
+
+    # the one reader of a table file: a measurements.csv as it is, any other through the import
+    imported = import_table(table, name=str(table), **import_options)
+    return imported.frame, str(table), imported.notes
 
 
 def analyze_table(
@@ -183,6 +274,11 @@ def analyze_table(
     title="Torsional stiffness and hysteresis report",
     n_draws=400,
     seed=0,
+    columns=None,
+    units=None,
+    angle_std_deg=None,
+    torque_std_nm=None,
+    catalogue=None,
 ):
     """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
 
@@ -205,6 +301,16 @@ def analyze_table(
     title : str
     n_draws, seed : int
         Monte Carlo settings of the analysis.
+    columns, units : dict, optional
+        For a table from elsewhere: quantity -> header, and quantity -> unit
+        (:func:`vision_torsion.table_import.import_table`; separators, decimal
+        commas, units in headers and a plain torque/angle record are handled there).
+    angle_std_deg, torque_std_nm : float, optional
+        1σ of every angle and torque, for a table without uncertainty columns.
+    catalogue : path-like, optional
+        A catalogue file (``[gear]`` and ``[spec]``,
+        :func:`~vision_torsion.session.config.load_catalogue`): with or without a
+        session, the catalogue values and the conformity verdict.
 
     Returns
     -------
@@ -216,13 +322,15 @@ def analyze_table(
         The table is missing, unreadable, or lacks a column (named), or has no usable
         row; the message starts with the file name.
     SessionError
-        The session.toml is invalid (every problem listed).
+        The session.toml or the catalogue file is invalid (every problem listed),
+        or the two give one key different values.
     """
     from ..analysis import analyze_session
     from ..fileio import output_set
     from . import write_report
 
-    df, name = _read_table(table)
+    df, name, import_notes = _read_table(table, column_map=columns, units=units, angle_std_deg=angle_std_deg,
+                                         torque_std_nm=torque_std_nm)
     if "status" in df.columns:
         df = df[df["status"].astype(str) != "pending"].reset_index(drop=True)
     config = None
@@ -233,16 +341,28 @@ def analyze_table(
             from ..session.config import load_config
 
             config = load_config(session)
-    kw = analysis_options(config) if config is not None else {}
+    gear, test, spec = merge_catalogue(config, catalogue)
+    if config is not None:
+        import dataclasses
+
+        config = dataclasses.replace(config, gear=gear, spec=spec)
+    kw = analysis_options(config) if config is not None else gear_options(gear)
     try:
         analysis = analyze_session(df, n_draws=n_draws, seed=seed, **kw)
     except AnalysisError as exc:
         if str(exc).startswith(name):
             raise
         raise type(exc)(f"{name}: {exc}", reason=getattr(exc, "reason", None)) from None
-    meta = test_metadata(config) if config is not None else {}
+    verdicts = None
+    if spec:
+        from ..analysis.conformity import conformity
+
+        verdicts = conformity(analysis.summary, spec_limits(spec, analysis.summary))
+    meta = test_metadata(gear=gear, test=test)
     analysis.settings["test_metadata"] = meta
     cond = dict(conditions) if conditions is not None else {"table": name}
+    if import_notes:
+        cond["table import"] = "; ".join(import_notes)
     if conditions is None and config is not None:
         cond.update(
             {
@@ -253,7 +373,9 @@ def analyze_table(
             }
         )
     # the header of the report shows the test's metadata (gear, serial, operator, ...)
-    metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()}
+    # (who, what and when lead page 1 and summary.json's "identity": not repeated here)
+    metadata = {_LABELS.get((t, k), f"{t}.{k}"): v for t, entries in meta.items() for k, v in entries.items()
+                if (t, k) not in _IDENTITY_KEYS}
     if out_dir is None:
         if isinstance(table, pd.DataFrame):
             raise AnalysisError("out_dir is needed when the table is a DataFrame")
@@ -271,6 +393,8 @@ def analyze_table(
             extra_sections=sections,
             title=title,
             metadata=metadata,
+            identity=identity(gear, test),
+            verdicts=verdicts,
         )
     f = analysis.figures
     by_kind = withheld_by_kind(analysis)
@@ -286,4 +410,6 @@ def analyze_table(
         withheld_by_kind=by_kind,
         angle_sign_advice=angle_sign_advice(config.angle_sign if config is not None else 1)
         if analysis.checks.get("angle_sign_inverted") else "",
+        import_notes=tuple(import_notes),
+        verdicts=None if verdicts is None else tuple(verdicts),
     )

@@ -31,22 +31,16 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
     return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
 
 
-def _stiffness_cell(r) -> str:
-    """The phase's straight-line stiffness, or, where that line does not fit, its two
-    stiffnesses and the switch torque."""
-    if np.isfinite(r.stiffness_nm_per_rad):
-        return fmt_value(r.stiffness_nm_per_rad, r.stiffness_std_nm_per_rad)
-    if np.isfinite(r.stiffness_below_nm_per_rad) and np.isfinite(r.stiffness_above_nm_per_rad):
-        below = fmt_value(r.stiffness_below_nm_per_rad, r.stiffness_below_std_nm_per_rad)
-        above = fmt_value(r.stiffness_above_nm_per_rad, r.stiffness_above_std_nm_per_rad)
-        switch = abs(r.switch_torque_nm)
-        return f"straight line does not fit: {below} below, {above} above the switch at {switch:.3g} N·m"
-    return "—"
-
-
 def _table1(stiff: pd.DataFrame) -> str:
+    """The paper's Table 1, one number per cell: a phase whose straight line fits has
+    its stiffness; one whose stiffness switches has its stiffnesses below and above
+    the switch and the switch torque instead (the straight line withheld, —)."""
     if stiff.empty:
         return '<p class="muted">No stiffness could be computed.</p>'
+
+    def values(v, u):
+        return [fmt_value(a, b) if np.isfinite(a) else "—" for a, b in zip(stiff[v], stiff[u])]
+
     out = pd.DataFrame(
         {
             "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
@@ -55,19 +49,22 @@ def _table1(stiff: pd.DataFrame) -> str:
                 f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
                 for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])
             ],
-            "stiffness k (N·m/rad)": [_stiffness_cell(r) for r in stiff.itertuples(index=False)],
-            "k (N·m/arcmin)": [f"{v:.4g}" if np.isfinite(v) else "—" for v in stiff["stiffness_nm_per_arcmin"]],
-            "secant (N·m/rad)": [
-                fmt_value(v, s) for v, s in zip(stiff["secant_nm_per_rad"], stiff["secant_std_nm_per_rad"])
-            ],
-            "hysteresis (deg)": [fmt_value(v, s) for v, s in zip(stiff["hysteresis_deg"], stiff["hysteresis_std_deg"])],
+            "k, one line (N·m/rad)": values("stiffness_nm_per_rad", "stiffness_std_nm_per_rad"),
+            "k below the switch (N·m/rad)": values("stiffness_below_nm_per_rad", "stiffness_below_std_nm_per_rad"),
+            "k above the switch (N·m/rad)": values("stiffness_above_nm_per_rad", "stiffness_above_std_nm_per_rad"),
+            "switch at |τ| (N·m)": [f"{abs(v):.3g}" if np.isfinite(v) else "—" for v in stiff["switch_torque_nm"]],
+            "secant (N·m/rad)": values("secant_nm_per_rad", "secant_std_nm_per_rad"),
+            "hysteresis (deg)": values("hysteresis_deg", "hysteresis_std_deg"),
             "cycles": stiff["n_cycles"].astype(str),
         }
     )
-    return _table(out, left=("orientation", "phase", "stiffness k (N·m/rad)"))
+    return (_table(out, left=("orientation", "phase"))
+            + '<p class="muted">A phase whose stiffness switches is not one straight line: its "one line" '
+            "stiffness is withheld (—) and its stiffnesses below and above the switch are given. Stiffness in "
+            "N·m/rad throughout (N·m/arcmin in stiffness_table.csv).</p>")
 
 
-def _metrics(mt: pd.DataFrame, orients) -> str:
+def _metrics(mt: pd.DataFrame, orients, *, one_loop: bool = False) -> str:
     if mt.empty:
         return '<p class="muted">No loop figure could be computed.</p>'
     cols = {"figure": mt["label"], "unit": mt["unit"]}
@@ -89,6 +86,10 @@ def _metrics(mt: pd.DataFrame, orients) -> str:
         )
         notes += f"<li>{html.escape(where)}: {html.escape(text)}</li>"
     out = _table(pd.DataFrame(cols), left=("figure", "unit"))
+    if one_loop:
+        out = ('<p class="note">One loop per orientation: each orientation mean is that loop\'s value, and its '
+               "uncertainty holds the measurement only (the repeatability between loops is not observed; measure "
+               "more cycles to observe it). † marks a value whose loop figure is itself flagged.</p>" + out)
     if notes:
         out += '<p class="note">† Orientation means shown with a flag:</p><ul class="note">' + notes + "</ul>"
     return out
@@ -126,6 +127,76 @@ def _header(metadata) -> str:
     )
 
 
+_IDENTITY_LABELS = (("gear", "Gear"), ("serial", "Serial number"), ("operator", "Operator"), ("date", "Test date"),
+                    ("notes", "Notes"))
+
+
+def _identity(identity) -> str:
+    """Who, what, when: the first lines of page 1 (a missing entry says how to give it;
+    None, the caller knows no session: nothing)."""
+    if identity is None:
+        return ""
+    rows = []
+    for key, label in _IDENTITY_LABELS:
+        value = identity.get(key)
+        if value:
+            rows.append(f"<tr><th>{label}</th><td>{html.escape(str(value))}</td></tr>")
+        elif key != "notes":
+            rows.append(f'<tr><th>{label}</th><td class="muted">not given (plan --{key}, or session.toml '
+                        f'[{"gear" if key in ("gear", "serial") else "test"}])</td></tr>')
+    return f'<table class="who">{"".join(rows)}</table>'
+
+
+_DECISION_WORDS = {"pass": ("PASS", "pass"), "fail": ("FAIL", "fail"),
+                   "not_decidable": ("not decidable within U", "undecided"), "no_value": ("no value", "undecided")}
+
+
+def _verdicts(verdicts) -> str:
+    """The conformity table of page 1: one row per catalogue limit (``[spec]``)."""
+    from ..analysis.conformity import DECISION_RULE, decision_counts, overall
+    from .tables import FIGURE_VOCABULARY
+
+    if verdicts is None:
+        return ('<p class="muted">No catalogue limits given, so no verdict: add a <code>[spec]</code> table to '
+                "session.toml (k1_min_nm_per_rad, k2_min_nm_per_rad, k3_min_nm_per_rad, lost_motion_max_arcmin, "
+                "hysteresis_loss_max_arcmin).</p>")
+    rows = []
+    for v in verdicts:
+        label, unit, scale = FIGURE_VOCABULARY.get(v.limit.figure, (v.limit.figure, "", 1.0))
+        if unit == "deg":  # catalogue angles are in arcmin
+            unit, scale = "arcmin", 60.0
+        word, css = _DECISION_WORDS[v.decision]
+        measured = "—" if v.value is None else (
+            fmt_value(v.value * scale, (v.u95 or 0) * scale)
+            + ("" if v.coverage_factor is None else f" (k = {v.coverage_factor:.2g})"))
+        why = v.reason + (f"; {v.flagged}" if v.flagged else "")
+        rows.append(
+            f'<tr><td class="l">{html.escape(label)}</td><td>{"≥" if v.limit.kind == "min" else "≤"} '
+            f"{v.limit.value * scale:.4g} {html.escape(unit)}</td><td>{html.escape(measured)} {html.escape(unit)}"
+            f'</td><td class="l {css}">{word}</td><td class="l">{html.escape(why)}</td></tr>'
+        )
+    verdict = overall(verdicts)
+    css = {"fail": "fail", "pass": "pass"}.get(verdict, "undecided")
+    return (
+        f'<p>Overall: <span class="{css}">{verdict.replace("_", " ").upper()}</span> — '
+        f"{html.escape(decision_counts(verdicts))}.</p>"
+        '<table><thead><tr><th class="l">figure</th><th>catalogue limit</th><th>measured: session mean ± U95</th>'
+        '<th class="l">verdict</th><th class="l">why</th></tr></thead><tbody>' + "".join(rows) + "</tbody></table>"
+        f'<p class="muted">Decision rule: {html.escape(DECISION_RULE)}</p>'
+    )
+
+
+def _flag_counts(analysis, issues: pd.DataFrame, n_failed: int) -> str:
+    """How many things need a look, each linked to its section further down."""
+    n_withheld = int((issues["withheld because"] != _ISSUE_WORDS["flagged"]).sum()) if len(issues) else 0
+    n_flagged = int((issues["withheld because"] == _ISSUE_WORDS["flagged"]).sum()) if len(issues) else 0
+    items = [f'<a href="#failed-images">{n_failed} image(s) not usable</a>',
+             f'<a href="#withheld">{n_withheld} figure(s) withheld</a>',
+             f'<a href="#withheld">{n_flagged} flagged</a>']
+    css = "ok" if not (n_failed or n_withheld or n_flagged) else "muted"
+    return f'<p class="{css}">Flags: {", ".join(items)}; details after the results.</p>'
+
+
 #: How the report names each kind of issue (:data:`vision_torsion.analysis.session.ISSUE_KINDS`).
 _ISSUE_WORDS = {
     "rejected": "does not fit its data",
@@ -156,7 +227,8 @@ def _withheld_intro(issues: pd.DataFrame) -> str:
 
 
 def render_html(
-    *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None
+    *, title, conditions, analysis, stiffness, metrics, figures, failed, extra_sections=(), metadata=None,
+    identity=None, verdicts=None,
 ) -> str:
     """Assemble the report page.
 
@@ -166,6 +238,10 @@ def render_html(
         The test's metadata shown under the title (e.g. gear, serial, operator,
         temperature, notes from session.toml's ``[test]``/``[gear]`` tables); None
         or blank values are left out. The software version and date are always shown.
+    identity : dict, optional
+        ``gear``, ``serial``, ``operator``, ``date``, ``notes``: the first lines of the page.
+    verdicts : sequence of Verdict, optional
+        The conformity table of page 1 (:mod:`vision_torsion.analysis.conformity`).
     figures : dict
         ``{"overlay": svg, "residuals": svg, "stiffness": svg, "orientation": svg}`` (SVG bytes).
     failed : pandas.DataFrame
@@ -198,6 +274,7 @@ def render_html(
     failed_view = failed.rename(columns={"orientation_deg": "orientation"}) if len(failed) else failed
     parts = [
         f"<h1>{html.escape(title)}</h1>",
+        _identity(identity),
         _header(metadata),
         (
             '<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml (or 1, if it is -1 now) '
@@ -205,9 +282,15 @@ def render_html(
             if (getattr(analysis, "checks", None) or {}).get("angle_sign_inverted")
             else ""
         ),
+        "<h2>Verdict against the catalogue</h2>",
+        _verdicts(verdicts),
+        _flag_counts(analysis, issues, len(failed)),
         '<p class="muted">Torsional stiffness and hysteresis report generated by vision-torsion. '
-        "Uncertainties are 1σ standard uncertainties (±) unless marked u95 (expanded: k = 2, or Student's t "
-        "where a part rests on few loops or a flagged fit; the budget table gives each k).</p>",
+        "Uncertainties are 1σ standard uncertainties (±) unless marked u95 or U95 (expanded: k = 2, or Student's "
+        "t where a part rests on few loops or a flagged fit; the budget table gives each k). Angles are those "
+        "of the shaft carrying the torque disk and the target (the input side when a gear ratio is given); "
+        "each angle is in one unit throughout: hysteresis in degrees, hysteresis loss and lost motion in "
+        "arcmin, stiffness in N·m/rad.</p>",
         "<h2>Test conditions</h2>",
         _conditions(conditions, analysis, len(failed)),
         "<h2>Hysteresis loops</h2>",
@@ -225,7 +308,8 @@ def render_html(
         "the same orientation; p &lt; 0.05 means the orientation effect is larger than that repeatability. "
         "With one cycle per orientation there is no such scatter: the test is not made (—), and the spread "
         "of the orientation means is given instead (sd between loops).</p>",
-        _metrics(metrics, orients),
+        _metrics(metrics, orients, one_loop=bool(len(analysis.per_orientation))
+                 and int(analysis.per_orientation["n_cycles"].max()) == 1),
         f"<figure>{_img(figures['orientation'], 'orientation effect')}</figure>",
         "<h2>Uncertainty</h2>",
         "<ul><li>Angles: independent per image (given <code>angle_std_deg</code>); the common reference-image "
@@ -238,11 +322,11 @@ def render_html(
         f"source, seed {s['seed']}.</li>"
         "<li>Fit uncertainties reflect measurement noise only; compare the residual RMS of a model with the "
         "angle uncertainty to judge whether the model describes the data.</li></ul>",
-        "<h2>Failed images</h2>",
+        '<h2 id="failed-images">Failed images</h2>',
         _table(failed_view, left=("image", "phase", "message"))
         if len(failed)
         else '<p class="ok">None: every image was measured.</p>',
-        "<h2>Figures withheld or flagged, and why</h2>",
+        '<h2 id="withheld">Figures withheld or flagged, and why</h2>',
         _withheld_intro(issues),
         (
             f'<div class="scroll">{_table(issues, left=("orientation", "cycle", "figure", "withheld because", "why"))}'

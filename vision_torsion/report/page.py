@@ -34,6 +34,10 @@ figure{margin:6px 0}figure img{max-width:100%;border:1px solid #e3e6eb}figcaptio
 .ok{color:#1a7f37;font-weight:600}.bad{color:#b42318;font-weight:600}
 .note{background:#fff8e6;border-left:4px solid #f0b429;padding:8px 12px;font-size:13px}
 .scroll{max-height:420px;overflow:auto;border:1px solid #e3e6eb}
+.who{border-collapse:collapse;font-size:15px;margin:6px 0 4px;width:auto!important}
+.who th,.who td{border:0;padding:2px 14px 2px 0;text-align:left;background:none!important}
+.who th{color:#5b6575;font-weight:600}
+.pass{color:#1a7f37;font-weight:700}.fail{color:#b42318;font-weight:700}.undecided{color:#9a6700;font-weight:700}
 .meta{display:flex;flex-wrap:wrap;gap:4px 22px;margin:8px 0 4px;font-size:13px}.meta b{color:#5b6575;font-weight:600}
 td{overflow-wrap:break-word}
 @page{size:A4;margin:12mm 11mm 14mm}

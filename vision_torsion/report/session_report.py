@@ -48,6 +48,8 @@ class SessionReport:
         Withheld figures by kind (:func:`~vision_torsion.report.analyze.withheld_by_kind`).
     angle_sign_advice : str
         Non-empty when the angle sign looks inverted: what to set.
+    verdicts : tuple of Verdict or None
+        The conformity verdicts against session.toml's ``[spec]`` (None without one).
     """
 
     files: ReportFiles
@@ -59,6 +61,7 @@ class SessionReport:
     unlisted: tuple = ()
     withheld_by_kind: dict = field(default_factory=dict)
     angle_sign_advice: str = ""
+    verdicts: tuple | None = None
 
 
 def _g6(x: float) -> float:
@@ -250,6 +253,7 @@ def report_session(session_dir, *, out_dir=None, jobs: int | None = None, progre
         unlisted=result.unlisted,
         withheld_by_kind=res.withheld_by_kind,
         angle_sign_advice=res.angle_sign_advice,
+        verdicts=res.verdicts,
     )
 
 
@@ -320,6 +324,7 @@ def run_demo(
         if rendered is not None and not force:
             logger.info("%s: rendered with seed %d; rendering it again with seed %d", session_dir, rendered, seed)
         scene, spec = demo_scene()
+        logger.info("rendering the synthetic session into %s", session_dir)
         write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True)
         atomic_write_text(stamp, json.dumps({"seed": seed}) + "\n")
     else:

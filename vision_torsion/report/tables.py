@@ -140,11 +140,21 @@ def metrics_table(analysis) -> pd.DataFrame:
     last columns hold the session mean, its standard uncertainty, the sd between
     loops and the orientation test p-value; ``flags`` maps an orientation to why its
     mean is flagged (:func:`vision_torsion.analysis.summary.summarise_figures`), for
-    the flagged ones.
+    the flagged ones. A mean of one loop is flagged only when that loop's value is
+    (that it holds no repeatability is said once, for the whole table).
     """
     po = _index(analysis.per_orientation)
     pof = analysis.per_orientation
-    flags = {(float(o), f): str(g) for o, f, g in zip(pof["orientation_deg"], pof["figure"], pof["flag"]) if g}
+    flags = {(float(o), f): str(g) for o, f, g, n in zip(pof["orientation_deg"], pof["figure"], pof["flag"],
+                                                         pof["n_cycles"]) if g and n > 1}
+    # a mean of one loop is that loop's value: flagged when the loop value is (the report
+    # says once that every mean of one loop holds no repeatability, not on every cell)
+    figs = analysis.figures
+    for o, f, g, n in zip(pof["orientation_deg"], pof["figure"], pof["flag"], pof["n_cycles"]):
+        if g and n == 1:
+            loop = figs[(figs["orientation_deg"] == o) & (figs["figure"] == f) & (figs["flag"].astype(str) != "")]
+            if len(loop):
+                flags[(float(o), f)] = "; ".join(dict.fromkeys(loop["flag"].astype(str)))
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     rows = []
     for fig, label, unit, scale in CATALOGUE_FIGURES:

@@ -32,8 +32,10 @@ __all__ = [
     "ProtocolConfig",
     "GearConfig",
     "TestConfig",
+    "SpecConfig",
     "SessionConfig",
     "load_config",
+    "load_catalogue",
     "write_config",
     "config_from_dict",
     "config_to_dict",
@@ -137,6 +139,9 @@ class TestConfig:
     ----------
     operator, notes : str or None
         Free text shown in the report.
+    date : str or None
+        The test date as written (``2026-11-27``; a TOML date is kept in ISO form),
+        shown in the report and used in the exported report's file name.
     temperature_c : float or None
         Ambient temperature (°C).
     lost_motion_fractions : tuple of float or None
@@ -150,9 +155,36 @@ class TestConfig:
     operator: str | None = None
     temperature_c: float | None = None
     notes: str | None = None
+    date: str | None = None
     lost_motion_fractions: tuple | None = None
     secant_interval_nm: tuple | None = None
     fit_breaks: bool = True
+
+
+@dataclass(frozen=True)
+class SpecConfig:
+    """The ``[spec]`` table: catalogue limits the gear is judged against (all optional).
+
+    Stiffness minima are in N·m/rad at the catalogue's break torques (``[gear]``
+    ``t1_nm``/``t2_nm``); the angle maxima are in arcmin, as catalogues give them
+    (lost motion at the ``[test]`` fractions of ``[gear] rated_torque_nm``;
+    hysteresis loss, the loop width at zero torque). The decision rule is in
+    :mod:`vision_torsion.analysis.conformity`.
+
+    Attributes
+    ----------
+    k1_min_nm_per_rad, k2_min_nm_per_rad, k3_min_nm_per_rad : float or None
+    lost_motion_max_arcmin, hysteresis_loss_max_arcmin : float or None
+    """
+
+    k1_min_nm_per_rad: float | None = None
+    k2_min_nm_per_rad: float | None = None
+    k3_min_nm_per_rad: float | None = None
+    lost_motion_max_arcmin: float | None = None
+    hysteresis_loss_max_arcmin: float | None = None
+
+    def __bool__(self) -> bool:
+        return any(v is not None for v in vars(self).values())
 
 
 @dataclass(frozen=True)
@@ -177,6 +209,7 @@ class SessionConfig:
     angle_sign: int = 1
     gear: GearConfig = field(default_factory=GearConfig)
     test: TestConfig = field(default_factory=TestConfig)
+    spec: SpecConfig = field(default_factory=SpecConfig)
 
     @property
     def torque_rig(self) -> TorqueRig:
@@ -306,7 +339,10 @@ def _protocol_from(table, problems) -> ProtocolConfig | None:
 
 
 _GEAR_KEYS = ("name", "serial", "ratio", "rated_torque_nm", "t1_nm", "t2_nm")
-_TEST_KEYS = ("operator", "temperature_c", "notes", "lost_motion_fractions", "secant_interval_nm", "fit_breaks")
+_TEST_KEYS = ("operator", "date", "temperature_c", "notes", "lost_motion_fractions", "secant_interval_nm",
+              "fit_breaks")
+_SPEC_KEYS = ("k1_min_nm_per_rad", "k2_min_nm_per_rad", "k3_min_nm_per_rad", "lost_motion_max_arcmin",
+              "hysteresis_loss_max_arcmin")
 
 
 def _text(table, key, problems, prefix):
@@ -353,6 +389,11 @@ def _gear_from(table, problems) -> GearConfig:
 def _test_from(table, problems) -> TestConfig:
     _unknown(table, _TEST_KEYS, "test", problems)
     kw = {k: _text(table, k, problems, "test") for k in ("operator", "notes")}
+    date = table.get("date")
+    if date is not None and not isinstance(date, str) and hasattr(date, "isoformat"):
+        kw["date"] = date.isoformat()  # a TOML date (2026-11-27 without quotes)
+    else:
+        kw["date"] = _text(table, "date", problems, "test")
     kw["temperature_c"] = _number(table, "temperature_c", problems, "test", required=False)
     kw["lost_motion_fractions"] = _numbers(
         table,
@@ -377,6 +418,27 @@ def _test_from(table, problems) -> TestConfig:
         fb = True
     kw["fit_breaks"] = fb
     return TestConfig(**kw)
+
+
+#: What a catalogue limit refers to, from the [gear] table: K1-K3 are taken at the
+#: catalogue's break torques, lost motion at fractions of the rated torque.
+_SPEC_NEEDS = {
+    "k1_min_nm_per_rad": ("t1_nm", "t2_nm"),
+    "k2_min_nm_per_rad": ("t1_nm", "t2_nm"),
+    "k3_min_nm_per_rad": ("t1_nm", "t2_nm"),
+    "lost_motion_max_arcmin": ("rated_torque_nm",),
+    "hysteresis_loss_max_arcmin": (),
+}
+
+
+def _spec_from(table, gear: GearConfig, problems) -> SpecConfig:
+    _unknown(table, _SPEC_KEYS, "spec", problems)
+    kw = {k: _number(table, k, problems, "spec", required=False, positive=True) for k in _SPEC_KEYS}
+    for key, needs in _SPEC_NEEDS.items():
+        missing = [f"gear.{g}" for g in needs if getattr(gear, g) is None]
+        if key in table and missing:
+            problems.add(f"spec.{key}", f"needs {' and '.join(missing)}: the catalogue value refers to it")
+    return SpecConfig(**kw)
 
 
 def _markers_from(table, problems) -> MeasureSettings | None:
@@ -404,7 +466,8 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
         was expected.
     """
     problems = _Problems()
-    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test"), "", problems)
+    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test", "spec"), "",
+             problems)
     version = data.get("format_version", _FORMAT_VERSION)
     if version != _FORMAT_VERSION:
         problems.add("format_version", f"expected {_FORMAT_VERSION}, got {version!r}")
@@ -416,8 +479,10 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
     markers = _markers_from(_table(data, "markers", problems, required=False), problems)
     gear = _gear_from(_table(data, "gear", problems, required=False), problems)
     test = _test_from(_table(data, "test", problems, required=False), problems)
+    spec = _spec_from(_table(data, "spec", problems, required=False), gear, problems)
     problems.raise_if_any(source)
-    return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign), gear=gear, test=test)
+    return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign), gear=gear, test=test,
+                         spec=spec)
 
 
 def load_config(path) -> SessionConfig:
@@ -431,6 +496,28 @@ def load_config(path) -> SessionConfig:
     p = Path(path)
     data = read_toml(p, what=f"the session description (a session folder needs {CONFIG_NAME})", error=SessionError)
     return config_from_dict(data, source=str(p))
+
+
+def load_catalogue(path) -> tuple[GearConfig, SpecConfig]:
+    """Read a gear type's catalogue file: its ``[gear]`` and ``[spec]`` tables, with
+    the keys and checks of session.toml (the same file serves every serial number of
+    the type; ``plan --catalogue`` copies it into session.toml, ``analyze
+    --catalogue`` uses it directly).
+
+    Raises
+    ------
+    SessionError
+        The file is missing or not TOML, has another table, or invalid keys (all
+        listed, named ``gear.t1_nm``, ``spec.k1_min_nm_per_rad``, ...).
+    """
+    p = Path(path)
+    data = read_toml(p, what="a catalogue file ([gear] and [spec] tables)", error=SessionError)
+    problems = _Problems()
+    _unknown(data, ("gear", "spec"), "", problems)
+    gear = _gear_from(_table(data, "gear", problems, required=False), problems)
+    spec = _spec_from(_table(data, "spec", problems, required=False), gear, problems)
+    problems.raise_if_any(str(p))
+    return gear, spec
 
 
 def config_to_dict(config: SessionConfig) -> dict:
@@ -470,6 +557,9 @@ def config_to_dict(config: SessionConfig) -> dict:
             test[k] = list(v) if isinstance(v, tuple) else v
     if test:
         out["test"] = test
+    spec = {k: getattr(config.spec, k) for k in _SPEC_KEYS if getattr(config.spec, k) is not None}
+    if spec:
+        out["spec"] = spec
     return out
 
 

@@ -58,11 +58,14 @@ from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from .torque import couple_torque
 
 __all__ = ["SessionPlan", "LostMotionLevel", "plan_session", "plan_rows", "lost_motion_levels",
-           "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE"]
+           "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE", "HEADER_KEYS"]
 
 logger = logging.getLogger(__name__)
 
 CAPTURE_SHEET_NAME = "capture_sheet.md"
+#: The test's identity given to the planner: header key -> (session.toml table, key).
+HEADER_KEYS = {"gear": ("gear", "name"), "serial": ("gear", "serial"), "operator": ("test", "operator"),
+               "date": ("test", "date"), "notes": ("test", "notes")}
 
 #: Lost-motion levels as fractions of the rated torque: ±3 % (GB/T 35089) and ±4 %
 #: (harmonic-drive catalogues).
@@ -415,6 +418,7 @@ def plan_session(
     header: dict | None = None,
     pdf: bool = False,
     rated_torque_nm: float | None = None,
+    catalogue=None,
 ) -> SessionPlan:
     """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
 
@@ -459,8 +463,11 @@ def plan_session(
         End each orientation with a ``closing`` image at zero torque, after the last
         cycle is unloaded back to zero (not photographed on the way).
     header : dict, optional
-        Test metadata printed on the capture sheet (keys ``gear``, ``serial``,
-        ``operator``, ``date``; blank fields to fill in by hand otherwise).
+        The test's identity (keys ``gear``, ``serial``, ``operator``, ``date``,
+        ``notes``): printed on the capture sheet (blank fields to fill in by hand
+        otherwise) and written to session.toml as ``[gear] name``/``serial`` and
+        ``[test] operator``/``date``/``notes``, from where the report and
+        summary.json take them.
     pdf : bool
         Also print the capture sheet to ``capture_sheet.pdf`` with a headless
         Chromium, when one is installed (:mod:`.sheet`); ``capture_sheet.html`` is
@@ -470,6 +477,11 @@ def plan_session(
         ±3 % and ±4 % of it, realised by whole numbers of step masses (see
         :func:`lost_motion_levels`; refused when they cannot be); written to
         session.toml as ``[gear] rated_torque_nm``.
+    catalogue : path-like, optional
+        The gear type's catalogue file (``[gear]`` ratio, rated torque, T1/T2 and
+        ``[spec]`` limits, :func:`~vision_torsion.session.config.load_catalogue`),
+        copied into session.toml; its rated torque names the lost-motion levels
+        when `rated_torque_nm` is not given (a different one is refused).
 
     Returns
     -------
@@ -527,6 +539,27 @@ def plan_session(
             "cycles": cycles,
         },
     }
+    if catalogue is not None:
+        from .config import load_catalogue
+
+        cat_gear, cat_spec = load_catalogue(catalogue)
+        if rated_torque_nm is not None and cat_gear.rated_torque_nm not in (None, float(rated_torque_nm)):
+            raise SessionError(f"plan_session: rated_torque_nm {rated_torque_nm:g} differs from the catalogue file's "
+                               f"{cat_gear.rated_torque_nm:g} ({catalogue}); give one")
+        if rated_torque_nm is None:
+            rated_torque_nm = cat_gear.rated_torque_nm
+        for table, entries in (("gear", cat_gear), ("spec", cat_spec)):
+            given = {k: v for k, v in vars(entries).items() if v is not None}
+            if given:
+                doc.setdefault(table, {}).update(given)
+    header = {k: v for k, v in (header or {}).items() if v is not None and str(v).strip()}
+    unknown = sorted(set(header) - set(HEADER_KEYS))
+    if unknown:
+        raise SessionError(f"plan_session: header key(s) {', '.join(map(repr, unknown))} unknown; "
+                           f"expected some of {', '.join(HEADER_KEYS)}")
+    for key, value in header.items():
+        table, name = HEADER_KEYS[key]
+        doc.setdefault(table, {})[name] = str(value)
     config = config_from_dict(doc, source="plan_session")
     if image_suffix.lower() not in IMAGE_SUFFIXES:
         raise SessionError(
@@ -553,7 +586,7 @@ def plan_session(
     check_replaceable(folder / name for name in (CONFIG_NAME, MANIFEST_NAME, CAPTURE_SHEET_NAME,
                                                  CAPTURE_SHEET_HTML, CAPTURE_SHEET_PDF))
     if levels:  # the analysis reads T_R from here for lost motion
-        doc["gear"] = {"rated_torque_nm": float(rated_torque_nm)}
+        doc.setdefault("gear", {})["rated_torque_nm"] = float(rated_torque_nm)
     planned = config_from_dict({**doc, "protocol": {**doc["protocol"], "max_torque_nm": planned_max}})
     plan = SessionPlan(
         folder=folder,
@@ -565,7 +598,7 @@ def plan_session(
         torque_per_step_nm=per_step,
         preconditioning_cycles=int(preconditioning_cycles),
         closing=bool(closing),
-        header=dict(header or {}),
+        header=header,
         rated_torque_nm=None if rated_torque_nm is None else float(rated_torque_nm),
         lost_motion_levels=levels,
     )

@@ -209,22 +209,11 @@ def _start_server() -> None:
         forkserver.ensure_running()
 
 
-class _NoBar:
-    def update(self) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
 def _progress_bar(total: int, progress: bool):
-    """tqdm's bar when asked for, else a stand-in: importing tqdm costs a quiet run
-    (``-q``, a script) 30-50 ms before its first image."""
-    if not progress:
-        return _NoBar()
-    from tqdm import tqdm
+    """A bar on a terminal, lines elsewhere (:func:`vision_torsion.progress.progress_bar`)."""
+    from ..progress import progress_bar
 
-    return tqdm(total=total, unit="image", desc="measuring")
+    return progress_bar(total, desc="measuring", unit="image", enabled=progress)
 
 
 def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):

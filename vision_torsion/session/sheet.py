@@ -5,7 +5,10 @@ printed when given to ``plan``, blank lines to fill in otherwise), the rig, the
 sign convention in words and as a picture (which pans make positive torque and
 which way the marker line then turns in the camera image), then one section per
 orientation, each starting on a new page, with a row per photograph: the mass on
-each pan, the torque, the file name to save it under and a box to tick. The
+each pan, the torque, the file name to save it under, a blank to note the camera's
+own file number and a box to tick. On every printed page: the orientation and the
+column names (the table head repeats), the gear and serial number at the top and
+"page N of M" at the bottom (CSS page-margin boxes). The
 unphotographed steps (preconditioning, the pre-load, the return to zero before a
 closing image) are rows of their own, in italics.
 
@@ -90,6 +93,12 @@ def sign_picture_svg(angle_sign: int) -> str:
 </svg>"""
 
 
+def _css_string(text: str) -> str:
+    """`text` for a CSS string in double quotes inside <style> (no markup there)."""
+    out = "".join(f"\\{ord(c):x} " if c in '"\\<>' or ord(c) < 32 else c for c in text)
+    return out
+
+
 def _pan(pieces: int, step_kg: float) -> str:
     if pieces == 0:
         return "empty"
@@ -122,6 +131,9 @@ def capture_sheet_html(plan) -> str:
         "photograph, load one + piece and check the turn on the camera's screen: if the line "
         "turns the other way, the pans are swapped or angle_sign is wrong; fix it now."
     )
+    named = [str(plan.header[k]) for k in ("gear", "serial") if plan.header.get(k)]
+    ident = esc(" — " + ", ".join(named)) if named else ""
+    running = _css_string("Capture sheet" + (" — " + ", ".join(named) if named else ""))
     sections = []
     current = None
     body: list[str] = []
@@ -132,9 +144,12 @@ def capture_sheet_html(plan) -> str:
             sections.append(
                 f"<section><h2>Orientation {esc(current)}°</h2><p>Rotate the flexspline to "
                 f"{esc(current)}° relative to the circular spline. Remove all weights.</p>"
-                "<table><tr><th>#</th><th>cycle</th><th>phase</th><th>step</th>"
+                # the head repeats on every printed page: the orientation, then the column names
+                f'<table><thead><tr class="title"><th colspan="10">Orientation {esc(current)}°{ident}'
+                "</th></tr><tr><th>#</th><th>cycle</th><th>phase</th><th>step</th>"
                 "<th>+ pans (each)</th><th>− pans (each)</th><th>torque (N·m)</th>"
-                "<th>save as</th><th>done</th></tr>" + "".join(body) + "</table></section>"
+                '<th>save as</th><th class="cam">camera file no.</th><th>done</th></tr></thead><tbody>'
+                + "".join(body) + "</tbody></table></section>"
             )
 
     for row in plan.rows:
@@ -147,12 +162,12 @@ def capture_sheet_html(plan) -> str:
                 f'<tr class="quiet"><td></td><td></td><td colspan="5">preconditioning, no '
                 f"photographs: load to +{plan.max_torque_nm:.5f} N·m and −{plan.max_torque_nm:.5f}"
                 f" N·m {plan.preconditioning_cycles} time(s), then remove all weights</td>"
-                "<td></td><td>☐</td></tr>"
+                "<td></td><td></td><td>☐</td></tr>"
             )
         if phase == "closing":
             body.append(
                 '<tr class="quiet"><td></td><td></td><td colspan="5">unload to zero step by '
-                "step, no photographs</td><td></td><td>☐</td></tr>"
+                "step, no photographs</td><td></td><td></td><td>☐</td></tr>"
             )
         pieces = round(float(row["mass_kg"]) / step)
         torque = couple_torque(float(row["mass_kg"]), phase, rig, step_mass_kg=step).torque_nm
@@ -164,20 +179,26 @@ def capture_sheet_html(plan) -> str:
         body.append(
             f"<tr><td>{number}</td><td>{row['cycle']}</td><td>{esc(phase)}</td><td>{row['step']}</td>"
             f"<td>{plus}</td><td>{minus}</td><td>{torque:+.5f}{level}</td><td><code>{esc(row['image'])}"
-            "</code></td><td>☐</td></tr>"
+            "</code></td><td></td><td>☐</td></tr>"
         )
         if phase == "reference":
             body.append(
                 f'<tr class="quiet"><td></td><td></td><td colspan="5">pre-load, no photographs: '
                 f"add {step * 1000:g} g to each + pan {n} times → {plan.max_torque_nm:+.5f} N·m</td>"
-                "<td></td><td>☐</td></tr>"
+                "<td></td><td></td><td>☐</td></tr>"
             )
     close_section()
     per_step = plan.torque_per_step_nm
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>Capture sheet</title>
 <style>
-@page {{ size: A4; margin: 12mm; }}
+@page {{ size: A4; margin: 12mm 12mm 14mm;
+  @top-left {{ content: "{running}"; font: 9px sans-serif; color: #555; }}
+  @bottom-center {{ content: "page " counter(page) " of " counter(pages); font: 9px sans-serif; }} }}
+thead {{ display: table-header-group; }}
+tr {{ break-inside: avoid; }}
+tr.title th {{ text-align: left; font-size: 12px; background: #eee; }}
+th.cam {{ width: 26mm; }}
 body {{ font-family: sans-serif; font-size: 11px; color: #111; }}
 h1 {{ font-size: 20px; margin: 0 0 6px; }}
 h2 {{ font-size: 15px; margin: 0 0 4px; }}

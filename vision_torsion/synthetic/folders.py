@@ -14,11 +14,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..errors import SceneError
 from ..fileio import atomic_write_bytes, write_csv
 from ..images import write_image
+from ..progress import track
 from .render import render
 from .scene import Scene, check_markers_in_frame
 
@@ -90,7 +90,7 @@ def write_accuracy_folder(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     refs, truths = [], []
-    for i, a in enumerate(tqdm(angles, desc="rendering", unit="image", disable=not progress)):
+    for i, a in enumerate(track(angles, desc="rendering", unit="image", enabled=progress)):
         name = f"{'reference' if i == 0 else f'img_{i:03d}'}{_suffix(scene)}"
         r = render(scene, a, seed=seed + i)
         write_rendered(out / name, r, scene)

@@ -30,10 +30,10 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from ..errors import SceneError
 from ..fileio import write_csv, write_json
+from ..progress import track
 from ..textfiles import read_toml
 from .folders import truth_row, write_rendered
 from .render import render
@@ -263,7 +263,7 @@ def write_session_folder(
     rows = []
     noise_seed = np.random.SeedSequence(seed).spawn(1)[0]
     rngs = noise_seed.spawn(len(truth))
-    for i, rec in enumerate(tqdm(truth.to_dict("records"), desc="rendering", unit="image", disable=not progress)):
+    for i, rec in enumerate(track(truth.to_dict("records"), desc="rendering", unit="image", enabled=progress)):
         disk_angle = spec.angle_sign * rec["true_angle_deg"]
         r = render(scene, disk_angle, seed=np.random.default_rng(rngs[i]))
         write_rendered(out / rec["image"], r, scene)
