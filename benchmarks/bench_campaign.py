@@ -12,7 +12,7 @@ life-test gear), untimed, then times two whole commands as a user runs them,
 start-up included:
 
     vision-torsion campaign add DB REPORT_DIR...      (a new database each repeat)
-    vision-torsion campaign report DB -o OUT          (with a [k1] min / lost motion max spec)
+    vision-torsion campaign report DB -o OUT          (against a catalogue file: K1 min, lost motion max)
 
 and prints the median and best wall time with the CPU time beside it, and the load
 average (on a shared machine wall time includes waiting for a core). Targets: add
@@ -70,15 +70,16 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         folders = write_campaign_folders(tmp / "reports", n_reports=args.reports, seed=0, life_test_every=10)
         print(f"{len(folders)} report folders written in {time.perf_counter() - t0:.1f} s (untimed)")
-        spec = tmp / "spec.toml"
-        spec.write_text("[k1]\nmin = 0.28\n[lost_motion_4pct]\nmax = 3.0\n", encoding="utf-8")
+        catalogue = tmp / "catalogue.toml"
+        catalogue.write_text("[gear]\nname = 'CSF-14-100'\nt1_nm = 0.07\nt2_nm = 0.25\nrated_torque_nm = 6.0\n"
+                             "[spec]\nk1_min_nm_per_rad = 0.28\nlost_motion_max_arcmin = 180\n", encoding="utf-8")
         for i in range(args.repeats):
             db = tmp / f"campaign_{i}.db"
             load = os.getloadavg()[0]
             runs["add"].append((*_timed([*CLI, "-q", "campaign", "add", str(db), *map(str, folders)]), load))
             load = os.getloadavg()[0]
             runs["report"].append((*_timed([*CLI, "-q", "campaign", "report", str(db), "-o", str(tmp / "out"),
-                                            "--spec", str(spec)]), load))
+                                            "--catalogue", str(catalogue)]), load))
     rows = []
     print(f"\n{args.reports} reports, {args.repeats} repeat(s), whole commands\n")
     print("| command | median wall (s) | best wall (s) | median CPU (s) | load (1 min) | target (s) | met |")

@@ -18,6 +18,7 @@ from vision_torsion.campaign import (
     CampaignDB,
     add_reports,
     capability,
+    catalogue_limits,
     compare_serials,
     control_limits,
     difference,
@@ -28,7 +29,6 @@ from vision_torsion.campaign import (
     read_report,
     write_campaign_report,
 )
-from vision_torsion.campaign.spec import read_spec_limits
 from vision_torsion.cli import main
 from vision_torsion.errors import CampaignError
 from vision_torsion.synthetic.campaign import base_summary, campaign_summary, write_campaign_folders
@@ -74,8 +74,12 @@ def test_a_record_keeps_identity_figures_and_input_hashes(tmp_path, folders):
     with CampaignDB(db) as c:
         row = c.reports().iloc[0]
         figures = c.figures().set_index("figure")
-    assert (row.model, row.serial) == (truth["gear"]["model"], truth["gear"]["serial"])
-    assert row.test_date == truth["test"]["date"]
+    assert (row.model, row.serial) == (truth["identity"]["gear"], truth["identity"]["serial"])
+    assert row.test_date == truth["identity"]["date"]
+    decisions = {v["figure"]: v["decision"] for v in truth["conformity"]["verdicts"]}
+    assert figures.loc["k1", "verdict"] == decisions["k1"]
+    assert figures.loc["k1", "limit_kind"] == "min"
+    assert row.verdict in ("pass", "fail", "not_decided")
     assert figures.loc["k1", "value"] == truth["summary"]["k1"]["mean"]
     assert figures.loc["k1", "u95"] == truth["summary"]["k1"]["mean_u95"]
     assert bool(figures.loc["k3", "withheld"]) is (truth["summary"]["k3"]["mean"] is None)
@@ -327,13 +331,23 @@ def test_capability_against_a_lower_limit():
 def test_campaign_report_page(tmp_path, folders):
     db = tmp_path / "c.db"
     add_reports(db, folders)
-    spec = {"k1": {"min": 0.28}, "lost_motion_4pct": {"max": 3.0}}
-    rep = write_campaign_report(db, tmp_path / "out", spec=spec)
+    catalogue = tmp_path / "type.toml"
+    catalogue.write_text("[gear]\nname = 'M'\nt1_nm = 0.07\nt2_nm = 0.25\nrated_torque_nm = 6.0\n"
+                         "[spec]\nk1_min_nm_per_rad = 0.28\nlost_motion_max_arcmin = 180\n")
+    limits = catalogue_limits(catalogue)
+    assert {(limit.figure, limit.kind, limit.value) for limit in limits} >= {
+        ("k1", "min", 0.28), ("lost_motion_4pct", "max", 3.0)}
+    rep = write_campaign_report(db, tmp_path / "out", limits=limits)
     page = rep.path.read_text()
     assert rep.n_reports == 24 and "k1" in rep.figures
-    for heading in ("Verdicts", "Capability", "Control charts", "Batch"):
+    for heading in ("Verdicts", "Conformity per figure", "Capability", "Control charts", "Batch"):
         assert f"<h2>{heading}</h2>" in page
     assert "≥ 0.28" in page and "≤ 3" in page
+    # without a catalogue, the limits the reports were judged against
+    default = write_campaign_report(db, tmp_path / "out2").path.read_text()
+    stored = json.loads((folders[-1] / "summary.json").read_text())["conformity"]["verdicts"]
+    assert f"≥ {stored[0]['limit']:g}" in default
+    assert "ISO 14253-1 guard bands" in default
     with CampaignDB(db) as c:
         charted = c.figures(figure=list(rep.figures)).query("not withheld")["figure"].nunique()
     assert page.count("<img") == charted == len(rep.figures) - 1  # k3 is withheld in every report
@@ -364,20 +378,13 @@ def test_export_csv_and_parquet(tmp_path, folders):
     assert pd.read_parquet(tmp_path / "all.parquet").shape == table.shape
 
 
-@pytest.mark.parametrize(
-    "text, message",
-    [
-        ("k1 = 3\n", r"\[k1\] must be a table with min and/or max"),
-        ("[k1]\nlow = 3\n", r"\[k1\] takes min and/or max, not low"),
-        ("[k1]\nmin = 'a'\n", r"\[k1\] min = 'a' is not a finite number"),
-        ("[k1]\nmin = 3\nmax = 2\n", r"\[k1\] min 3 is above max 2"),
-    ],
-)
-def test_spec_file_errors(tmp_path, text, message):
-    path = tmp_path / "spec.toml"
-    path.write_text(text)
-    with pytest.raises(CampaignError, match=message):
-        read_spec_limits(path)
+def test_a_bad_catalogue_names_its_key(tmp_path):
+    from vision_torsion.errors import SessionError
+
+    path = tmp_path / "type.toml"
+    path.write_text("[spec]\nk1_min_nm_per_rad = 'a'\n")
+    with pytest.raises(SessionError, match=r"spec.k1_min_nm_per_rad"):
+        catalogue_limits(path)
 
 
 def test_cli_round_trip(tmp_path, folders, capsys):

@@ -7,12 +7,13 @@ import html
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..analysis.conformity import DECISION_RULE, DECISIONS
 from ..errors import CampaignError
 from .stats import capability, control_limits
 from .store import CampaignDB
 from .views import HEADLINE_FIGURES
 
-__all__ = ["CampaignReport", "write_campaign_report", "REPORT_NAME"]
+__all__ = ["CampaignReport", "write_campaign_report", "catalogue_limits", "REPORT_NAME"]
 
 REPORT_NAME = "campaign_report.html"
 # the figures of the batch table (all of them are charted)
@@ -31,14 +32,36 @@ class CampaignReport:
     figures: tuple[str, ...]
 
 
-def _limits_from_spec(spec: dict | None) -> dict:
-    """figure -> (lower, upper) from ``{figure: {"min": x} | {"max": y}}``."""
+def _limits_by_figure(limits, long) -> dict:
+    """figure -> (lower, upper): from ``limits`` (conformity Limits) when given, else
+    the limit the newest report judged each figure against."""
     out = {}
-    for name, entry in (spec or {}).items():
-        if isinstance(entry, dict):
-            lower, upper = entry.get("min"), entry.get("max")
-            out[name] = (float(lower) if lower is not None else None, float(upper) if upper is not None else None)
+    if limits is not None:
+        for limit in limits:
+            lower, upper = out.get(limit.figure, (None, None))
+            out[limit.figure] = (limit.value, upper) if limit.kind == "min" else (lower, limit.value)
+        return out
+    stored = long.dropna(subset=["limit_kind"])
+    for name, part in stored.groupby("figure", sort=False):
+        last = part.iloc[-1]
+        out[name] = (last["limit_value"], None) if last["limit_kind"] == "min" else (None, last["limit_value"])
     return out
+
+
+def catalogue_limits(path, *, figures=HEADLINE_FIGURES):
+    """The conformity limits of a gear type's catalogue file (``[gear]`` and
+    ``[spec]``, as ``plan --catalogue`` takes it), in the figures' units.
+
+    Raises
+    ------
+    SessionError
+        The file is missing, not TOML, or has invalid keys (named).
+    """
+    from ..report.analyze import spec_limits
+    from ..session.config import load_catalogue
+
+    _, spec = load_catalogue(path)
+    return spec_limits(spec, figures)
 
 
 def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
@@ -104,7 +127,7 @@ def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
     return png_bytes(fig, dpi=150)
 
 
-def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HEADLINE_FIGURES) -> CampaignReport:
+def write_campaign_report(db_path, out_dir, *, model=None, limits=None, figures=HEADLINE_FIGURES) -> CampaignReport:
     """Write ``campaign_report.html`` for the newest version of every report.
 
     Parameters
@@ -115,9 +138,10 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
         Output folder (created).
     model : str, optional
         Only this gear model.
-    spec : dict, optional
-        ``{figure: {"min": value} | {"max": value}}`` in the figures' stored units;
-        without it the page shows conformity as the reports' own verdicts.
+    limits : sequence of vision_torsion.analysis.conformity.Limit, optional
+        Catalogue limits in the figures' units (N·m/rad, degrees), e.g. from a
+        catalogue file (:func:`catalogue_limits`); default: the limits the newest
+        report judged each figure against (its ``[spec]``).
 
     Notes
     -----
@@ -139,9 +163,9 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
             raise CampaignError(f"{db_path}: no report{' of model ' + model if model else ''} in the campaign",
                                 reason="not_found")
         long = db.figures(reports["id"].tolist(), figure=list(figures))
-    limits_by_figure = _limits_from_spec(spec)
     order = {rid: i for i, rid in enumerate(reports["id"])}
     long = long.assign(order=long["report_id"].map(order)).sort_values("order")
+    limits_by_figure = _limits_by_figure(limits, long)
 
     batch = reports[["serial", "test_date", "version", "verdict"]].copy()
     charts, capability_rows, conformity_rows = [], [], []
@@ -160,9 +184,9 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
         verdicts = part["verdict"].dropna()
         if len(verdicts):
             counts = verdicts.value_counts()
-            conformity_rows.append({"figure": name, "reports with a verdict": int(len(verdicts)),
-                                    **{k: int(counts.get(k, 0)) for k in ("pass", "fail", "undecided")}})
-    verdict_counts = reports["verdict"].fillna("no [spec]").value_counts()
+            conformity_rows.append({"figure": name, "reports judged": int(len(verdicts)),
+                                    **{k.replace("_", " "): int(counts.get(k, 0)) for k in DECISIONS}})
+    verdict_counts = reports["verdict"].fillna("no [spec]").str.replace("_", " ").value_counts()
     n = len(reports)
     parts = [
         f"<h1>Campaign{' — ' + html.escape(model) if model else ''}</h1>",
@@ -175,6 +199,7 @@ def write_campaign_report(db_path, out_dir, *, model=None, spec=None, figures=HE
         "<h2>Conformity per figure</h2>",
         table_html(pd.DataFrame(conformity_rows), left=("figure",)) if conformity_rows
         else '<p class="muted">No report carries a conformity verdict (no [spec] in their session.toml).</p>',
+        f'<p class="muted">{html.escape(DECISION_RULE)}</p>' if conformity_rows else "",
         "<h2>Capability</h2>",
         '<p class="muted">Ppk = min(USL − mean, mean − LSL) / 3s over the newest report of each test, with its '
         "one-sided 95 % lower bound; withheld with the reason when there are too few reports or no limit.</p>",

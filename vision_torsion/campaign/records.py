@@ -44,7 +44,8 @@ class FigureRecord:
 
     ``value`` is None when the report withheld the figure; ``u95`` is the expanded
     uncertainty with ``coverage_factor``; ``flagged`` says the report marked it (its
-    reason in ``flag``); ``verdict`` is the report's conformity verdict for it, if any.
+    reason in ``flag``); ``verdict`` is the report's conformity decision for it
+    (:data:`vision_torsion.analysis.conformity.DECISIONS`), if it was judged.
     """
 
     figure: str
@@ -67,7 +68,9 @@ class ReportRecord:
     ``identity`` names the test (model, serial, test date, session folder name): a
     report of the same identity with other content is a new version of it.
     ``content_sha256`` is the hash of summary.json and of every input's hash: the
-    same report added twice has the same one.
+    same report added twice has the same one. ``verdict`` is the report's overall
+    conformity verdict (``pass``, ``fail``, ``not_decided``; None without a
+    ``[spec]``) and ``limits`` its catalogue limit per figure, ``(kind, value)``.
     """
 
     source: str
@@ -80,6 +83,7 @@ class ReportRecord:
     software_version: str
     summary_schema: str
     verdict: str | None
+    limits: dict
     inputs: dict
     content_sha256: str
     summary_bytes: bytes
@@ -115,25 +119,29 @@ def _text(mapping, *keys) -> str:
     return ""
 
 
-def _verdicts(summary: dict) -> tuple[str | None, dict]:
-    """The report's overall verdict and its verdict per figure (None: no [spec])."""
+def _verdicts(summary: dict) -> tuple[str | None, dict, dict]:
+    """The report's overall verdict, its decision per figure and its limit per figure
+    (``(kind, value)``), from summary.json's ``conformity`` (None, {}, {}: no [spec])."""
+    from ..analysis.conformity import Limit, Verdict, overall
+
     conformity = summary.get("conformity")
-    if not isinstance(conformity, dict):
-        return None, {}
-    overall = conformity.get("verdict")
-    per_figure = {}
-    figures = conformity.get("figures")
-    if isinstance(figures, dict):
-        items = figures.items()
-    elif isinstance(figures, list):
-        items = ((f.get("figure"), f) for f in figures if isinstance(f, dict))
-    else:
-        items = ()
-    for name, entry in items:
-        verdict = entry.get("verdict") if isinstance(entry, dict) else entry
-        if isinstance(name, str) and isinstance(verdict, str):
-            per_figure[name] = verdict
-    return (overall if isinstance(overall, str) else None), per_figure
+    entries = conformity.get("verdicts") if isinstance(conformity, dict) else None
+    if not isinstance(entries, list):
+        return None, {}, {}
+    verdicts, decisions, limits = [], {}, {}
+    for entry in entries:
+        if not isinstance(entry, dict):
+            continue
+        figure, kind, limit, decision = (entry.get(k) for k in ("figure", "limit_kind", "limit", "decision"))
+        if not (isinstance(figure, str) and isinstance(decision, str) and kind in ("min", "max")
+                and _number(limit) is not None):
+            continue
+        decisions[figure] = decision
+        limits[figure] = (kind, float(limit))
+        verdicts.append(Verdict(Limit(figure, kind, float(limit)), _number(entry.get("value")),
+                                _number(entry.get("u95")), _number(entry.get("coverage_factor")), decision,
+                                str(entry.get("reason") or "")))
+    return (overall(verdicts) if verdicts else None), decisions, limits
 
 
 def _figures(summary: dict, where: Path, verdicts: dict) -> tuple[FigureRecord, ...]:
@@ -214,10 +222,9 @@ def _inputs(folder: Path, summary: dict, summary_bytes: bytes) -> dict:
 
 def _test_date(summary: dict, folder: Path) -> tuple[str, str]:
     """(ISO date of the test, where it came from)."""
-    for table in ("test", "metadata", "gear"):
-        value = _text(summary.get(table), "date", "test_date")
-        if value:
-            return value, f"[{table}] date"
+    value = _text(summary.get("identity"), "date")
+    if value:
+        return value, "[test] date"
     stamp = datetime.fromtimestamp((folder / SUMMARY_NAME).stat().st_mtime, tz=timezone.utc)
     return stamp.date().isoformat(), "date of summary.json (no test date in the report)"
 
@@ -242,8 +249,9 @@ def read_report(folder, *, test_hours: float | None = None) -> ReportRecord:
     """
     folder = Path(folder).resolve()
     data, summary = _load_summary(folder)
-    overall, per_figure = _verdicts(summary)
+    overall, per_figure, limits = _verdicts(summary)
     figures = _figures(summary, folder / SUMMARY_NAME, per_figure)
+    identity = summary.get("identity") if isinstance(summary.get("identity"), dict) else {}
     gear, test = summary.get("gear"), summary.get("test")
     if test_hours is None:
         test_hours = _number(test.get("test_hours")) if isinstance(test, dict) else None
@@ -254,15 +262,16 @@ def read_report(folder, *, test_hours: float | None = None) -> ReportRecord:
     software = summary.get("software")
     return ReportRecord(
         source=str(folder),
-        model=_text(gear, "model", "name"),
-        serial=_text(gear, "serial"),
-        operator=_text(test, "operator") or _text(summary.get("metadata"), "operator"),
+        model=_text(identity, "gear") or _text(gear, "model", "name"),
+        serial=_text(identity, "serial") or _text(gear, "serial"),
+        operator=_text(identity, "operator") or _text(test, "operator"),
         test_date=test_date,
         date_source=date_source,
         test_hours=test_hours,
         software_version=_text(software, "version") if isinstance(software, dict) else _text(summary, "software"),
         summary_schema=str(summary["schema"]),
         verdict=overall,
+        limits=limits,
         inputs=inputs,
         content_sha256=content,
         summary_bytes=data,

@@ -75,6 +75,8 @@ CREATE TABLE figures(
     withheld INTEGER NOT NULL,
     flag TEXT NOT NULL,
     verdict TEXT,
+    limit_kind TEXT,
+    limit_value REAL,
     PRIMARY KEY(report_id, figure)
 ) WITHOUT ROWID;
 CREATE INDEX figures_by_name ON figures(figure, report_id);
@@ -305,9 +307,10 @@ class CampaignDB:
                 )
                 report_id = cursor.lastrowid
                 conn.executemany(
-                    "INSERT INTO figures VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+                    "INSERT INTO figures VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                     [(report_id, f.figure, f.unit, f.n, f.value, f.std, f.u95, f.coverage_factor, int(f.flagged),
-                      int(f.withheld), f.flag, f.verdict) for f in record.figures],
+                      int(f.withheld), f.flag, f.verdict, *record.limits.get(f.figure, (None, None)))
+                     for f in record.figures],
                 )
                 conn.execute("COMMIT")
             except BaseException:
@@ -350,10 +353,10 @@ class CampaignDB:
 
     def figures(self, report_ids=None, *, figure=None):
         """Figures as a long DataFrame (``report_id, figure, unit, n, value, std, u95,
-        coverage_factor, flagged, withheld, flag, verdict``)."""
+        coverage_factor, flagged, withheld, flag, verdict, limit_kind, limit_value``)."""
         import pandas as pd
 
-        columns = [f.name for f in FigureRecord.__dataclass_fields__.values()]
+        columns = [f.name for f in FigureRecord.__dataclass_fields__.values()] + ["limit_kind", "limit_value"]
         where, params = [], []
         if report_ids is not None:
             ids = [int(i) for i in report_ids]

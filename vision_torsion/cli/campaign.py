@@ -55,8 +55,9 @@ def register(sub) -> None:
     rep.add_argument("db", metavar="DB")
     add_output_option(rep, "the current folder")
     rep.add_argument("--model", help="only this gear model")
-    rep.add_argument("--spec", metavar="FILE.toml",
-                     help="specification limits: a table per figure with min or max, e.g. [k1] min = 0.28")
+    rep.add_argument("--catalogue", metavar="FILE.toml",
+                     help="the gear type's catalogue file ([gear] and [spec], as plan --catalogue takes it); "
+                          "default: the limits each report was judged against")
     add_common_options(rep)
     rep.set_defaults(func=run_report)
 
@@ -133,11 +134,10 @@ def run_trend(args) -> int:
 
 
 def run_report(args) -> int:
-    from ..campaign import write_campaign_report
-    from ..campaign.spec import read_spec_limits
+    from ..campaign import catalogue_limits, write_campaign_report
 
-    spec = read_spec_limits(args.spec) if args.spec else None
-    rep = write_campaign_report(args.db, args.out_dir or ".", model=args.model, spec=spec)
+    limits = catalogue_limits(args.catalogue) if args.catalogue else None
+    rep = write_campaign_report(args.db, args.out_dir or ".", model=args.model, limits=limits)
     print(f"{rep.n_reports} report(s); campaign report: {rep.path}")
     return 0
 

@@ -44,7 +44,8 @@ def base_summary(*, seed: int = 0, n_cycles: int = 2) -> dict:
 
 
 def campaign_summary(base: dict, *, model: str, serial: str, test_date: str, stiffness_factor: float,
-                     rng: np.random.Generator, operator: str = "synthetic", test_hours: float | None = None) -> dict:
+                     rng: np.random.Generator, operator: str = "synthetic", test_hours: float | None = None,
+                     limits=()) -> dict:
     """``base`` as the report of one gear: identity and test set, figures scaled.
 
     Parameters
@@ -56,9 +57,14 @@ def campaign_summary(base: dict, *, model: str, serial: str, test_date: str, sti
         Each figure's mean is then moved by a normal draw of its own standard
         uncertainty (``mean_std``): a report scatters about its gear's truth as its
         ± says.
+    limits : sequence of vision_torsion.analysis.conformity.Limit
+        Catalogue limits: the report then carries its conformity verdicts, as
+        ``report`` writes them with a ``[spec]``.
     """
+    from ..analysis.conformity import DECISION_RULE, conformity
+
     out = copy.deepcopy(base)
-    out["gear"] = {"model": model, "serial": serial}
+    out["identity"] = {"gear": model, "serial": serial, "operator": operator, "date": test_date}
     out["test"] = {"operator": operator, "date": test_date}
     if test_hours is not None:
         out["test"]["test_hours"] = float(test_hours)
@@ -70,12 +76,15 @@ def campaign_summary(base: dict, *, model: str, serial: str, test_date: str, sti
                 entry[key] = entry[key] * factor
         if isinstance(entry.get("mean"), (int, float)) and isinstance(entry.get("mean_std"), (int, float)):
             entry["mean"] += float(rng.normal(0.0, entry["mean_std"]))
+    if limits:
+        out["conformity"] = {"rule": DECISION_RULE,
+                             "verdicts": [v.to_dict() for v in conformity(out["summary"], limits)]}
     return out
 
 
 def write_campaign_folders(out_dir, *, n_reports: int, seed: int = 0, model: str = "CSF-14-100",
                            batch_sd: float = 0.03, life_test_every: int = 0, life_drift_per_1000h: float = -0.05,
-                           base: dict | None = None) -> list[Path]:
+                           base: dict | None = None, limits=None) -> list[Path]:
     """Write ``n_reports`` report folders (``report_0001/summary.json`` ...).
 
     Parameters
@@ -94,14 +103,23 @@ def write_campaign_folders(out_dir, *, n_reports: int, seed: int = 0, model: str
         Relative stiffness change of the life-test gear per 1000 h.
     base : dict, optional
         The analysed summary to vary (default :func:`base_summary`).
+    limits : sequence of vision_torsion.analysis.conformity.Limit, optional
+        Catalogue limits every report is judged against; default: K1 at least 0.95
+        of the base session's and lost motion at 4 % at most 1.05 of it (a batch
+        that mostly passes, some gears failing or not decidable).
 
     Returns
     -------
     list of Path
         The report folders, in test order (one test a day from 2026-01-01).
     """
+    from ..analysis.conformity import Limit
+
     rng = np.random.default_rng(seed)
     base = base if base is not None else base_summary(seed=seed)
+    if limits is None:
+        limits = (Limit("k1", "min", 0.95 * base["summary"]["k1"]["mean"]),
+                  Limit("lost_motion_4pct", "max", 1.05 * base["summary"]["lost_motion_4pct"]["mean"]))
     out = Path(out_dir)
     folders, hours = [], 0.0
     start = date(2026, 1, 1)
@@ -110,12 +128,12 @@ def write_campaign_folders(out_dir, *, n_reports: int, seed: int = 0, model: str
         if life_test_every and i % life_test_every == 0:
             factor = 1.0 + life_drift_per_1000h * hours / 1000.0
             summary = campaign_summary(base, model=model, serial="LT-1", test_date=day, stiffness_factor=factor,
-                                       rng=rng, test_hours=hours)
+                                       rng=rng, test_hours=hours, limits=limits)
             hours += 100.0
         else:
             factor = float(np.exp(rng.normal(0.0, batch_sd)))
             summary = campaign_summary(base, model=model, serial=f"S{1000 + i}", test_date=day,
-                                       stiffness_factor=factor, rng=rng)
+                                       stiffness_factor=factor, rng=rng, limits=limits)
         folder = out / f"report_{i + 1:04d}"
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "summary.json").write_text(json.dumps(summary), encoding="utf-8")
