@@ -205,10 +205,10 @@ def overlay_section(images, *, settings: MeasureSettings | None = None, width_px
     """A report section: each (title, image path) drawn with its detections, as
     (section title, trusted HTML). Images are scaled to `width_px` and embedded as
     JPEG (a full-size PNG of each would make the report tens of MB)."""
-    import base64
     import html
 
     from .errors import VisionTorsionError
+    from .htmlpage import image_tag
 
     parts = ["<p>Each orientation's reference image with what was detected: fitted marker "
              "circles and centres (green), the pair used for the angle joined by the marker line "
@@ -222,7 +222,6 @@ def overlay_section(images, *, settings: MeasureSettings | None = None, width_px
         scale = min(1.0, width_px / rgb.shape[1])
         small = cv2.resize(rgb, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) if scale < 1 else rgb
         ok, buf = cv2.imencode(".jpg", cv2.cvtColor(small, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
-        data = base64.b64encode(buf.tobytes()).decode("ascii")
-        parts.append(f'<figure><img alt="{html.escape(title)}" src="data:image/jpeg;base64,{data}">'
+        parts.append(f'<figure>{image_tag(buf.tobytes(), title, mime="image/jpeg")}'
                      f"<figcaption>{html.escape(title)}</figcaption></figure>")
     return "Detected markers on the reference images", "\n".join(parts)

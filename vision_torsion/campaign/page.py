@@ -66,7 +66,7 @@ def catalogue_limits(path, *, figures=HEADLINE_FIGURES):
 
 def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
     """A figure's control chart with its caption (or why there is none)."""
-    from ..report.page import image_tag
+    from ..htmlpage import image_tag
 
     if usable.empty:
         return f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>'
@@ -82,7 +82,7 @@ def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
 
 def _capability_row(usable, *, name: str, unit: str, lower, upper) -> dict:
     """A figure's row of the capability table."""
-    from ..report.page import unit_words
+    from ..htmlpage import unit_words
 
     cap = capability(usable["value"].tolist(), lower=lower, upper=upper)
     return {
@@ -101,8 +101,8 @@ def _limit_text(lower, upper) -> str:
 
 
 def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
+    from ..htmlpage import unit_words
     from ..plotting import fixed_figure, png_bytes
-    from ..report.page import unit_words
 
     fig = fixed_figure(5.0, 2.4, left=0.8, bottom=0.45, top=0.15)
     ax = fig.add_subplot()
@@ -154,7 +154,7 @@ def write_campaign_report(db_path, out_dir, *, model=None, limits=None, figures=
     import pandas as pd
 
     from ..fileio import atomic_write_text, check_output_dir
-    from ..report.page import fmt_value, page_html, table_html, unit_words
+    from ..htmlpage import fmt_value, page_html, table_html, unit_words
 
     out_dir = check_output_dir(out_dir)
     with CampaignDB(db_path) as db:

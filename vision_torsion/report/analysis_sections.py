@@ -15,9 +15,9 @@ import math
 import numpy as np
 import pandas as pd
 
-from .page import fmt_value
-from .page import image_tag as _img
-from .page import table_html as _table
+from ..htmlpage import fmt_value
+from ..htmlpage import image_tag as _img
+from ..htmlpage import table_html as _table
 from .tables import figure_rows
 
 __all__ = ["analysis_sections", "HEADLINE_FIGURES"]

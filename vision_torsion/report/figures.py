@@ -21,8 +21,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
+from ..htmlpage import unit_words
 from ..plotting import fixed_figure, svg_bytes
-from .page import unit_words
 
 __all__ = ["svg_bytes", "safe_svg", "loops_overlay", "loop_detail", "fit_residuals", "phase_stiffness_chart",
            "orientation_chart", "value_scale"]

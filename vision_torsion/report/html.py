@@ -14,9 +14,9 @@ import html
 import numpy as np
 import pandas as pd
 
-from .page import fmt_value, page_html
-from .page import image_tag as _img
-from .page import table_html as _table
+from ..htmlpage import fmt_value, page_html
+from ..htmlpage import image_tag as _img
+from ..htmlpage import table_html as _table
 
 __all__ = ["render_html", "fmt_value"]
 

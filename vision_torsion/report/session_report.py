@@ -121,10 +121,10 @@ def _stiffness_section(measurements: pd.DataFrame):
     import html
 
     from ..errors import VisionTorsionError
+    from ..htmlpage import image_tag as _img
+    from ..htmlpage import table_html as _table
     from ..stiffness.report import stiffness_section
     from .figures import svg_bytes
-    from .page import image_tag as _img
-    from .page import table_html as _table
 
     try:
         section = stiffness_section(measurements)

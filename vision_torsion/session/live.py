@@ -22,11 +22,28 @@ import math
 import time
 from dataclasses import dataclass
 
+from ..htmlpage import page_html
+
 __all__ = ["LivePoint", "live_page", "nice_ticks", "loop_closure", "LIVE_PAGE_NAME"]
 
 #: File name of the live page in the output folder.
 LIVE_PAGE_NAME = "live.html"
 _W, _H, _PAD = 560, 380, 48
+_LIVE_CSS = """
+body {{ font-family: sans-serif; margin: 16px; color: #222; }}
+h1 {{ font-size: 20px; margin: 0 0 4px; }}
+.status {{ color: #555; margin: 0 0 8px; }}
+.next {{ font-size: 18px; background: #eef7ee; border-left: 5px solid #2ca02c; padding: 6px 10px; }}
+.plots {{ display: flex; flex-wrap: wrap; gap: 12px; }}
+figure {{ margin: 0; max-width: {w}px; }}
+th {{ text-align: left; }}
+table {{ border-collapse: collapse; font-size: 13px; margin-top: 8px; }}
+td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: right; }}
+td:nth-child(2), td:nth-child(5), td:nth-child(9) {{ text-align: left; }}
+tr.warn td {{ background: #fde8e8; }}
+.warnings li {{ color: #a00; }}
+li.ok {{ color: #1a7f37; }} li.bad {{ color: #a00; font-weight: 600; }}
+""".format(w=_W)
 
 
 @dataclass(frozen=True)
@@ -321,25 +338,7 @@ def live_page(*, title: str, points, planned_torques, next_step: str | None,
               "run <code>vision-torsion report</code> on the session folder).</p>" if finished else "")
     nxt = (f'<p class="next">Next: {html.escape(str(next_step))}</p>' if next_step is not None
            else '<p class="next">Every planned image is in.</p>')
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">{head}
-<title>live: {html.escape(title)}</title>
-<style>
-body {{ font-family: sans-serif; margin: 16px; color: #222; }}
-h1 {{ font-size: 20px; margin: 0 0 4px; }}
-.status {{ color: #555; margin: 0 0 8px; }}
-.next {{ font-size: 18px; background: #eef7ee; border-left: 5px solid #2ca02c; padding: 6px 10px; }}
-.plots {{ display: flex; flex-wrap: wrap; gap: 12px; }}
-figure {{ margin: 0; max-width: {_W}px; }}
-th {{ text-align: left; }}
-table {{ border-collapse: collapse; font-size: 13px; margin-top: 8px; }}
-td, th {{ border: 1px solid #ccc; padding: 2px 6px; text-align: right; }}
-td:nth-child(2), td:nth-child(5), td:nth-child(9) {{ text-align: left; }}
-tr.warn td {{ background: #fde8e8; }}
-.warnings li {{ color: #a00; }}
-li.ok {{ color: #1a7f37; }} li.bad {{ color: #a00; font-weight: 600; }}
-</style></head><body>
-<h1>{html.escape(title)}</h1>
+    body = f"""<h1>{html.escape(title)}</h1>
 <p class="status">{len(points)} of {n_rows} planned images · {len(warned)} with warnings · updated {stamp} · {state}</p>
 {report}{nxt}
 <div class="plots"><figure>{_loop_svg(points, current, next_torque, _largest_step(list(planned_torques)))}
@@ -355,5 +354,5 @@ image; photographs joined where the torque was loaded step by step)</figcaption>
 <th>torque (N·m)</th><th>angle (°)</th><th>Δangle (°)</th><th>warnings</th></tr>
 {"".join(rows)}</table>
 {f"<h2>Notices</h2><ul>{notes}</ul>" if notes else ""}
-</body></html>
 """
+    return page_html(f"live: {title}", [body], css=_LIVE_CSS, head=head, main=False)

@@ -27,6 +27,7 @@ import tempfile
 from pathlib import Path
 
 from ..fileio import atomic_write_text
+from ..htmlpage import page_html
 from .torque import couple_torque
 
 __all__ = ["capture_sheet_html", "sign_picture_svg", "write_capture_sheet", "find_chromium",
@@ -189,10 +190,8 @@ def capture_sheet_html(plan) -> str:
             )
     close_section()
     per_step = plan.torque_per_step_nm
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>Capture sheet</title>
-<style>
-@page {{ size: A4; margin: 12mm 12mm 14mm;
+    # the page style: A4, every page with the running title, the page number and the column heads
+    css = f"""@page {{ size: A4; margin: 12mm 12mm 14mm;
   @top-left {{ content: "{running}"; font: 9px sans-serif; color: #555; }}
   @bottom-center {{ content: "page " counter(page) " of " counter(pages); font: 9px sans-serif; }} }}
 thead {{ display: table-header-group; }}
@@ -215,8 +214,8 @@ code {{ font-size: 9.5px; }}
 .signpic {{ margin: 0; width: 360px; }}
 .signpic figcaption {{ font-size: 10px; color: #555; }}
 section td:nth-child(5), section td:nth-child(6) {{ white-space: nowrap; }}
-</style></head><body>
-<h1>Capture sheet</h1>
+"""
+    body = f"""<h1>Capture sheet</h1>
 <div class="head"><div>
 <table class="fields">{fields}</table>
 <p>Arm radius r = {rig.arm_radius_m:g} m, g = {rig.gravity_m_per_s2:g} m/s², step mass
@@ -232,8 +231,8 @@ names and run <code>vision-torsion bind</code> (or <code>watch</code> during the
 image. Grey: the markers at zero torque; black: after a positive torque. One pan of each pair
 is drawn.</figcaption></figure></div>
 {"".join(sections)}
-</body></html>
 """
+    return page_html("Capture sheet", [body], css=css, main=False)
 
 
 def find_chromium() -> str | None:

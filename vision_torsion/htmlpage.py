@@ -1,9 +1,12 @@
-"""The display layer's building blocks: the page style, values rounded to their
-uncertainty, tables and embedded figures, and a whole self-contained page.
+"""The display layer's building blocks: a whole self-contained page, the report
+style, values rounded to their uncertainty, tables and embedded figures.
 
-Every HTML page the package writes (the session report, the campaign report) is
-built from these: inline CSS, images as base64 data URIs, no scripts, no network.
-Text is escaped here, once. The style prints on A4 (``@page``/``@media print``):
+Every HTML page the package writes is built from these: the session and campaign
+reports (:data:`PAGE_CSS`), the live page of ``watch`` and the capture sheet of
+``plan`` (each with its own style). Inline CSS, images as base64 data URIs, no
+scripts, no network; text is escaped here. The pages are written by several layers
+(``plan`` and ``watch`` in the session layer, ``report`` above it), so this home is
+in the foundation. :data:`PAGE_CSS` prints on A4 (``@page``/``@media print``):
 figures and table rows are never split, long tables repeat their header row.
 """
 
@@ -97,13 +100,16 @@ def table_html(frame: pd.DataFrame, left=()) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
 
 
-def page_html(title: str, parts) -> str:
-    """A whole page: ``title`` (escaped) and the body's HTML ``parts`` in order."""
+def page_html(title: str, parts, *, css: str = PAGE_CSS, head: str = "", main: bool = True) -> str:
+    """A whole page: ``title`` (escaped), the style ``css``, trusted ``head`` markup
+    (a refresh, ...) and the body's HTML ``parts`` in order (inside ``<main>``
+    unless ``main`` is false)."""
+    body = "\n".join(parts)
+    if main:
+        body = f"<main>{body}</main>"
     return (
-        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f"<title>{html.escape(title)}</title><style>{PAGE_CSS}</style></head><body><main>"
-        + "\n".join(parts)
-        + "</main></body></html>\n"
+        f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">{head}'
+        f"<title>{html.escape(title)}</title><style>{css}</style></head><body>{body}</body></html>\n"
     )
 
 
