@@ -168,3 +168,17 @@ def area_image(dark, n: int = 4, *, background=200.0, depth=160.0):
     pixel `background` less `depth` times the share of it covered."""
     h, w = dark.shape[0] // n, dark.shape[1] // n
     return background - depth * dark.reshape(h, n, w, n).mean(axis=(1, 3))
+
+
+def mount_tmpfs(path: Path, options: str) -> bool:
+    """Mount a tmpfs with `options` (``size=4m``, ``ro``, ...) on `path` (created);
+    False where mounting is not allowed (not root, a container without it)."""
+    import subprocess
+
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
+                              capture_output=True, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return done.returncode == 0

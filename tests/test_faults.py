@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
-from helpers import draw_target, make_session, run_cli, tree_digest
+from helpers import draw_target, make_session, mount_tmpfs, run_cli, tree_digest
 
 from vision_torsion import fileio
 from vision_torsion.cli import main
@@ -213,16 +213,6 @@ def test_a_folder_where_the_result_file_should_be(capsys, folder, tmp_path):
     assert len(err.strip().splitlines()) == 1
 
 
-def _mount_tmpfs(path: Path, options: str) -> bool:
-    path.mkdir(parents=True, exist_ok=True)
-    try:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
-                              capture_output=True, timeout=20)
-    except (OSError, subprocess.SubprocessError):
-        return False
-    return done.returncode == 0
-
-
 @pytest.fixture
 def small_disk(tmp_path):
     """A mounted 256 kB tmpfs (needs root; skipped where mounting is not allowed)."""
@@ -230,7 +220,7 @@ def small_disk(tmp_path):
 
     def make(name, options):
         p = tmp_path / name
-        if not _mount_tmpfs(p, options):
+        if not mount_tmpfs(p, options):
             pytest.skip("cannot mount a tmpfs here (needs root)")
         mounted.append(p)
         return p

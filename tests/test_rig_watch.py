@@ -9,7 +9,7 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-from helpers import draw_target, make_session, tree_digest
+from helpers import draw_target, make_session, mount_tmpfs, tree_digest
 
 from vision_torsion.errors import SessionError
 from vision_torsion.images import write_image
@@ -307,18 +307,6 @@ def test_ctrl_c_stops_cleanly_and_keeps_everything(rig):
     assert "finished" in (folder / "results" / "live.html").read_text()
 
 
-def _mount_tmpfs(path, options):
-    import subprocess
-
-    path.mkdir(parents=True, exist_ok=True)
-    try:
-        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)],
-                              capture_output=True, timeout=20)
-    except (OSError, subprocess.SubprocessError):
-        return False
-    return done.returncode == 0
-
-
 @pytest.fixture
 def read_only_session(tmp_path, rig):
     """The rig's session copied onto a tmpfs that is then made read-only (needs root)."""
@@ -326,7 +314,7 @@ def read_only_session(tmp_path, rig):
 
     folder, cam, plan, photos = rig
     mount = tmp_path / "ro"
-    if not _mount_tmpfs(mount, "size=4m"):
+    if not mount_tmpfs(mount, "size=4m"):
         pytest.skip("cannot mount a tmpfs here (needs root)")
     try:
         shutil.copytree(folder, mount / "s")
