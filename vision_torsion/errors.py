@@ -36,6 +36,7 @@ __all__ = [
     "RecordError",
     "OutputError",
     "MeasurementsError",
+    "TargetError",
 ]
 
 
@@ -142,3 +143,10 @@ class MeasurementsError(AnalysisError, RecordError):
     """
 
     reason = "bad_measurements"
+
+
+class TargetError(VisionTorsionError):
+    """A target description (layout of the dots on the disk) is invalid or cannot be
+    read; the message names the file and the field."""
+
+    reason = "bad_target"

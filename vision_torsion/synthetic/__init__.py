@@ -8,6 +8,7 @@ known to far better than a thousandth of a pixel.
 from .geometry import CameraMapping, marker_centres_disk, marker_centres_image
 from .render import Rendered, render, render_ideal
 from .scene import Scene, load_scene, scene_from_dict, scene_to_dict, validate_scene
+from .targets import target_scene
 
 __all__ = [
     "Scene",
@@ -21,4 +22,5 @@ __all__ = [
     "CameraMapping",
     "marker_centres_disk",
     "marker_centres_image",
+    "target_scene",
 ]
