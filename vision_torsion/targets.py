@@ -35,7 +35,7 @@ by their stem (``ring16``, ``ring8``, ``grid5``, ``pair_distinct``), see
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -46,6 +46,7 @@ from .textfiles import read_toml
 __all__ = [
     "Target",
     "ring_target",
+    "ring_dot_diameter_mm",
     "grid_target",
     "dots_target",
     "target_from_dict",
@@ -83,6 +84,8 @@ class Target:
     index : tuple of int
         Dots that carry the identity (the index mark): their size differs from the
         others'. Empty for a layout without one.
+    spec : tuple of (str, value)
+        The description's keys it was made from (for :meth:`to_toml`).
     """
 
     name: str
@@ -91,6 +94,32 @@ class Target:
     y_mm: tuple
     diameter_mm: tuple
     index: tuple = ()
+    spec: tuple = field(default=(), repr=False, compare=False)
+
+    def to_toml(self) -> str:
+        """The ``[target]`` table that describes this target (for session.toml or a file).
+
+        Examples
+        --------
+        >>> print(ring_target(8, diameter_mm=80, dot_diameter_mm=12, index_diameter_mm=15).to_toml())
+        [target]
+        layout = "ring"
+        markers = 8
+        diameter_mm = 80.0
+        dot_diameter_mm = 12.0
+        index_diameter_mm = 15.0
+        """
+        items = dict(self.spec) or {"layout": "dots", "x_mm": list(self.x_mm), "y_mm": list(self.y_mm),
+                                    "dot_diameter_mm": list(self.diameter_mm)}
+
+        def fmt(v):
+            if isinstance(v, (list, tuple)):
+                return "[" + ", ".join(fmt(x) for x in v) + "]"
+            if isinstance(v, str):
+                return f'"{v}"'
+            return repr(v)
+
+        return "[target]\n" + "\n".join(f"{k} = {fmt(v)}" for k, v in items.items() if v is not None)
 
     @property
     def n_markers(self) -> int:
@@ -184,9 +213,9 @@ def _check_count(value, field: str, where: str, minimum: int) -> int:
     return int(value)
 
 
-def _finish(name, layout, x, y, d, index, where) -> Target:
+def _finish(name, layout, x, y, d, index, where, spec) -> Target:
     target = Target(name=name, layout=layout, x_mm=tuple(float(v) for v in x), y_mm=tuple(float(v) for v in y),
-                    diameter_mm=tuple(float(v) for v in d), index=tuple(index))
+                    diameter_mm=tuple(float(v) for v in d), index=tuple(index), spec=spec)
     c, r = target.centres_mm, target.radii_mm
     for i in range(target.n_markers):
         for j in range(i + 1, target.n_markers):
@@ -206,6 +235,22 @@ def _index_diameter(doc, dot, where):
                           f"dot_diameter_mm {dot:g}: the index mark must differ clearly in size",
                           reason="weak_index")
     return idx
+
+
+def ring_dot_diameter_mm(markers: int, diameter_mm: float) -> float:
+    """Dot diameter (mm) for a ring: as large as leaves a gap of one dot radius
+    beside an index dot 1.25 times larger, and at most 12 % of the ring's diameter.
+
+    The angle's noise falls as 1/(ring radius·√(N·r)) with r the dots' radius;
+    dots larger than this gain little more and crowd the neighbours' edges.
+
+    Examples
+    --------
+    >>> round(ring_dot_diameter_mm(16, 80.0), 2), round(ring_dot_diameter_mm(4, 80.0), 2)
+    (9.6, 9.6)
+    """
+    chord = diameter_mm * math.sin(math.pi / markers)
+    return min(0.12 * diameter_mm, 2.0 * chord / 3.25)
 
 
 def ring_target(markers: int, *, diameter_mm: float, dot_diameter_mm: float,
@@ -321,7 +366,8 @@ def target_from_dict(doc: dict, *, name: str = "target", where: str = "") -> Tar
         d = [_check_positive(v, "dot_diameter_mm", where) for v in d]
         common = float(np.median(d))
         index = [i for i, v in enumerate(d) if max(v, common) / min(v, common) >= MIN_INDEX_RATIO]
-        return _finish(name, layout, x, y, d, index, where)
+        spec = (("layout", "dots"), ("x_mm", x), ("y_mm", y), ("dot_diameter_mm", d))
+        return _finish(name, layout, x, y, d, index, where, spec)
     dot = _check_positive(doc["dot_diameter_mm"], "dot_diameter_mm", where)
     idx = _index_diameter(doc, dot, where)
     if layout == "ring":
@@ -345,7 +391,10 @@ def target_from_dict(doc: dict, *, name: str = "target", where: str = "") -> Tar
     if idx is not None:
         d[0] = idx
         index = [0]
-    return _finish(name, layout, x, y, d, index, where)
+    shape = (("markers", n), ("diameter_mm", 2.0 * rad)) if layout == "ring" else \
+        (("rows", rows), ("columns", cols), ("pitch_mm", pitch))
+    spec = (("layout", layout), *shape, ("dot_diameter_mm", dot), ("index_diameter_mm", idx))
+    return _finish(name, layout, x, y, d, index, where, spec)
 
 
 def ready_targets() -> list[str]:

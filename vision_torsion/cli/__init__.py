@@ -49,6 +49,7 @@ _COMMAND_MODULES = [
     "measure",
     "synth",
     "plan",
+    "target",
     "process",
     "bind",
     "watch",
