@@ -166,9 +166,19 @@ def test_hidden_index_mark_is_ambiguous(ref):
 
 
 def test_layout_that_does_not_match_is_refused(ref):
-    grid = load_target("grid5")
-    ident = identify_markers(ref, grid)
-    assert ident.status == "layout_mismatch" and "grid5" in ident.message
+    ident = identify_markers(ref, load_target("grid5"))
+    assert ident.status == "layout_mismatch" and ident.rows == (-1,) * 25
+    assert "no two markers have the sizes and spacing of two dots of the target 'grid5'" in ident.message
+
+
+def test_layout_that_matches_only_a_few_dots_is_refused(ref):
+    # three dots of the ring (the index and its two neighbours) and seven that are not on the disk
+    x = list(RING.x_mm[:2]) + [RING.x_mm[15]] + [-30.0, -20.0, -10.0, 0.0, 10.0, -30.0, -20.0]
+    y = list(RING.y_mm[:2]) + [RING.y_mm[15]] + [0.0, 0.0, 0.0, 0.0, 0.0, 20.0, 20.0]
+    d = [12.0, 9.6, 9.6] + [9.6] * 7
+    ident = identify_markers(ref, dots_target(x, y, d, name="partial"))
+    assert ident.status == "layout_mismatch"
+    assert "at most 3 of the 10 dots of the target 'partial' agree with the markers found (need 5)" in ident.message
 
 
 def test_a_dirty_marker_is_dropped_with_its_reason(ref):

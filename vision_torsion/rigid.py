@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -58,7 +59,9 @@ __all__ = [
     "target_angle",
     "target_angles",
     "rotation_centre",
+    "measure_target_folder",
     "IDENTITY_STATUSES",
+    "TARGET_COLUMNS",
 ]
 
 #: Per-image statuses of the identity: ``ok``, a dot with no marker
@@ -696,3 +699,91 @@ def rotation_centre(results, *, min_turn_deg: float = 1.0) -> RotationCentre:
         if r.usable:
             shifts[k] = np.array([r.shift_x_px, r.shift_y_px]) - (np.eye(2) - _rot(math.radians(r.angle_deg))) @ a
     return RotationCentre(float(a[0]), float(a[1]), cov, shifts, used)
+
+
+#: Columns of the angles.csv of an N-marker target (:func:`measure_target_folder`).
+TARGET_COLUMNS = ["image", "angle_deg", "angle_std_deg", "status", "message", "n_used", "dropped_dots",
+                  "shift_x_px", "shift_y_px", "shift_x_std_px", "shift_y_std_px", "bump", "chi2_red"]
+
+
+def measure_target_folder(image_dir, *, reference, target, out_dir=None, settings: MeasureSettings | None = None,
+                          progress: bool = False, reject_sigma: float = 5.0, bump_sigma: float = 5.0,
+                          bump_px: float = 0.25):
+    """Measure every image of a folder against a reference image, from all markers of a target.
+
+    Parameters
+    ----------
+    image_dir : str or os.PathLike
+        Folder of images, measured in natural name order (angles unwrapped along it).
+    reference : str or os.PathLike
+        The reference image (angle 0).
+    target : Target, str or os.PathLike
+        The printed target, a target file or a ready target's name.
+    out_dir : str or os.PathLike, optional
+        Where ``angles.csv`` goes; ``IMAGE_DIR/results`` by default (not the image
+        folder itself).
+    settings : MeasureSettings, optional
+        How markers are found.
+    progress : bool
+        Show a progress bar.
+    reject_sigma, bump_sigma, bump_px : float
+        See :func:`target_angle`.
+
+    Returns
+    -------
+    MeasureResult
+        The table (:data:`TARGET_COLUMNS`): per image the angle (deg, counter-clockwise
+        as displayed) and its 1σ, status (``ok``, ``marker_missing`` with the angle
+        from the others, ``ambiguous``/``layout_mismatch`` with the angle withheld,
+        ``failed`` for an image that cannot be read or has no markers), the dots
+        dropped, the axis shift and whether it is a ``bump``. Every status but ``ok``
+        counts in ``n_failed``.
+
+    Raises
+    ------
+    ImageReadError, MarkerError
+        The folder has no images, or the reference image cannot be read.
+    TargetError
+        The target cannot be read, or the reference's identity is not certain.
+    OutputError
+        The output folder is the image folder, or cannot be written.
+    """
+    import pandas as pd
+
+    from .batch import measure_each
+    from .errors import OutputError
+    from .fileio import check_output_dir, write_csv
+    from .measure import MeasureResult, list_images, printable_name
+    from .measurements import output_folder
+
+    settings = settings or MeasureSettings()
+    files = list_images(image_dir)
+    out = output_folder(image_dir, out_dir)
+    if out.resolve() == Path(image_dir).resolve():
+        raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
+                          "subfolder such as results/")
+    check_output_dir(out)
+    target, table, ident = _reference(reference, target, settings)
+    ref_xy, ref_cov = _centres(table, ident)
+    origin = (ident.axis_x_px, ident.axis_y_px)
+    done = measure_each(lambda f: _measure(ref_xy, ref_cov, origin, f, target, settings, f.name, reject_sigma,
+                                           bump_sigma, bump_px), files, names=[f.name for f in files],
+                        progress=progress)
+    rows, last = [], 0.0
+    for f, d in zip(files, done):
+        row = {"image": printable_name(f.name), "status": "failed", "message": d.message, "bump": False}
+        res = d.value
+        if res is not None:
+            row.update(status=res.status, message=res.message)
+            if res.usable:
+                last = last + ((res.angle_deg - last + 180.0) % 360.0 - 180.0)
+                row.update(angle_deg=last, angle_std_deg=res.angle_std_deg, n_used=res.n_used,
+                           dropped_dots=" ".join(str(r.dot) for r in res.residuals if not r.used),
+                           shift_x_px=res.shift_x_px, shift_y_px=res.shift_y_px,
+                           shift_x_std_px=math.sqrt(res.shift_cov[0, 0]),
+                           shift_y_std_px=math.sqrt(res.shift_cov[1, 1]), bump=res.bump, chi2_red=res.chi2_red)
+        rows.append(row)
+    frame = pd.DataFrame(rows, columns=TARGET_COLUMNS)
+    write_csv(out / "angles.csv", frame)
+    n_ok = int((frame["status"] == "ok").sum())
+    return MeasureResult(table=frame, path=out / "angles.csv", n_ok=n_ok, n_failed=len(frame) - n_ok)
