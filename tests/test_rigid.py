@@ -160,6 +160,17 @@ def test_a_missing_marker_is_named_and_the_others_give_the_angle(ref):
     assert res.n_used == 15 and abs(res.angle_deg - 30.0) < 0.002
 
 
+def test_one_marker_is_not_an_identity(ref):
+    ident = identify_markers(ref.iloc[:1], RING)
+    assert ident.status == "marker_missing" and not ident.certain and ident.missing == tuple(range(16))
+    assert "1 marker(s) found, the target 'ring16' has 16; all dots missing" in ident.message
+    res = target_angle(ref, ref.iloc[:1], target=RING)
+    assert res.status == "marker_missing" and not res.usable and math.isnan(res.angle_deg)
+    with pytest.raises(TargetError, match=r"reference: 1 marker\(s\) found") as err:
+        target_angle(ref.iloc[:1], ref, target=RING)
+    assert err.value.reason == "marker_missing"
+
+
 def test_hidden_index_mark_is_ambiguous(ref):
     res = target_angle(ref, painted_over(SCENE, 30.0, [0], seed=22), target=RING)
     assert res.status == "ambiguous" and "the index mark (dot 0)" in res.message and math.isnan(res.angle_deg)

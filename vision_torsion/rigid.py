@@ -75,7 +75,7 @@ POSITION_TOLERANCE = 0.25
 #: Relative radius difference within which a found marker has the dot's size.
 RADIUS_TOLERANCE = 0.06
 #: Found markers tried as seeds of the layout hypotheses, and neighbours of each.
-_SEEDS, _PARTNERS = 4, 3
+_SEEDS, _PARTNERS = 6, 3
 
 
 @dataclass(frozen=True)
@@ -114,8 +114,9 @@ class Identification:
 
     @property
     def certain(self) -> bool:
-        """True when the identity can be used (``ok`` or ``marker_missing``)."""
-        return self.status in ("ok", "marker_missing")
+        """True when the identity can be used: ``ok``, or ``marker_missing`` with at
+        least two dots named."""
+        return self.status in ("ok", "marker_missing") and sum(r >= 0 for r in self.rows) >= 2
 
 
 def _rot(theta):
@@ -151,7 +152,7 @@ def identify_markers(markers, target, *, name: str = "image",
 
     Notes
     -----
-    Hypotheses: for up to 4 seed markers (nearest the markers' median centre) and
+    Hypotheses: for up to 6 seed markers (nearest the markers' median centre) and
     each of their 3 nearest neighbours, every ordered pair of dots of the right sizes
     fixes a similarity; all dots are mapped with it, and a dot is *matched* when a
     marker lies within 0.25 of the smallest dot spacing of it and *agrees* when that
@@ -215,8 +216,8 @@ def identify_markers(markers, target, *, name: str = "image",
                               f"{target.name!r} agree with the markers found (need {need})", n_dots)
     chosen = cands[0]
     for other in cands[1:]:
-        if any(x != y and x >= 0 and y >= 0 for x, y in zip(chosen, other)) or \
-                sum(x >= 0 for x in other) != sum(x >= 0 for x in chosen):
+        # the same identity found from other seeds agrees on every dot both name
+        if any(x != y and x >= 0 and y >= 0 for x, y in zip(chosen, other)):
             turns = sorted({_assignment_turn(P, L, k) for k in (chosen, other)})
             return _fail_identity("ambiguous", f"{name}: the markers fit the target {target.name!r} equally "
                                   f"well in {len(cands)} ways (turns of {', '.join(f'{t:.1f}' for t in turns)}°"
@@ -484,8 +485,8 @@ class TargetAngle:
 
     @property
     def usable(self) -> bool:
-        """True when the angle is a measurement (identity certain)."""
-        return self.status in ("ok", "marker_missing")
+        """True when the angle is a measurement (identity certain, angle fitted)."""
+        return self.status in ("ok", "marker_missing") and math.isfinite(self.angle_deg)
 
 
 def _table(obj, settings, name):

@@ -58,6 +58,6 @@ def target_scene(target, *, px_per_mm: float, base: Scene | None = None) -> Scen
         base.markers, positions_deg=positions, radii_px=radii, radius_px=float(np.median(radii)),
         distance_px=float(dist[0]) if same else float(np.max(dist)),
         distances_px=() if same else tuple(float(v) for v in dist))
-    scene = base.replace(markers=markers)
-    validate_scene(scene, where=f"target {target.name}: ")
+    scene = dataclasses.replace(base, markers=markers)
+    validate_scene(scene, where=f"target {target.name}")
     return scene
