@@ -180,7 +180,7 @@ def identify_markers(markers, target, *, name: str = "image",
     vl = L[jj] - L[ii]
     len_l = np.hypot(vl[:, 0], vl[:, 1])
     ang_l = np.arctan2(vl[:, 1], vl[:, 0])
-    best = {}  # assignment -> (score, similarity)
+    best = {}  # assignment (a marker index or -1 per dot) -> (score, the dots that agree)
     for a in seeds:
         for b in np.argsort(dpp[a])[: min(_PARTNERS, len(P) - 1)]:
             vp = P[b] - P[a]
@@ -220,8 +220,9 @@ def identify_markers(markers, target, *, name: str = "image",
         if any(x != y and x >= 0 and y >= 0 for x, y in zip(chosen, other)):
             turns = sorted({_assignment_turn(P, L, k) for k in (chosen, other)})
             return _fail_identity("ambiguous", f"{name}: the markers fit the target {target.name!r} equally "
-                                  f"well in {len(cands)} ways (turns of {', '.join(f'{t:.1f}' for t in turns)}°"
-                                  " apart); give the target an index mark", n_dots)
+                                  f"well in {len(cands)} ways (the layout turned by "
+                                  f"{' or '.join(f'{t:.1f}°' for t in turns)}, ...); give the target an index mark",
+                                  n_dots)
     agreeing = set(best[chosen][1])
     unseen = [k for k in target.index if k not in agreeing]
     if unseen:
