@@ -74,6 +74,8 @@ def test_target_file_and_session_table_read_alike(tmp_path):
      rf"index_diameter_mm 8.8 is within {MIN_INDEX_RATIO:g}x of dot_diameter_mm 8", "weak_index"),
     ({"layout": "grid", "rows": 1, "columns": 1, "pitch_mm": 5, "dot_diameter_mm": 2},
      r"a grid needs at least 2 dots, got 1x1", "bad_value"),
+    ({"layout": "dots", "x_mm": [0, "a"], "y_mm": [0, 1], "dot_diameter_mm": 2},
+     r"x_mm must hold finite numbers \(mm\), got 'a'", "bad_value"),
     ({"layout": "dots", "x_mm": [0, 10], "y_mm": [0], "dot_diameter_mm": 2},
      r"x_mm, y_mm and dot_diameter_mm must be lists of one value per dot", "bad_value"),
 ])

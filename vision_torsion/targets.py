@@ -359,10 +359,12 @@ def target_from_dict(doc: dict, *, name: str = "target", where: str = "") -> Tar
         if not (isinstance(x, list) and isinstance(y, list)) or not len(x) == len(y) == len(d) or len(x) < 2:
             raise TargetError(f"{where}[target] x_mm, y_mm and dot_diameter_mm must be lists of one value per "
                               f"dot, at least 2 dots", reason="bad_value")
-        x = [float(v) if not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-             else _check_positive(v, "x_mm", where) for v in x]
-        y = [float(v) if not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v)
-             else _check_positive(v, "y_mm", where) for v in y]
+        for key, values in (("x_mm", x), ("y_mm", y)):
+            bad = [v for v in values if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]
+            if bad:
+                raise TargetError(f"{where}[target] {key} must hold finite numbers (mm), got {bad[0]!r}",
+                                  reason="bad_value")
+        x, y = [float(v) for v in x], [float(v) for v in y]
         d = [_check_positive(v, "dot_diameter_mm", where) for v in d]
         common = float(np.median(d))
         index = [i for i, v in enumerate(d) if max(v, common) / min(v, common) >= MIN_INDEX_RATIO]
