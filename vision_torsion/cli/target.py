@@ -19,7 +19,7 @@ def register(subparsers) -> None:
         help="write a printable N-marker target (vector PDF at true scale, with a scale bar)",
         description="Write a ring or a grid of dots (or a ready/own target description) as a one-page "
         "vector PDF at true scale, with a 50 mm scale bar to check the print and a cross on the shaft "
-        "axis. Dot 0 is the index mark (25 %% larger) unless --no-index. Lengths take mm, cm or in "
+        "axis. Dot 0 is the index mark (25 % larger) unless --no-index. Lengths take mm, cm or in "
         "(80mm, 8cm; a bare number is mm). Prints the [target] table for session.toml.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
