@@ -160,6 +160,16 @@ def test_a_missing_marker_is_named_and_the_others_give_the_angle(ref):
     assert res.n_used == 15 and abs(res.angle_deg - 30.0) < 0.002
 
 
+def test_markers_on_no_dot_are_ignored(ref):
+    # six bolt holes (r 30 px) on a 180 px circle inside the ring, dust specks: not dots of the layout
+    holes = SCENE.replace(distractors={"bolt_holes": 6, "bolt_hole_radius_px": 30.0, "bolt_circle_px": 180.0,
+                                       "dust": 20})
+    cur = table(holes, 33.0, 24)
+    assert (cur["status"] == "ok").sum() == 22
+    res = target_angle(ref, cur, target=RING)
+    assert res.status == "ok" and res.n_used == 16 and abs(res.angle_deg - 33.0) < 0.002
+
+
 def test_one_marker_is_not_an_identity(ref):
     ident = identify_markers(ref.iloc[:1], RING)
     assert ident.status == "marker_missing" and not ident.certain and ident.missing == tuple(range(16))

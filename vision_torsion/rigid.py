@@ -39,6 +39,7 @@ angles in degrees, counter-clockwise as displayed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -75,7 +76,7 @@ POSITION_TOLERANCE = 0.25
 #: Relative radius difference within which a found marker has the dot's size.
 RADIUS_TOLERANCE = 0.06
 #: Found markers tried as seeds of the layout hypotheses, and neighbours of each.
-_SEEDS, _PARTNERS = 6, 3
+_SEEDS, _PARTNERS = 12, 3
 
 
 @dataclass(frozen=True)
@@ -152,11 +153,12 @@ def identify_markers(markers, target, *, name: str = "image",
 
     Notes
     -----
-    Hypotheses: for up to 6 seed markers (nearest the markers' median centre) and
-    each of their 3 nearest neighbours, every ordered pair of dots of the right sizes
-    fixes a similarity; all dots are mapped with it, and a dot is *matched* when a
-    marker lies within 0.25 of the smallest dot spacing of it and *agrees* when that
-    marker's radius is also within `radius_tolerance` of the dot's. The score is
+    Hypotheses: for up to 12 seed markers (spread evenly in distance from the
+    markers' median centre, nearest to farthest) and each of their 3 nearest
+    neighbours, every ordered pair of dots of the right sizes fixes a similarity;
+    all dots are mapped with it, and a dot is *matched* when a marker lies within
+    0.25 of the smallest dot spacing of it and *agrees* when that marker's radius is
+    also within `radius_tolerance` of the dot's. The score is
     the number of dots that agree. The best assignment is taken when no other
     assignment of equal score names any dot differently, and every index dot
     agrees; a target that maps onto itself under a turn therefore always comes out
@@ -171,9 +173,11 @@ def identify_markers(markers, target, *, name: str = "image",
         return _fail_identity("marker_missing", f"{name}: {len(P)} marker(s) found, the target "
                               f"{target.name!r} has {n_dots}; all dots missing", n_dots)
     L, rl = target.centres_mm, target.radii_mm
-    # seeds near the middle of what was found, each with its nearest neighbours
+    # seeds spread from the middle of what was found outwards (distractors such as bolt
+    # holes often sit together), each with its nearest neighbours
     med = np.median(P, axis=0)
-    seeds = np.argsort(np.hypot(*(P - med).T))[:_SEEDS]
+    by_distance = np.argsort(np.hypot(*(P - med).T))
+    seeds = by_distance[np.unique(np.linspace(0, len(P) - 1, min(_SEEDS, len(P))).round().astype(int))]
     dpp = np.hypot(*(P[:, None, :] - P[None, :, :]).transpose(2, 0, 1))
     np.fill_diagonal(dpp, np.inf)
     ii, jj = np.nonzero(~np.eye(n_dots, dtype=bool))
@@ -632,16 +636,10 @@ def target_angles(reference, images, *, target, settings: MeasureSettings | None
                        bump_sigma, bump_px)
         if res.usable:
             a = last + ((res.angle_deg - last + 180.0) % 360.0 - 180.0)
-            res = _replace(res, angle_deg=a)
+            res = dataclasses.replace(res, angle_deg=a)
             last = a
         out.append(res)
     return out
-
-
-def _replace(obj, **kw):
-    import dataclasses
-
-    return dataclasses.replace(obj, **kw)
 
 
 @dataclass(frozen=True)
