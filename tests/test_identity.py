@@ -177,5 +177,5 @@ def test_plan_target_distinct_writes_the_pair_and_says_why(tmp_path):
 def test_plan_rejects_an_unknown_target(tmp_path):
     from vision_torsion.session.config import SessionError
 
-    with pytest.raises(SessionError, match="target must be 'equal' or 'distinct'"):
+    with pytest.raises(SessionError, match="target must be 'equal', 'distinct' or a target description"):
         plan_session(tmp_path / "s", max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05, target="x")

@@ -37,6 +37,7 @@ __all__ = [
     "OutputError",
     "MeasurementsError",
     "CampaignError",
+    "TargetError",
 ]
 
 
@@ -151,3 +152,10 @@ class CampaignError(VisionTorsionError):
     database that cannot be written. The message names the file."""
 
     reason = "bad_campaign"
+
+
+class TargetError(VisionTorsionError):
+    """A target description (layout of the dots on the disk) is invalid or cannot be
+    read; the message names the file and the field."""
+
+    reason = "bad_target"

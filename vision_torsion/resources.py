@@ -13,11 +13,13 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["named_file", "available", "SCENES", "SPECS"]
+__all__ = ["named_file", "available", "SCENES", "SPECS", "TARGETS"]
 
 #: (package, folder) of the ready scenes and of the ready accuracy-check specs.
 SCENES = ("vision_torsion.synthetic", "scenes")
 SPECS = ("vision_torsion.calibration", "specs")
+#: (package, folder) of the ready target descriptions (``ring16``, ...).
+TARGETS = ("vision_torsion", "targets")
 
 
 def available(kind: tuple[str, str]) -> list[str]:
@@ -36,11 +38,11 @@ def named_file(path, kind: tuple[str, str], *, error: type[Exception], what: str
     path : str or os.PathLike
         A file, or the name of a ready file (no folder, no suffix).
     kind : tuple
-        :data:`SCENES` or :data:`SPECS`.
+        :data:`SCENES`, :data:`SPECS` or :data:`TARGETS`.
     error : exception class
         Raised for a name that is neither a file nor a ready file.
     what : str
-        "scene" or "spec", for the message.
+        "scene", "spec" or "target", for the message.
 
     Raises
     ------

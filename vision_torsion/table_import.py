@@ -330,6 +330,35 @@ def phases_from_torque(torque) -> RecordPhases:
     return RecordPhases(rows=tuple(rows), left_out=int((~used).sum()), first=first)
 
 
+def _given_uncertainties(out, notes, *, angle_std_deg, torque_std_nm, name) -> None:
+    """The 1σ columns the table lacks, from the values given (refused when none is)."""
+    for col, value, word in (("angle_std_deg", angle_std_deg, "angle_std"),
+                             ("torque_std_nm", torque_std_nm, "torque_std")):
+        if col in out.columns:
+            continue
+        if value is None:
+            raise MeasurementsError(
+                f"{name}: no {col} column and no 1σ given: map the column (--columns {word}=HEADER) or give "
+                f"the instrument's standard uncertainty (--{word.replace('_', '-')} "
+                f"{'DEG' if word.startswith('angle') else 'NM'})", reason="no_uncertainty")
+        out[col] = float(value)
+        notes.append(f"{col} = {value:g} for every row (given)")
+
+
+def _fill_defaults(out, notes) -> None:
+    """The optional columns the table lacks (orientation 0, no mass, status ok, the
+    line as the image's name), said in `notes`."""
+    defaults = {"orientation_deg": 0.0, "mass_kg": np.nan, "status": "ok", "message": ""}
+    filled = [c for c in defaults if c not in out.columns]
+    for col in filled:
+        out[col] = defaults[col]
+    if "image" not in out.columns:
+        out["image"] = [f"line {ln}" for ln in out.index]
+        filled.append("image")
+    if filled:
+        notes.append(f"not in the table, filled: {', '.join(filled)}")
+
+
 def import_table(path, *, column_map=None, units=None, angle_std_deg=None, torque_std_nm=None, name=None):
     """Read a torque–angle table in any of the forms the module docstring lists.
 
@@ -419,30 +448,12 @@ def import_table(path, *, column_map=None, units=None, angle_std_deg=None, torqu
             out[col] = numbers(head)
         else:
             out[col] = table[head].astype(str)
-    for col, value, word in (("angle_std_deg", angle_std_deg, "angle_std"),
-                             ("torque_std_nm", torque_std_nm, "torque_std")):
-        if col in out.columns:
-            continue
-        if value is None:
-            raise MeasurementsError(
-                f"{name}: no {col} column and no 1σ given: map the column (--columns {word}=HEADER) or give "
-                f"the instrument's standard uncertainty (--{word.replace('_', '-')} "
-                f"{'DEG' if word.startswith('angle') else 'NM'})", reason="no_uncertainty")
-        out[col] = float(value)
-        notes.append(f"{col} = {value:g} for every row (given)")
+    _given_uncertainties(out, notes, angle_std_deg=angle_std_deg, torque_std_nm=torque_std_nm, name=name)
     if "phase" not in out.columns:
         out = _phases(out, notes, name)
     else:
         notes += _direction_notes(out)
-    defaults = {"orientation_deg": 0.0, "mass_kg": np.nan, "status": "ok", "message": ""}
-    filled = [c for c in defaults if c not in out.columns]
-    for col in filled:
-        out[col] = defaults[col]
-    if "image" not in out.columns:
-        out["image"] = [f"line {ln}" for ln in out.index]
-        filled.append("image")
-    if filled:
-        notes.append(f"not in the table, filled: {', '.join(filled)}")
+    _fill_defaults(out, notes)
     extra = [c for c in out.columns if c not in MEASUREMENT_COLUMNS]
     frame = read_measurements(out.loc[:, list(MEASUREMENT_COLUMNS) + extra], name=name)
     return ImportedTable(frame=frame, delimiter=sep, decimal_comma=decimal_comma, notes=tuple(notes))

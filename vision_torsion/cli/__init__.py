@@ -60,6 +60,7 @@ _COMMAND_MODULES = [
     "measure",
     "synth",
     "plan",
+    "target",
     "process",
     "bind",
     "watch",

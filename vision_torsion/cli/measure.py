@@ -29,6 +29,11 @@ def register(sub) -> None:
     )
     p.add_argument("--max-step", type=float, default=30.0, metavar="DEG",
                    help="sequence order: the largest turn between consecutive images taken as certain (default 30)")
+    p.add_argument("--target", metavar="NAME|FILE",
+                   help="an N-marker target (a ready one: ring16, ring8, grid5, pair_distinct; or a target "
+                        "TOML file): the angle of each image from all its markers by a weighted rigid fit, "
+                        "identity from the layout's index mark (no tracking; --order and --max-step do not "
+                        "apply), and the shaft axis' shift (a camera bump) per image")
     p.add_argument("--overlay", metavar="DIR",
                    help="also write each image (and the reference) with its detected markers and "
                         "fitted circles drawn, as DIR/<name>_overlay.png")
@@ -40,15 +45,25 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..measure import measure_folder
 
-    res = measure_folder(
-        args.image_dir,
-        reference=args.reference,
-        out_dir=args.out_dir,
-        settings=settings_from_args(args),
-        progress=progress_enabled(args),
-        order=args.order,
-        max_step_deg=args.max_step,
-    )
+    if args.target:
+        from ..rigid import measure_target_folder
+
+        res = measure_target_folder(args.image_dir, reference=args.reference, target=args.target,
+                                    out_dir=args.out_dir, settings=settings_from_args(args),
+                                    progress=progress_enabled(args))
+        for row in res.table.itertuples():
+            if row.bump and row.status == "ok":
+                print(f"  {row.image}: {row.message}", file=sys.stderr)
+    else:
+        res = measure_folder(
+            args.image_dir,
+            reference=args.reference,
+            out_dir=args.out_dir,
+            settings=settings_from_args(args),
+            progress=progress_enabled(args),
+            order=args.order,
+            max_step_deg=args.max_step,
+        )
     print(f"{res.n_ok} of {res.n_ok + res.n_failed} images measured; wrote {res.path}")
     if args.overlay:
         from pathlib import Path

@@ -51,9 +51,11 @@ def register(subparsers) -> None:
                    help="dark markers on a bright disk, or the reverse")
     p.add_argument("--radius-range", type=float, nargs=2, metavar=("MIN", "MAX"),
                    help="marker radius range in pixels")
-    p.add_argument("--target", choices=("equal", "distinct"), default="equal",
-                   help="two equal markers, or two of clearly different radii (recommended: "
-                        "which marker is which is then certain at any angle)")
+    p.add_argument("--target", default="equal", metavar="equal|distinct|NAME|FILE",
+                   help="two equal markers; two of clearly different radii (recommended for two: "
+                        "which marker is which is then certain at any angle); or an N-marker target, "
+                        "a ready one (ring16, ring8, grid5, pair_distinct) or a target TOML file "
+                        "(print it with `vision-torsion target`), written to session.toml as [target]")
     p.add_argument("--angle-sign", type=int, choices=(1, -1), default=1,
                    help="factor making positive torque give a positive angle")
     p.add_argument("--image-type", default=".png", metavar="SUFFIX",

@@ -21,10 +21,11 @@ from pathlib import Path
 
 import tomli_w
 
-from ..errors import SessionError, VisionTorsionError
+from ..errors import SessionError, TargetError, VisionTorsionError
 from ..fileio import atomic_write_text
 from ..measurements import TorqueRig
 from ..settings import MeasureSettings
+from ..targets import Target, load_target, target_from_dict
 from ..textfiles import read_toml
 
 __all__ = [
@@ -201,6 +202,10 @@ class SessionConfig:
     angle_sign : int
         +1 or -1: the factor applied to measured angles (CCW positive as displayed)
         so that positive torque gives a positive angle.
+    target : Target or None
+        The N-marker target on the disk (``[target]``: a layout table, see
+        :mod:`vision_torsion.targets`, or ``name = "ring16"`` for a ready one);
+        None for the two-marker target of ``[markers]``.
     """
 
     rig: RigConfig
@@ -210,6 +215,7 @@ class SessionConfig:
     gear: GearConfig = field(default_factory=GearConfig)
     test: TestConfig = field(default_factory=TestConfig)
     spec: SpecConfig = field(default_factory=SpecConfig)
+    target: Target | None = None
 
     @property
     def torque_rig(self) -> TorqueRig:
@@ -449,6 +455,18 @@ def _markers_from(table, problems) -> MeasureSettings | None:
         return None
 
 
+def _target_from(table, problems) -> Target | None:
+    if not table:
+        return None
+    try:
+        if set(table) == {"name"}:  # a ready target by name
+            return load_target(str(table["name"]))
+        return target_from_dict(table)
+    except TargetError as exc:
+        problems.add("target", str(exc))
+        return None
+
+
 def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
     """Validate a parsed session.toml and build the :class:`SessionConfig`.
 
@@ -466,7 +484,8 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
         was expected.
     """
     problems = _Problems()
-    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test", "spec"), "",
+    _unknown(data, ("format_version", "angle_sign", "rig", "markers", "protocol", "gear", "test", "spec", "target"),
+             "",
              problems)
     version = data.get("format_version", _FORMAT_VERSION)
     if version != _FORMAT_VERSION:
@@ -480,9 +499,10 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
     gear = _gear_from(_table(data, "gear", problems, required=False), problems)
     test = _test_from(_table(data, "test", problems, required=False), problems)
     spec = _spec_from(_table(data, "spec", problems, required=False), gear, problems)
+    target = _target_from(_table(data, "target", problems, required=False), problems)
     problems.raise_if_any(source)
     return SessionConfig(rig=rig, protocol=protocol, markers=markers, angle_sign=int(sign), gear=gear, test=test,
-                         spec=spec)
+                         spec=spec, target=target)
 
 
 def load_config(path) -> SessionConfig:
@@ -560,6 +580,8 @@ def config_to_dict(config: SessionConfig) -> dict:
     spec = {k: getattr(config.spec, k) for k in _SPEC_KEYS if getattr(config.spec, k) is not None}
     if spec:
         out["spec"] = spec
+    if config.target is not None:
+        out["target"] = {"name": config.target.name, **{k: v for k, v in config.target.spec if v is not None}}
     return out
 
 

@@ -49,10 +49,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import SessionError
+from ..errors import SessionError, TargetError
 from ..fileio import atomic_write_text, check_replaceable
 from ..images import IMAGE_SUFFIXES
 from ..measurements import CYCLE_PHASES, PHASES
+from ..targets import Target, load_target
 from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
 from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from .torque import couple_torque
@@ -412,7 +413,7 @@ def plan_session(
     angle_sign: int = 1,
     image_suffix: str = ".png",
     overwrite: bool = False,
-    target: str = "equal",
+    target="equal",
     preconditioning_cycles: int = 0,
     closing: bool = False,
     header: dict | None = None,
@@ -446,10 +447,12 @@ def plan_session(
         by default).
     polarity, radius_range :
         Marker settings written to ``[markers]``.
-    target : {"equal", "distinct"}
-        Two equal markers (identity tracked between images), or two markers of
+    target : {"equal", "distinct"}, Target, str or os.PathLike
+        Two equal markers (identity tracked between images), two markers of
         clearly different radii (``pair = "distinct"`` in ``[markers]``: identity
-        certain at any angle, recommended).
+        certain at any angle, recommended), or an N-marker target (a
+        :class:`~vision_torsion.targets.Target`, a ready target's name such as
+        ``"ring16"``, or a target file), written to session.toml as ``[target]``.
     angle_sign : {1, -1}
         Written to ``angle_sign``.
     image_suffix : str
@@ -493,7 +496,8 @@ def plan_session(
         Invalid parameters (named as their session.toml keys), both or neither of
         `max_torque_nm` and `steps`, a maximum torque below one step, or a folder
         that already holds a session; lost-motion levels the weight pieces cannot
-        realise.
+        realise; a target that is neither ``equal``, ``distinct`` nor a readable
+        target description (the reason of its :class:`TargetError` kept).
 
     Examples
     --------
@@ -515,10 +519,16 @@ def plan_session(
     if steps is not None:
         max_torque_nm = float(f"{steps * 2.0 * step_mass_kg * gravity_m_per_s2 * arm_radius_m:.12g}")
     markers = {"polarity": polarity}
-    if target not in ("equal", "distinct"):
-        raise SessionError(f"plan_session: target must be 'equal' or 'distinct', got {target!r}")
-    if target == "distinct":
-        markers["pair"] = "distinct"
+    described = None
+    if isinstance(target, str) and target in ("equal", "distinct"):
+        if target == "distinct":
+            markers["pair"] = "distinct"
+    else:
+        try:
+            described = target if isinstance(target, Target) else load_target(target)
+        except TargetError as exc:
+            raise SessionError(f"plan_session: target must be 'equal', 'distinct' or a target description: {exc}",
+                               reason=exc.reason) from exc
     if radius_range is not None:
         markers["radius_range"] = list(radius_range)
     doc = {
@@ -560,6 +570,8 @@ def plan_session(
     for key, value in header.items():
         table, name = HEADER_KEYS[key]
         doc.setdefault(table, {})[name] = str(value)
+    if described is not None:
+        doc["target"] = {"name": described.name, **{k: v for k, v in described.spec if v is not None}}
     config = config_from_dict(doc, source="plan_session")
     if image_suffix.lower() not in IMAGE_SUFFIXES:
         raise SessionError(

@@ -395,7 +395,10 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     Raises
     ------
     SessionError
-        Invalid session folder or session.toml, or `out_dir` is the session folder.
+        Invalid session folder or session.toml, or `out_dir` is the session folder;
+        a session of an N-marker target (``[target]`` in session.toml, reason
+        ``target_not_processed``): its images are measured with
+        :func:`vision_torsion.rigid.measure_target_folder` for now.
     ManifestError
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
@@ -406,6 +409,11 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
+    if session.config.target is not None:  # two markers of it would give an angle, with no check of the rest
+        raise SessionError(f"{session.folder / 'session.toml'}: [target] names the {session.config.target.n_markers}"
+                           f"-marker target {session.config.target.name!r}, which `process` does not measure yet; "
+                           "measure each orientation's images with `vision-torsion measure IMAGES --reference REF "
+                           "--target FILE|NAME`", reason="target_not_processed")
     out = output_folder(session.folder, out_dir)
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "

@@ -235,6 +235,22 @@ class Watcher:
                 return i, row
         return None
 
+    def _vanished(self, names) -> list[WatchEvent]:
+        """A notice for each file seen before that is no longer among `names`."""
+        events = []
+        for name in sorted(set(self.seen) - names):
+            info = self.seen.pop(name)
+            if name in self.done:
+                pos = next((p for p, b in self.bound.items() if b.file == name), None)
+                where = f", bound to {row_text(self.rows[pos])}" if pos is not None else ""
+                events.append(self._notice("deleted", name, f"{name} was deleted after it was "
+                                           f"measured{where}; its measurement is kept (cache), "
+                                           "but process and bind will need the file back"))
+            elif info is not None:
+                events.append(self._notice("deleted", name, f"{name} was deleted before it was "
+                                           "complete; not bound"))
+        return events
+
     def tick(self, now: float | None = None) -> list[WatchEvent]:
         """Look at the camera folder once; return what happened (module docstring)."""
         now = self.clock() if now is None else now
@@ -251,18 +267,7 @@ class Watcher:
         if self.folder_gone:
             self.folder_gone = False
             events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is back"))
-        names = {e.name for e in entries}
-        for name in sorted(set(self.seen) - names):
-            info = self.seen.pop(name)
-            if name in self.done:
-                pos = next((p for p, b in self.bound.items() if b.file == name), None)
-                where = f", bound to {row_text(self.rows[pos])}" if pos is not None else ""
-                events.append(self._notice("deleted", name, f"{name} was deleted after it was "
-                                           f"measured{where}; its measurement is kept (cache), "
-                                           "but process and bind will need the file back"))
-            elif info is not None:
-                events.append(self._notice("deleted", name, f"{name} was deleted before it was "
-                                           "complete; not bound"))
+        events += self._vanished({e.name for e in entries})
         ready, unsettled, changed_bound = [], [], []
         wall = time.time()
         for e in entries:

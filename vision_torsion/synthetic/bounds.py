@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import CameraMapping, marker_centres_disk
+from .geometry import CameraMapping, marker_centres_disk, marker_centres_image
 from .render import light_field, paint_circle
 from .scene import Scene
 
-__all__ = ["centre_covariance_bound", "angle_bound_deg"]
+__all__ = ["centre_covariance_bound", "angle_bound_deg", "target_angle_bound_deg"]
 
 
 def _marker_patch(scene: Scene, mapping, params, box):
@@ -142,3 +142,55 @@ def angle_bound_deg(scene: Scene, angle_deg: float = 0.0, *, reference_deg: floa
         c = marker_centres_disk(scene, a)[:2]
         total += _line_var(c, centre_covariance_bound(scene, a)[:2])
     return float(np.degrees(np.sqrt(total)))
+
+
+def target_angle_bound_deg(scene: Scene, angle_deg: float = 0.0, *, reference_deg: float = 0.0) -> float:
+    """Cramér-Rao bound (1σ, degrees) of the rotation from **all** the scene's markers.
+
+    The centres' bounds (:func:`centre_covariance_bound`, both images) are combined
+    through the weighted rigid fit the measurement makes
+    (:func:`vision_torsion.rigid.fit_rigid`, errors in both images): each marker's
+    pixels are independent of the others', so this is the bound of the angle with
+    every centre, radius and grey level of both images a nuisance parameter. With
+    two markers it equals :func:`angle_bound_deg`.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene (an N-marker target: :func:`~vision_torsion.synthetic.target_scene`).
+    angle_deg, reference_deg : float
+        Rotation of the current and of the reference image (deg).
+
+    Returns
+    -------
+    float
+        Smallest standard deviation (deg) of an unbiased angle from these two images.
+
+    Examples
+    --------
+    >>> s = Scene()
+    >>> bool(abs(target_angle_bound_deg(s, 10.0) / angle_bound_deg(s, 10.0) - 1) < 1e-6)
+    True
+    """
+    from ..rigid import fit_rigid
+
+    ref = marker_centres_image(scene, reference_deg)
+    cur = marker_centres_image(scene, angle_deg)
+    fit = fit_rigid(ref, _image_cov(scene, reference_deg), cur, _image_cov(scene, angle_deg), reject_sigma=np.inf)
+    return float(fit.angle_std_deg)
+
+
+def _image_cov(scene, angle_deg):
+    """Centre bounds in image coordinates: the disk-plane bounds through the camera's Jacobian."""
+    mapping = CameraMapping(scene)
+    cov = centre_covariance_bound(scene, angle_deg)
+    if mapping.is_identity:
+        return cov
+    out = np.empty_like(cov)
+    for k, (X, Y) in enumerate(marker_centres_disk(scene, angle_deg)):
+        h = 1e-3
+        jx = (np.array(mapping.to_image(X + h, Y)) - np.array(mapping.to_image(X - h, Y))) / (2 * h)
+        jy = (np.array(mapping.to_image(X, Y + h)) - np.array(mapping.to_image(X, Y - h))) / (2 * h)
+        J = np.column_stack([jx, jy])
+        out[k] = J @ cov[k] @ J.T
+    return out

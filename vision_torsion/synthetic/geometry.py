@@ -30,8 +30,9 @@ def marker_centres_disk(scene, angle_deg):
     """Marker centres on the disk plane (px) at disk rotation `angle_deg`; shape (n, 2)."""
     mk, disk = scene.markers, scene.disk
     phi = np.deg2rad(np.asarray(mk.positions_deg, dtype=np.float64) + angle_deg)
+    dist = np.asarray(mk.distances(), dtype=np.float64)
     return np.stack(
-        [disk.center_x + mk.distance_px * np.cos(phi), disk.center_y - mk.distance_px * np.sin(phi)],
+        [disk.center_x + dist * np.cos(phi), disk.center_y - dist * np.sin(phi)],
         axis=-1,
     )
 

@@ -9,7 +9,8 @@ output bit depth, angles in degrees counter-clockwise as displayed)::
 
     [image]            width, height, bit_depth
     [disk]             center_x*, center_y*, background_level*, radius_px, outside_level
-    [markers]          polarity*, level*, radius_px*, distance_px*, positions_deg, radii_px
+    [markers]          polarity*, level*, radius_px*, distance_px*, positions_deg, radii_px,
+                       distances_px
     [optics]           blur_sigma_px, tilt_deg, tilt_axis_deg, focal_length_px, radial_k1
     [noise]            read_noise_dn, shot_noise, electrons_per_dn, jpeg_quality
     [lighting]         gradient_x, gradient_y, vignetting
@@ -76,7 +77,9 @@ class MarkerSpec:
     counter-clockwise as displayed from the +x axis. ``radii_px``, when given, is
     each marker's own radius (one per position), e.g. ``[35, 25]`` for a target
     whose two markers can never be mistaken for each other; otherwise every
-    marker has ``radius_px``.
+    marker has ``radius_px``. ``distances_px``, when given, is each marker's own
+    distance from the centre (a grid target, see
+    :func:`~vision_torsion.synthetic.target_scene`); otherwise ``distance_px``.
     """
 
     polarity: str = "dark"
@@ -85,10 +88,15 @@ class MarkerSpec:
     distance_px: float = 300.0
     positions_deg: tuple = (0.0, 180.0)
     radii_px: tuple = ()
+    distances_px: tuple = ()
 
     def radii(self) -> tuple:
         """Radius (px) of each marker, in the order of ``positions_deg``."""
         return tuple(self.radii_px) if self.radii_px else (self.radius_px,) * len(self.positions_deg)
+
+    def distances(self) -> tuple:
+        """Distance (px) of each marker from the rotation centre, in the order of ``positions_deg``."""
+        return tuple(self.distances_px) if self.distances_px else (self.distance_px,) * len(self.positions_deg)
 
 
 @dataclass(frozen=True)
@@ -342,6 +350,12 @@ def validate_scene(scene: Scene, *, where: str = "") -> None:
         raise SceneError(f"{p}[markers] radii_px must all be positive, got {list(mk.radii_px)}")
     if mk.distance_px < 0:
         raise SceneError(f"{p}[markers] distance_px must not be negative, got {mk.distance_px}")
+    if mk.distances_px and len(mk.distances_px) != len(mk.positions_deg):
+        raise SceneError(
+            f"{p}[markers] distances_px has {len(mk.distances_px)} value(s) for {len(mk.positions_deg)} positions_deg"
+        )
+    if any(d < 0 for d in mk.distances_px):
+        raise SceneError(f"{p}[markers] distances_px must not be negative, got {list(mk.distances_px)}")
     if len(mk.positions_deg) < 1:
         raise SceneError(f"{p}[markers] positions_deg needs at least one marker")
     if op.blur_sigma_px < 0:
@@ -364,11 +378,11 @@ def validate_scene(scene: Scene, *, where: str = "") -> None:
     if d.bolt_hole_radius_px <= 0 or d.dust_radius_px <= 0 or d.wire_width_px <= 0:
         raise SceneError(f"{p}[distractors] radii and widths must be positive")
     # marker overlap (on the disk, rotation-invariant)
-    pos, radii = mk.positions_deg, mk.radii()
+    pos, radii, dist = mk.positions_deg, mk.radii(), mk.distances()
     for i in range(len(pos)):
         for j in range(i + 1, len(pos)):
             dphi = math.radians(pos[i] - pos[j])
-            sep = 2 * mk.distance_px * abs(math.sin(dphi / 2))
+            sep = math.sqrt(max(dist[i] ** 2 + dist[j] ** 2 - 2 * dist[i] * dist[j] * math.cos(dphi), 0.0))
             if sep < radii[i] + radii[j] + 2:
                 raise SceneError(
                     f"{p}[markers] markers {i + 1} and {j + 1} overlap "
