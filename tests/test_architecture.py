@@ -19,7 +19,7 @@ LAYERS = [
     (0, "foundation", ["vision_torsion", "vision_torsion._lazy", "vision_torsion.errors", "vision_torsion.fileio",
                        "vision_torsion.textfiles", "vision_torsion.resources", "vision_torsion.numerics",
                        "vision_torsion.batch", "vision_torsion.measurements", "vision_torsion.settings",
-                       "vision_torsion.plotting"]),
+                       "vision_torsion.plotting", "vision_torsion.validate"]),
     (1, "image", ["vision_torsion.images", "vision_torsion.quality"]),
     (2, "markers", ["vision_torsion._ring", "vision_torsion.detect", "vision_torsion.edges",
                     "vision_torsion.pixelfit", "vision_torsion.circlefit", "vision_torsion.markers"]),

@@ -1,0 +1,184 @@
+"""Limits checked before work (issue 30): each refused with one line naming the
+file, row or parameter, exit status 2 from the command line, no traceback.
+
+Every input is generated here at run time (sparse files, crafted headers); nothing
+outside the test's own folders is touched.
+"""
+
+from __future__ import annotations
+
+import pytest
+from helpers import make_session, tree_digest
+
+from vision_torsion.cli import main
+from vision_torsion.errors import ManifestError, SessionError
+from vision_torsion.session.manifest import load_manifest
+from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_session
+from vision_torsion.session.plausibility import MAX_STEPS_PER_PHASE
+
+
+def run(capsys, *argv):
+    """(status, stdout, stderr) of the command line; no traceback, one error line."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err and "internal error" not in err, err
+    return code, out, err
+
+
+@pytest.fixture
+def session(tmp_path):
+    folder = tmp_path / "session"
+    make_session(folder, orientations=(0,))
+    return folder
+
+
+def _edit(path, old, new, count=1):
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, count))
+
+
+# -- session.toml ---------------------------------------------------------------------
+
+
+def test_a_deeply_nested_session_toml_is_refused(capsys, session, tmp_path):
+    (session / "session.toml").write_text("x = " + "[" * 3000 + "]" * 3000 + "\n")
+    code, _, err = run(capsys, "process", session, "-o", tmp_path / "out")
+    assert code == 2
+    assert "session.toml: not valid TOML (tables or arrays nested deeper than 32 levels)" in err
+
+
+def test_a_400_digit_integer_in_session_toml_is_refused(capsys, session, tmp_path):
+    _edit(session / "session.toml", "cycles = 1", "cycles = " + "7" * 400)
+    code, _, err = run(capsys, "process", session, "-o", tmp_path / "out")
+    assert code == 2
+    assert "session.toml: protocol.cycles is an integer beyond TOML's 64 bits" in err
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("step_mass_kg = 0.02", "step_mass_kg = 1e308",
+     r"protocol\.step_mass_kg: must be a finite number > 0 \(kg\) \(its magnitude is limited to 1e\+12\), "
+     r"got 1e\+308"),
+    ("max_torque_nm = 0.03924", "max_torque_nm = 1e308",
+     r"protocol\.max_torque_nm: must be a finite number > 0 \(N·m\) \(its magnitude is limited to 1e\+12\)"),
+])
+def test_1e308_in_session_toml_is_refused_by_key(session, old, new, message):
+    _edit(session / "session.toml", old, new)
+    from vision_torsion.session.load import load_session
+
+    with pytest.raises(SessionError, match=message):
+        load_session(session)
+
+
+def test_a_max_torque_of_millions_of_pieces_is_refused_by_process(session):
+    _edit(session / "session.toml", "max_torque_nm = 0.03924", "max_torque_nm = 1e9")
+    from vision_torsion.session.load import load_session
+
+    with pytest.raises(SessionError, match=rf"protocol\.max_torque_nm = 1e\+09 N·m needs 5\.1e\+10 pieces of "
+                                           rf"0\.02 kg per pan, more than the {MAX_STEPS_PER_PHASE} a protocol"):
+        load_session(session)
+
+
+# -- plan: the same rules as process, and its size, before anything is written ------------
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--max-torque", "1", "--step-mass", "1e-9"],
+     r"protocol\.step_mass_kg = 1e-09 kg is outside 0\.0001\.\.50 kg"),
+    (["--steps", "1000000", "--step-mass", "0.02"],
+     rf"protocol\.max_torque_nm = 19620 N·m needs 1e\+06 pieces of 0\.02 kg per pan, more than the "
+     rf"{MAX_STEPS_PER_PHASE}"),
+    (["--max-torque", "1", "--step-mass", "0.02", "--gravity", "981"],
+     r"rig\.gravity_m_per_s2 = 981 m/s² is outside the Earth's 9\.76\.\.9\.84 m/s²: cm/s²\?"),
+])
+def test_plan_refuses_what_process_would_refuse(capsys, tmp_path, argv, message):
+    out = tmp_path / "plan"
+    code, _, err = run(capsys, "plan", out, "--arm-radius", "0.05", "--no-pdf", *argv)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("error: plan_session: ")
+    import re
+
+    assert re.search(message, err), err
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_plan_refuses_an_arm_radius_in_millimetres(tmp_path):
+    with pytest.raises(SessionError, match=r"plan_session: 1 implausible value\(s\)\n  rig\.arm_radius_m = 50 m "
+                                           r"is outside 0\.001\.\.2 m: millimetres\?"):
+        plan_session(tmp_path, max_torque_nm=1.0, step_mass_kg=0.02, arm_radius_m=50)
+    assert not any(tmp_path.iterdir())
+
+
+def test_plan_size_is_checked_before_writing(tmp_path):
+    orientations = tuple(range(0, 360, 1))  # 360 orientations x (2 + 4 x 100 steps x 1 cycle)
+    with pytest.raises(SessionError, match=rf"plan_session: 144720 images \(360 orientation\(s\) × \(2 \+ 4 phases × "
+                                           rf"100 steps × 1 cycle\(s\)\)\), more than the {MAX_PLAN_IMAGES} a plan"):
+        plan_session(tmp_path, steps=100, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=orientations)
+    assert not any(tmp_path.iterdir())
+
+
+def test_plan_steps_must_be_whole(tmp_path):
+    with pytest.raises(SessionError, match=r"plan_session: steps must be a whole number >= 1, got 2\.5"):
+        plan_session(tmp_path, steps=2.5, step_mass_kg=0.02, arm_radius_m=0.05)
+
+
+# -- manifest ----------------------------------------------------------------------------
+
+
+def test_a_manifest_cell_over_the_csv_field_limit_names_its_line(capsys, session, tmp_path):
+    manifest = session / "manifest.csv"
+    lines = manifest.read_text().splitlines(keepends=True)
+    lines[3] = lines[3].rstrip("\n") + ',"unclosed note\n'
+    text = lines[0].rstrip("\n") + ",notes\n" + "".join(
+        line if i == 3 else line.rstrip("\n") + ",\n" for i, line in enumerate(lines[1:], 1))
+    manifest.write_text(text + ("x" * 1000 + "\n") * 200)  # 200 kB inside one quoted field
+    before = tree_digest(session)
+    code, _, err = run(capsys, "process", session, "-o", tmp_path / "out")
+    assert code == 2
+    assert "manifest.csv: line 4: cannot be read as CSV (field larger than field limit (131072)); a field that " \
+           "long is usually a quote (\") opened and never closed" in err
+    assert tree_digest(session) == before
+
+
+def test_a_loaded_step_with_zero_mass_is_refused(session):
+    manifest = session / "manifest.csv"
+    rows = manifest.read_text().splitlines()
+    n = next(i for i, r in enumerate(rows) if ",positive_loading,1," in r)
+    rows[n] = rows[n].rsplit(",", 1)[0] + ",0"
+    manifest.write_text("\n".join(rows) + "\n")
+    with pytest.raises(ManifestError, match=rf"line {n + 1}: mass_kg '0' on step 1 of a positive_loading row; "
+                                           r"a loading step has weights on its pans"):
+        load_manifest(manifest, check_files=False)
+
+
+@pytest.mark.parametrize("value", ["1e308", "-1e200"])
+def test_an_absurd_manifest_mass_names_its_line(session, value):
+    manifest = session / "manifest.csv"
+    rows = manifest.read_text().splitlines()
+    rows[2] = rows[2].rsplit(",", 1)[0] + f",{value}"
+    manifest.write_text("\n".join(rows) + "\n")
+    with pytest.raises(ManifestError, match=r"line 3: mass_kg .*(limited to 1e\+12|is negative)"):
+        load_manifest(manifest, check_files=False)
+
+
+def test_an_absurd_manifest_torque_names_its_line(session):
+    manifest = session / "manifest.csv"
+    rows = manifest.read_text().splitlines()
+    rows[0] += ",torque_nm,torque_std_nm"
+    rows[1:] = [r + ",," for r in rows[1:]]
+    rows[2] = rows[2][:-2] + ",1e308,0.001"
+    manifest.write_text("\n".join(rows) + "\n")
+    with pytest.raises(ManifestError, match=r"line 3: torque_nm must be a finite number \(its magnitude is limited "
+                                           r"to 1e\+12\), got 1e\+308; expected a measured torque in N·m"):
+        load_manifest(manifest, check_files=False)
+
+
+def test_a_self_referencing_symlink_among_photos_is_an_error(capsys, session, tmp_path):
+    image = session / load_manifest(session / "manifest.csv").rows[2].image
+    image.unlink()
+    image.symlink_to(image.name)
+    with pytest.raises(ManifestError, match=rf"line 4: image '{image.relative_to(session).as_posix()}' is a "
+                                           r"symbolic link that cannot be followed \(Too many levels"):
+        load_manifest(session / "manifest.csv", missing="pending")
+    code, _, err = run(capsys, "process", session, "-o", tmp_path / "out", "--jobs", "1")
+    assert code == 2 and "is a symbolic link that cannot be followed" in err
