@@ -182,3 +182,97 @@ def test_a_self_referencing_symlink_among_photos_is_an_error(capsys, session, tm
         load_manifest(session / "manifest.csv", missing="pending")
     code, _, err = run(capsys, "process", session, "-o", tmp_path / "out", "--jobs", "1")
     assert code == 2 and "is a symbolic link that cannot be followed" in err
+
+
+# -- binding.json edited by hand ---------------------------------------------------------
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("missing", ["x"], r"'missing' is \['x'\]; expected a list of manifest line numbers \(whole numbers >= 2\)"),
+    ("missing", 3, r"'missing' is 3; expected a list of manifest line numbers"),
+    ("skipped", "IMG_1.png", r"'skipped' is 'IMG_1\.png'; expected a list of camera file names"),
+    ("by", 7, r"'by' is 7; expected \"time\" or \"name\""),
+])
+def test_a_hand_edited_binding_with_a_wrong_type_names_the_key(capsys, session, tmp_path, key, value, message):
+    import json
+    import re
+
+    camera = tmp_path / "camera"
+    camera.mkdir()
+    doc = {"format": 1, "camera_dir": str(camera), "by": "time", "images": {}, "skipped": [], "missing": []}
+    doc[key] = value
+    (session / "binding.json").write_text(json.dumps(doc))
+    code, _, err = run(capsys, "process", session, "-o", tmp_path / "out")
+    assert code == 2
+    assert re.search(r"binding\.json: " + message + r".*; run `vision-torsion bind` again", err), err
+
+
+# -- the stiffness rig file and records ------------------------------------------------
+
+
+def test_a_rig_file_with_text_for_a_list_names_the_constant(capsys, tmp_path):
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[rig]\ntransmission_ratio = 100\n[meshing]\ncheck_torque_nm = "2,5,10"\n'
+                   "check_pairs = [15, 28, 37]\n")
+    record = tmp_path / "r.csv"
+    record.write_text("time_s,torque_nm,input_angle_deg\n" + "".join(f"{i},{i % 7},{i}\n" for i in range(40)))
+    code, _, err = run(capsys, "stiffness", record, "--rig", rig, "-o", tmp_path / "out")
+    assert code == 2
+    assert "rig.toml: rig constant check_torque_nm must be a list of numbers, got '2,5,10'" in err
+
+
+def test_a_rig_file_with_text_in_a_list_names_the_element(tmp_path):
+    from vision_torsion.errors import RigError
+    from vision_torsion.stiffness.rig import load_rig
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[meshing]\ncheck_torque_nm = [2, "5", 10]\ncheck_pairs = [15, 28, 37]\n')
+    with pytest.raises(RigError, match=r"rig constant check_torque_nm\[1\] must be a finite number, got '5'"):
+        load_rig(rig)
+
+
+def _encoder_record(path, change):
+    rows = [[f"{0.1 * i:.1f}", f"{(i % 20) / 4:g}", f"{i * 3}"] for i in range(40)]
+    change(rows)
+    path.write_text("time_s,torque_nm,input_angle_deg\n" + "".join(",".join(r) + "\n" for r in rows))
+    return path
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda r: r[5].__setitem__(0, r[4][0]),
+     r"column 'time_s' must be strictly increasing; line 7 \(t = 0\.4 s\) does not come after line 6"),
+    (lambda r: r[5].__setitem__(0, "0.1"),
+     r"column 'time_s' must be strictly increasing; line 7 \(t = 0\.1 s\) does not come after line 6"),
+    (lambda r: r[7].__setitem__(1, "nan"), r"column 'torque_nm' has a missing, non-numeric or infinite value "
+                                           r"'nan' on line 9"),
+    (lambda r: r[7].__setitem__(1, "inf"), r"column 'torque_nm' has a missing, non-numeric or infinite value "
+                                           r"inf on line 9"),
+    (lambda r: r[7].__setitem__(1, "2.5 Nm"), r"column 'torque_nm' has a missing, non-numeric or infinite value "
+                                              r"'2\.5 Nm' on line 9"),
+    (lambda r: r[7].__setitem__(2, "1e150"), r"line 9: column 'input_angle_deg' must be a finite number \(its "
+                                             r"magnitude is limited to 1e\+12\), got 1e\+150"),
+])
+def test_stiffness_record_messages_name_the_row(tmp_path, change, message):
+    from vision_torsion.errors import RecordError
+    from vision_torsion.stiffness.records import read_record
+    from vision_torsion.stiffness.rig import RigConstants
+
+    path = _encoder_record(tmp_path / "r.csv", change)
+    with pytest.raises(RecordError, match=r"r\.csv: " + message):
+        read_record(path, rig=RigConstants(transmission_ratio=100))
+
+
+# -- measurements.csv: absurd magnitudes refused at read time, by row -----------------------
+
+
+def test_analyze_with_one_value_of_1e150_names_the_row(capsys, tmp_path):
+    from vision_torsion.measurements import MEASUREMENT_COLUMNS
+
+    rows = [["a.png", "0", "1", "reference", "0", "0", "0", "0.001", "0", "0.001", "ok", ""],
+            ["b.png", "0", "1", "positive_loading", "1", "0.02", "0.0196", "0.001", "1e150", "0.001", "ok", ""]]
+    table = tmp_path / "measurements.csv"
+    table.write_text(",".join(MEASUREMENT_COLUMNS) + "\n" + "".join(",".join(r) + "\n" for r in rows))
+    code, _, err = run(capsys, "analyze", table, "-o", tmp_path / "out")
+    assert code == 2
+    assert "line 3: column angle_deg must be a finite number (its magnitude is limited to 1e+12), got 1e+150" in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())

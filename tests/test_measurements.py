@@ -63,7 +63,8 @@ def test_missing_value_after_failed_rows_names_its_csv_line(tmp_path):
     table.loc[1:2, "status"] = "failed"
     table.loc[4, "angle_deg"] = np.nan  # ok row at position 4: line 6 (was "data row 3")
     path = _write(tmp_path, table)
-    with pytest.raises(RecordError, match=r"column 'angle_deg' has a missing or non-numeric value \(blank\) on line 6"):
+    with pytest.raises(RecordError, match=r"column 'angle_deg' has a missing, non-numeric or infinite value "
+                                          r"\(blank\) on line 6"):
         read_record(path)
 
 

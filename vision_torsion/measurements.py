@@ -20,6 +20,7 @@ beside :mod:`.settings`.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import MISSING, asdict, dataclass, fields
@@ -29,6 +30,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import MeasurementsError, RigError
+from .textfiles import read_text_bytes
+from .validate import MAX_MAGNITUDE, number_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is read (see _read_csv)
     import pandas as pd
@@ -245,12 +248,13 @@ def csv_line(position: int) -> int:
 def _read_csv(path: Path, name: str) -> pd.DataFrame:
     import pandas as pd  # here, not at the top: `process` uses this module without pandas
 
+    if not path.exists():
+        raise MeasurementsError(f"{name}: no such file", reason="not_found")
+    raw = read_text_bytes(path, what="a measurements table", error=MeasurementsError)  # size checked first
     try:
         # blank cells are missing values; text such as "NA" is not silently one
-        return pd.read_csv(path, keep_default_na=False, na_values=[""])
-    except FileNotFoundError:
-        raise MeasurementsError(f"{name}: no such file", reason="not_found") from None
-    except (OSError, UnicodeDecodeError, ValueError, pd.errors.ParserError) as exc:
+        return pd.read_csv(io.BytesIO(raw), keep_default_na=False, na_values=[""])
+    except (UnicodeDecodeError, ValueError, pd.errors.ParserError) as exc:
         raise MeasurementsError(f"{name}: cannot be read as CSV ({exc})", reason="unreadable") from None
 
 
@@ -284,7 +288,9 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
     MeasurementsError
         The file is missing or not CSV; `source` is neither a path nor a DataFrame;
         a needed column is missing; or rows have problems: text that is not a number
-        in a numeric column, a negative mass or uncertainty, an unknown phase. Every
+        in a numeric column, a number that is infinite or beyond
+        :data:`~vision_torsion.validate.MAX_MAGNITUDE` (checked here, at read time,
+        so no analysis overflows), a negative mass or uncertainty, an unknown phase. Every
         row problem is listed (the first 20, then a count), each with its CSV line
         number and column.
 
@@ -338,6 +344,9 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
             bad = num.isna() & raw.notna() & (text != "") & (text.str.lower() != "nan")
             problems += [(line, f"column {col} is not a number ({raw[line]!r})") for line in raw.index[bad]]
             out[col] = num
+        with np.errstate(invalid="ignore"):  # NaN is a blank cell, not a huge one
+            huge = np.abs(out[col].to_numpy()) > MAX_MAGNITUDE  # inf included
+        problems += [(line, f"column {col} {number_problem(float(out[col][line]))}") for line in out.index[huge]]
         if col in _NON_NEGATIVE:
             neg = out[col] < 0
             problems += [(line, f"{col} is negative ({out[col][line]:g})") for line in out.index[neg]]
