@@ -276,3 +276,155 @@ def test_analyze_with_one_value_of_1e150_names_the_row(capsys, tmp_path):
     assert code == 2
     assert "line 3: column angle_deg must be a finite number (its magnitude is limited to 1e+12), got 1e+150" in err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+# -- images: size and header before reading and decoding ---------------------------------
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    import struct
+    import zlib
+
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def _png(width, height, *, bits=8, colour_type=0, rows=b""):
+    import struct
+    import zlib
+
+    ihdr = struct.pack(">IIBBBBB", width, height, bits, colour_type, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", zlib.compress(rows))
+            + _chunk(b"IEND", b""))
+
+
+def _deflate_tiff(width, height, *, bits=8):
+    """A little-endian TIFF whose IFD0 declares `width` x `height` px and whose one
+    strip is a small deflate stream (the decoder would inflate it to width*height bytes)."""
+    import struct
+    import zlib
+
+    data = zlib.compress(b"\0" * 1_000_000, 9)  # ~1 kB standing for a huge image
+    entries = [(256, 4, 1, width), (257, 4, 1, height), (258, 3, 1, bits), (259, 3, 1, 8),
+               (262, 3, 1, 1), (273, 4, 1, 8), (277, 3, 1, 1), (278, 4, 1, height), (279, 4, 1, len(data))]
+    ifd_at = 8 + len(data)
+    ifd = struct.pack("<H", len(entries)) + b"".join(
+        struct.pack("<HHI", tag, kind, n) + (struct.pack("<HH", value, 0) if kind == 3 else struct.pack("<I", value))
+        for tag, kind, n, value in entries) + struct.pack("<I", 0)
+    return b"II*\x00" + struct.pack("<I", ifd_at) + data + ifd
+
+
+def test_a_deflate_tiff_declaring_32000_px_is_refused_before_decoding(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import image_size, load_image
+
+    raw = _deflate_tiff(32000, 32000)
+    assert len(raw) < 10_000 and image_size(raw, "tiff") == (32000, 32000)
+    path = tmp_path / "huge.tif"
+    path.write_bytes(raw)
+    with pytest.raises(ImageReadError, match=r"huge\.tif: image larger than the limit \(32000x32000 px = 1024 Mpx; "
+                                             r"at most 268 Mpx\)"):
+        load_image(path)
+
+
+def test_a_tiff_header_that_states_no_size_is_refused(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import load_image
+
+    path = tmp_path / "cut.tif"
+    path.write_bytes(b"II*\x00" + (999_999).to_bytes(4, "little") + b"\0" * 64)
+    with pytest.raises(ImageReadError, match=r"cut\.tif: corrupt TIFF header \(it does not state the image size\)"):
+        load_image(path)
+
+
+def test_a_sparse_3_gb_png_is_refused_before_it_is_read(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import MAX_IMAGE_FILE_BYTES, load_image
+
+    path = tmp_path / "huge.png"
+    path.write_bytes(_png(100, 100))
+    with open(path, "r+b") as fh:
+        fh.truncate(3 * 1024**3)  # sparse: no disk used, and reading it would take 3 GB
+    with pytest.raises(ImageReadError, match=rf"huge\.png: 3221225472 bytes, larger than an image file may be "
+                                             rf"\({MAX_IMAGE_FILE_BYTES} bytes\)") as info:
+        load_image(path)
+    assert info.value.reason == "too_large"
+
+
+def test_a_file_that_is_no_image_is_refused_from_its_first_bytes(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import read_image_bytes
+
+    path = tmp_path / "notes.png"
+    with open(path, "wb") as fh:
+        fh.write(b"just text")
+        fh.truncate(1024**3)
+    with pytest.raises(ImageReadError, match=r"notes\.png: not a PNG, TIFF, BMP or JPEG image \(unrecognised"):
+        read_image_bytes(path)
+
+
+def test_a_1_bit_png_is_refused_naming_the_file(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import load_image
+
+    path = tmp_path / "bw.png"
+    path.write_bytes(_png(16, 16, bits=1, rows=b"".join(b"\x00\xaa\x55" for _ in range(16))))
+    with pytest.raises(ImageReadError, match=r"bw\.png: 1-bit PNG \(black and white or few grey levels\); the "
+                                             r"markers' edges are fitted to grey levels") as info:
+        load_image(path)
+    assert info.value.reason == "unsupported_image"
+
+
+def test_a_1_bit_tiff_is_refused_naming_the_file(tmp_path):
+    from vision_torsion.errors import ImageReadError
+    from vision_torsion.images import load_image
+
+    path = tmp_path / "bw.tif"
+    path.write_bytes(_deflate_tiff(64, 64, bits=1))
+    with pytest.raises(ImageReadError, match=r"bw\.tif: 1-bit TIFF"):
+        load_image(path)
+
+
+def test_one_unreadable_image_does_not_stop_a_measure_batch(capsys, tmp_path, monkeypatch):
+    from helpers import draw_target
+
+    from vision_torsion import images as images_module
+    from vision_torsion.images import write_image
+
+    folder = tmp_path / "photos"
+    for i, angle in enumerate((0.0, 1.0, 2.0)):
+        write_image(folder / f"img_{i}.png", draw_target(angle))
+    locked = folder / "img_1.png"
+    real_open = open
+
+    def refuse(path, *a, **kw):  # chmod cannot lock a file away from root: the open fails instead
+        if str(path) == str(locked):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, *a, **kw)
+
+    monkeypatch.setattr(images_module, "open", refuse, raising=False)
+    code, out, err = run(capsys, "measure", folder, "--reference", folder / "img_0.png", "-o", tmp_path / "out")
+    assert code == 1
+    assert "2 of 3 images measured" in out
+    assert "failed: " in err and "img_1.png: cannot be read (Permission denied)" in err
+
+
+def test_few_open_files_degrade_process_to_threads(tmp_path):
+    import os
+    import resource
+    import subprocess
+    import sys
+
+    folder = tmp_path / "session"
+    make_session(folder, orientations=(0,))
+
+    def low_limit():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (16, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    done = subprocess.run([sys.executable, "-m", "vision_torsion", "process", str(folder), "-o",
+                           str(tmp_path / "out"), "-j", "4"], capture_output=True, text=True, cwd=root,
+                          preexec_fn=low_limit, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert ("WARNING: only 16 files may be open (ulimit -n), too few for 4 worker processes; measuring with 3 "
+            "threads of this process instead") in done.stderr
+    assert "Traceback" not in done.stderr and "internal error" not in done.stderr

@@ -20,14 +20,14 @@ import os
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import cv2
 import xxhash
 from threadpoolctl import threadpool_limits
 
 from ..batch import attempt
-from ..images import GreyImage, decode_image
+from ..errors import ImageReadError
+from ..images import GreyImage, decode_image, read_image_bytes
 from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
 from .cache import CacheLog
@@ -124,9 +124,10 @@ def read_task(task: tuple[str, str, str]) -> ReadImage:
     """
     path, settings_json, settings_key = task
     try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        why = json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"})
+        data = read_image_bytes(path, signature=False)  # its size checked before it is read; a non-image
+        # is refused by decode_image below, a failure cached by the file's hash
+    except ImageReadError as exc:
+        why = json.dumps({"status": "failed", "message": str(exc)})
         return ReadImage("", result=("", why, "unread"))
     image_hash = content_hash(data)
     key = digest(f"{image_hash}\n{settings_key}".encode())
