@@ -5,6 +5,7 @@ import pickle
 import pytest
 
 from vision_torsion import errors
+from vision_torsion.correction import PlaneCorrection
 from vision_torsion.errors import (
     ImageReadError,
     ManifestError,
@@ -14,6 +15,14 @@ from vision_torsion.errors import (
     SessionError,
     VisionTorsionError,
 )
+from vision_torsion.measurements import TorqueRig
+from vision_torsion.stiffness import (
+    RigConstants,
+    meshing_pairs,
+    realistic_encoder_record,
+    synthetic_encoder_record,
+)
+from vision_torsion.stiffness.branches import zero_band
 from vision_torsion.textfiles import MAX_TOML_DEPTH, parse_toml, read_text_bytes, read_toml
 from vision_torsion.validate import MAX_MAGNITUDE, check_number, describe_range, number_problem
 
@@ -141,3 +150,42 @@ def test_read_text_bytes_limit_and_loop(tmp_path):
     loop.symlink_to(loop)
     with pytest.raises(SessionError, match=r"loop\.toml: cannot be read \(Too many levels of symbolic links\)"):
         read_toml(loop, what="a session description", error=SessionError)
+
+
+# -- the checker where the hand-written checks were ------------------------------------
+
+
+@pytest.mark.parametrize("call, error, message", [
+    (lambda: synthetic_encoder_record(cycles=0),
+     errors.SceneError, r"^synthetic_encoder_record: cycles must be a whole number >= 1, got 0$"),
+    (lambda: synthetic_encoder_record(torque_noise_nm=-1),
+     errors.SceneError, r"^synthetic_encoder_record: torque_noise_nm must be a finite number >= 0 \(N·m\), got -1$"),
+    (lambda: realistic_encoder_record(friction_ratio=0.7),
+     errors.SceneError, r"^realistic_encoder_record: friction_ratio must be a finite number in \[0, 0\.5\), got 0\.7$"),
+    (lambda: realistic_encoder_record(bedding_in_deg=0.3),
+     errors.SceneError, r"^realistic_encoder_record: bedding_in_deg must be a finite number in \[0, 0\.2\) "
+                        r"\(degrees, below backlash_deg\), got 0\.3$"),
+    (lambda: realistic_encoder_record(sampling_rate_hz=60),
+     errors.SceneError, r"^realistic_encoder_record: sampling_rate_hz must be a finite number > 100 "
+                        r"\(Hz, above 2·hum_hz\), got 60$"),
+    (lambda: meshing_pairs(
+        [1.0], tooth_stiffness_nm_per_rad=float("nan")),
+     RigError, r"^rig constant tooth_stiffness_nm_per_rad must be a finite number > 0 \(N·m/rad\), got nan$"),
+    (lambda: zero_band([0.0, 1.0], threshold_nm=-2),
+     errors.AnalysisError, r"^threshold_nm must be a finite number > 0 \(N·m\), got -2$"),
+    (lambda: TorqueRig(
+        step_mass_kg="0.02", mass_std_kg=0, arm_radius_m=0.05),
+     RigError, r"^rig: step_mass_kg must be a finite number > 0, got '0\.02'$"),
+    (lambda: TorqueRig(
+        step_mass_kg=0.02, mass_std_kg=-1e-5, arm_radius_m=0.05),
+     RigError, r"^rig: mass_std_kg must be a finite number >= 0, got -1e-05$"),
+    (lambda: PlaneCorrection(
+        homography=[[1, 0, 0], [0, 1, 0], [0, 0, 1]], k1=float("inf")),
+     errors.CalibrationError, r"^k1 must be a finite number, got inf$"),
+    (lambda: RigConstants(teeth=160.5),
+     RigError, r"^rig constant teeth must be a whole number >= 1, got 160\.5$"),
+])
+def test_hand_written_checks_now_name_parameter_value_and_range(call, error, message):
+    with pytest.raises(error, match=message) as info:
+        call()
+    assert info.value.reason == "bad_value"

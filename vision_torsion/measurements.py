@@ -21,7 +21,6 @@ beside :mod:`.settings`.
 from __future__ import annotations
 
 import io
-import math
 import os
 from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
@@ -31,7 +30,7 @@ import numpy as np
 
 from .errors import MeasurementsError, RigError
 from .textfiles import read_text_bytes
-from .validate import MAX_MAGNITUDE, number_problem
+from .validate import MAX_MAGNITUDE, check_number, number_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is read (see _read_csv)
     import pandas as pd
@@ -187,15 +186,8 @@ class TorqueRig:
 
     def __post_init__(self):
         for f in fields(self):
-            v = getattr(self, f.name)
-            try:
-                v = float(v)
-            except (TypeError, ValueError):
-                raise RigError(f"rig: {f.name} must be a number, got {v!r}") from None
-            positive = f.name in self._POSITIVE
-            if not math.isfinite(v) or (v <= 0 if positive else v < 0):
-                raise RigError(f"rig: {f.name} must be a {'positive' if positive else 'non-negative'} "
-                               f"finite number, got {v!r}")
+            v = check_number(getattr(self, f.name), name=f"rig: {f.name}", error=RigError, low=0,
+                             low_open=f.name in self._POSITIVE)
             object.__setattr__(self, f.name, v)
 
     @classmethod

@@ -65,6 +65,7 @@ from ..measurements import output_folder
 from ..pair import measure_pair
 from ..settings import MeasureSettings
 from ..textfiles import csv_delimiter, decode_utf8, read_toml
+from ..validate import check_number
 
 __all__ = [
     "AccuracyResult",
@@ -353,9 +354,8 @@ def check_accuracy(
     if spec is not None and not isinstance(spec, AccuracySpec):
         spec = load_spec(spec)
     spec = spec or AccuracySpec()
-    tol = float(spec.tolerance_deg if tolerance_deg is None else tolerance_deg)
-    if not tol > 0:
-        raise ReferenceTableError(f"tolerance must be positive, got {tol!r} deg")
+    tol = check_number(spec.tolerance_deg if tolerance_deg is None else tolerance_deg, name="tolerance",
+                       error=ReferenceTableError, low=0, low_open=True, unit="degrees")
     settings = settings or spec.settings or MeasureSettings()
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)
