@@ -7,14 +7,29 @@ outside the test's own folders is touched.
 
 from __future__ import annotations
 
-import pytest
-from helpers import make_session, tree_digest
+import json
+import os
+import re
+import resource
+import struct
+import subprocess
+import sys
+import zlib
 
+import pytest
+from helpers import draw_target, make_session, tree_digest
+
+from vision_torsion import images as images_module
 from vision_torsion.cli import main
-from vision_torsion.errors import ManifestError, SessionError
+from vision_torsion.errors import ImageReadError, ManifestError, RecordError, RigError, SessionError
+from vision_torsion.images import MAX_IMAGE_FILE_BYTES, image_size, load_image, read_image_bytes, write_image
+from vision_torsion.measurements import MEASUREMENT_COLUMNS
+from vision_torsion.session.load import load_session
 from vision_torsion.session.manifest import load_manifest
 from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_session
 from vision_torsion.session.plausibility import MAX_STEPS_PER_PHASE
+from vision_torsion.stiffness.records import read_record
+from vision_torsion.stiffness.rig import RigConstants, load_rig
 
 
 def run(capsys, *argv):
@@ -64,7 +79,6 @@ def test_a_400_digit_integer_in_session_toml_is_refused(capsys, session, tmp_pat
 ])
 def test_1e308_in_session_toml_is_refused_by_key(session, old, new, message):
     _edit(session / "session.toml", old, new)
-    from vision_torsion.session.load import load_session
 
     with pytest.raises(SessionError, match=message):
         load_session(session)
@@ -72,7 +86,6 @@ def test_1e308_in_session_toml_is_refused_by_key(session, old, new, message):
 
 def test_a_max_torque_of_millions_of_pieces_is_refused_by_process(session):
     _edit(session / "session.toml", "max_torque_nm = 0.03924", "max_torque_nm = 1e9")
-    from vision_torsion.session.load import load_session
 
     with pytest.raises(SessionError, match=rf"protocol\.max_torque_nm = 1e\+09 N·m needs 5\.1e\+10 pieces of "
                                            rf"0\.02 kg per pan, more than the {MAX_STEPS_PER_PHASE} a protocol"):
@@ -96,7 +109,6 @@ def test_plan_refuses_what_process_would_refuse(capsys, tmp_path, argv, message)
     code, _, err = run(capsys, "plan", out, "--arm-radius", "0.05", "--no-pdf", *argv)
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("error: plan_session: ")
-    import re
 
     assert re.search(message, err), err
     assert not out.exists() or not any(out.iterdir())
@@ -194,8 +206,6 @@ def test_a_self_referencing_symlink_among_photos_is_an_error(capsys, session, tm
     ("by", 7, r"'by' is 7; expected \"time\" or \"name\""),
 ])
 def test_a_hand_edited_binding_with_a_wrong_type_names_the_key(capsys, session, tmp_path, key, value, message):
-    import json
-    import re
 
     camera = tmp_path / "camera"
     camera.mkdir()
@@ -222,8 +232,6 @@ def test_a_rig_file_with_text_for_a_list_names_the_constant(capsys, tmp_path):
 
 
 def test_a_rig_file_with_text_in_a_list_names_the_element(tmp_path):
-    from vision_torsion.errors import RigError
-    from vision_torsion.stiffness.rig import load_rig
 
     rig = tmp_path / "rig.toml"
     rig.write_text('[meshing]\ncheck_torque_nm = [2, "5", 10]\ncheck_pairs = [15, 28, 37]\n')
@@ -253,9 +261,6 @@ def _encoder_record(path, change):
                                              r"magnitude is limited to 1e\+12\), got 1e\+150"),
 ])
 def test_stiffness_record_messages_name_the_row(tmp_path, change, message):
-    from vision_torsion.errors import RecordError
-    from vision_torsion.stiffness.records import read_record
-    from vision_torsion.stiffness.rig import RigConstants
 
     path = _encoder_record(tmp_path / "r.csv", change)
     with pytest.raises(RecordError, match=r"r\.csv: " + message):
@@ -266,7 +271,6 @@ def test_stiffness_record_messages_name_the_row(tmp_path, change, message):
 
 
 def test_analyze_with_one_value_of_1e150_names_the_row(capsys, tmp_path):
-    from vision_torsion.measurements import MEASUREMENT_COLUMNS
 
     rows = [["a.png", "0", "1", "reference", "0", "0", "0", "0.001", "0", "0.001", "ok", ""],
             ["b.png", "0", "1", "positive_loading", "1", "0.02", "0.0196", "0.001", "1e150", "0.001", "ok", ""]]
@@ -282,15 +286,11 @@ def test_analyze_with_one_value_of_1e150_names_the_row(capsys, tmp_path):
 
 
 def _chunk(kind: bytes, data: bytes) -> bytes:
-    import struct
-    import zlib
 
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
 def _png(width, height, *, bits=8, colour_type=0, rows=b""):
-    import struct
-    import zlib
 
     ihdr = struct.pack(">IIBBBBB", width, height, bits, colour_type, 0, 0, 0)
     return (b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", zlib.compress(rows))
@@ -300,8 +300,6 @@ def _png(width, height, *, bits=8, colour_type=0, rows=b""):
 def _deflate_tiff(width, height, *, bits=8):
     """A little-endian TIFF whose IFD0 declares `width` x `height` px and whose one
     strip is a small deflate stream (the decoder would inflate it to width*height bytes)."""
-    import struct
-    import zlib
 
     data = zlib.compress(b"\0" * 1_000_000, 9)  # ~1 kB standing for a huge image
     entries = [(256, 4, 1, width), (257, 4, 1, height), (258, 3, 1, bits), (259, 3, 1, 8),
@@ -314,8 +312,6 @@ def _deflate_tiff(width, height, *, bits=8):
 
 
 def test_a_deflate_tiff_declaring_32000_px_is_refused_before_decoding(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import image_size, load_image
 
     raw = _deflate_tiff(32000, 32000)
     assert len(raw) < 10_000 and image_size(raw, "tiff") == (32000, 32000)
@@ -327,8 +323,6 @@ def test_a_deflate_tiff_declaring_32000_px_is_refused_before_decoding(tmp_path):
 
 
 def test_a_tiff_header_that_states_no_size_is_refused(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import load_image
 
     path = tmp_path / "cut.tif"
     path.write_bytes(b"II*\x00" + (999_999).to_bytes(4, "little") + b"\0" * 64)
@@ -337,8 +331,6 @@ def test_a_tiff_header_that_states_no_size_is_refused(tmp_path):
 
 
 def test_a_sparse_3_gb_png_is_refused_before_it_is_read(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import MAX_IMAGE_FILE_BYTES, load_image
 
     path = tmp_path / "huge.png"
     path.write_bytes(_png(100, 100))
@@ -351,8 +343,6 @@ def test_a_sparse_3_gb_png_is_refused_before_it_is_read(tmp_path):
 
 
 def test_a_file_that_is_no_image_is_refused_from_its_first_bytes(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import read_image_bytes
 
     path = tmp_path / "notes.png"
     with open(path, "wb") as fh:
@@ -362,33 +352,20 @@ def test_a_file_that_is_no_image_is_refused_from_its_first_bytes(tmp_path):
         read_image_bytes(path)
 
 
-def test_a_1_bit_png_is_refused_naming_the_file(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import load_image
-
-    path = tmp_path / "bw.png"
-    path.write_bytes(_png(16, 16, bits=1, rows=b"".join(b"\x00\xaa\x55" for _ in range(16))))
-    with pytest.raises(ImageReadError, match=r"bw\.png: 1-bit PNG \(black and white or few grey levels\); the "
-                                             r"markers' edges are fitted to grey levels") as info:
+@pytest.mark.parametrize("name, raw, message", [
+    ("bw.png", _png(16, 16, bits=1, rows=b"".join(b"\x00\xaa\x55" for _ in range(16))),
+     r"bw\.png: 1-bit PNG \(black and white or few grey levels\); the markers' edges are fitted to grey levels"),
+    ("bw.tif", _deflate_tiff(64, 64, bits=1), r"bw\.tif: 1-bit TIFF \(black and white"),
+])
+def test_a_1_bit_image_is_refused_naming_the_file(tmp_path, name, raw, message):
+    path = tmp_path / name
+    path.write_bytes(raw)
+    with pytest.raises(ImageReadError, match=message) as info:
         load_image(path)
     assert info.value.reason == "unsupported_image"
 
 
-def test_a_1_bit_tiff_is_refused_naming_the_file(tmp_path):
-    from vision_torsion.errors import ImageReadError
-    from vision_torsion.images import load_image
-
-    path = tmp_path / "bw.tif"
-    path.write_bytes(_deflate_tiff(64, 64, bits=1))
-    with pytest.raises(ImageReadError, match=r"bw\.tif: 1-bit TIFF"):
-        load_image(path)
-
-
 def test_one_unreadable_image_does_not_stop_a_measure_batch(capsys, tmp_path, monkeypatch):
-    from helpers import draw_target
-
-    from vision_torsion import images as images_module
-    from vision_torsion.images import write_image
 
     folder = tmp_path / "photos"
     for i, angle in enumerate((0.0, 1.0, 2.0)):
@@ -409,10 +386,6 @@ def test_one_unreadable_image_does_not_stop_a_measure_batch(capsys, tmp_path, mo
 
 
 def test_few_open_files_degrade_process_to_threads(tmp_path):
-    import os
-    import resource
-    import subprocess
-    import sys
 
     folder = tmp_path / "session"
     make_session(folder, orientations=(0,))
