@@ -203,7 +203,7 @@ def test_a_self_referencing_symlink_among_photos_is_an_error(capsys, session, tm
     ("missing", ["x"], r"'missing' is \['x'\]; expected a list of manifest line numbers \(whole numbers >= 2\)"),
     ("missing", 3, r"'missing' is 3; expected a list of manifest line numbers"),
     ("skipped", "IMG_1.png", r"'skipped' is 'IMG_1\.png'; expected a list of camera file names"),
-    ("by", 7, r"'by' is 7; expected \"time\" or \"name\""),
+    ("by", 7, r"'by' is 7; expected one of 'time', 'name', 'watch'"),
 ])
 def test_a_hand_edited_binding_with_a_wrong_type_names_the_key(capsys, session, tmp_path, key, value, message):
 

@@ -222,15 +222,8 @@ def load_spec(path) -> AccuracySpec:
         raise ReferenceTableError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
     for key in ("tolerance_deg", "reference_std_deg"):
         v = d.get(key, 0.0 if key == "reference_std_deg" else DEFAULT_TOLERANCE_DEG)
-        if (
-            isinstance(v, bool)
-            or not isinstance(v, (int, float))
-            or not v >= 0
-            or (key == "tolerance_deg" and not v > 0)
-        ):
-            raise ReferenceTableError(
-                f"{p}: {key} must be a {'positive' if key == 'tolerance_deg' else 'non-negative'} number, got {v!r}"
-            )
+        check_number(v, name=f"{p}: {key}", error=ReferenceTableError, low=0, low_open=key == "tolerance_deg",
+                     unit="degrees")
     try:
         settings = MeasureSettings.from_dict(d["markers"]) if "markers" in d else None
     except (VisionTorsionError, TypeError) as exc:

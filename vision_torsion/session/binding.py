@@ -76,6 +76,10 @@ class Binding:
                 "missing": list(self.missing)}
 
 
+#: How the files were bound: bind's two orders (:mod:`.camera`), or as they came (``watch``).
+_ORDERS = ("time", "name", "watch")
+
+
 def load_binding(session_dir) -> Binding | None:
     """The binding of a session folder, or None when it has none.
 
@@ -108,9 +112,9 @@ def load_binding(session_dir) -> Binding | None:
             raise SessionError(f"{path}: {image!r} is bound to {name!r}; expected a file name "
                                "inside the camera folder")
     by, skipped, missing = doc.get("by", "time"), doc.get("skipped", []), doc.get("missing", [])
-    if by not in ("time", "name"):
-        raise SessionError(f"{path}: 'by' is {by!r}; expected \"time\" or \"name\"; run `vision-torsion bind` "
-                           "again to rewrite it")
+    if by not in _ORDERS:
+        raise SessionError(f"{path}: 'by' is {by!r}; expected one of {', '.join(map(repr, _ORDERS))}; run "
+                           "`vision-torsion bind` again to rewrite it")
     if not isinstance(skipped, list) or not all(isinstance(x, str) for x in skipped):
         raise SessionError(f"{path}: 'skipped' is {skipped!r}; expected a list of camera file names; run "
                            "`vision-torsion bind` again to rewrite it")
