@@ -16,14 +16,15 @@ import subprocess
 import sys
 import zlib
 
+import numpy as np
 import pytest
 from helpers import draw_target, make_session, tree_digest
 
 from vision_torsion import images as images_module
+from vision_torsion.analysis.simulate import simulate_measurements
 from vision_torsion.cli import main
 from vision_torsion.errors import ImageReadError, ManifestError, RecordError, RigError, SessionError
 from vision_torsion.images import MAX_IMAGE_FILE_BYTES, image_size, load_image, read_image_bytes, write_image
-from vision_torsion.measurements import MEASUREMENT_COLUMNS
 from vision_torsion.session.load import load_session
 from vision_torsion.session.manifest import load_manifest
 from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_session
@@ -270,15 +271,19 @@ def test_stiffness_record_messages_name_the_row(tmp_path, change, message):
 # -- measurements.csv: absurd magnitudes refused at read time, by row -----------------------
 
 
-def test_analyze_with_one_value_of_1e150_names_the_row(capsys, tmp_path):
-
-    rows = [["a.png", "0", "1", "reference", "0", "0", "0", "0.001", "0", "0.001", "ok", ""],
-            ["b.png", "0", "1", "positive_loading", "1", "0.02", "0.0196", "0.001", "1e150", "0.001", "ok", ""]]
-    table = tmp_path / "measurements.csv"
-    table.write_text(",".join(MEASUREMENT_COLUMNS) + "\n" + "".join(",".join(r) + "\n" for r in rows))
-    code, _, err = run(capsys, "analyze", table, "-o", tmp_path / "out")
+@pytest.mark.parametrize("column, value, shown", [
+    ("angle_deg", 1e150, "1e+150"),
+    ("torque_nm", 1e9, "1000000000.0"),  # made the analysis' normal matrix singular (an internal error)
+])
+def test_analyze_with_one_absurd_value_names_the_row(capsys, tmp_path, column, value, shown):
+    table = simulate_measurements(k_u=4.33, k_l=1.44, tau_c=0.1, orientations_deg=(0,),
+                                  rng=np.random.default_rng(1))
+    table.loc[5, column] = value
+    path = tmp_path / "measurements.csv"
+    table.to_csv(path, index=False)
+    code, _, err = run(capsys, "analyze", path, "-o", tmp_path / "out")
     assert code == 2
-    assert "line 3: column angle_deg must be a finite number (its magnitude is limited to 1e+12), got 1e+150" in err
+    assert f"line 7: column {column} must be a finite number in [-1e+06, 1e+06], got {shown}" in err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 

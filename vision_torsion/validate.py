@@ -82,7 +82,8 @@ def number_problem(value, *, low=None, high=None, low_open: bool = False, high_o
     str or None
         ``"must be <range>, got <value>"``, where the range is
         :func:`describe_range` and a number beyond :data:`MAX_MAGNITUDE` adds
-        "(its magnitude is limited to 1e+12)"; None when the value is acceptable.
+        "(its magnitude is limited to 1e+12)" unless the range is narrower; None
+        when the value is acceptable.
 
     Examples
     --------
@@ -97,14 +98,17 @@ def number_problem(value, *, low=None, high=None, low_open: bool = False, high_o
                               whole=whole, unit=unit, nonzero=nonzero)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         return f"must be {expected}, got {_shown(value)}"
+    # the general limit is stated unless the range itself is narrower
+    limited = expected if (low is not None and high is not None and -MAX_MAGNITUDE <= low
+                           and high <= MAX_MAGNITUDE) else f"{expected} (its magnitude is limited to {MAX_MAGNITUDE:g})"
     try:
         v = float(value)
     except OverflowError:  # an integer beyond float's range
-        return f"must be {expected} (its magnitude is limited to {MAX_MAGNITUDE:g}), got {_shown(value)}"
+        return f"must be {limited}, got {_shown(value)}"
     if not math.isfinite(v):
         return f"must be {expected}, got {_shown(value)}"
     if abs(v) > MAX_MAGNITUDE:
-        return f"must be {expected} (its magnitude is limited to {MAX_MAGNITUDE:g}), got {_shown(value)}"
+        return f"must be {limited}, got {_shown(value)}"
     bad = ((whole and not v.is_integer())
            or (nonzero and v == 0)
            or (low is not None and (v <= low if low_open else v < low))
