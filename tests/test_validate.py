@@ -16,11 +16,13 @@ from vision_torsion.errors import (
     VisionTorsionError,
 )
 from vision_torsion.measurements import TorqueRig
+from vision_torsion.session.process import process_session
 from vision_torsion.stiffness import (
     RigConstants,
     meshing_pairs,
     realistic_encoder_record,
     synthetic_encoder_record,
+    synthetic_measurements,
 )
 from vision_torsion.stiffness.branches import zero_band
 from vision_torsion.textfiles import MAX_TOML_DEPTH, parse_toml, read_text_bytes, read_toml
@@ -184,6 +186,10 @@ def test_read_text_bytes_limit_and_loop(tmp_path):
      errors.CalibrationError, r"^k1 must be a finite number, got inf$"),
     (lambda: RigConstants(teeth=160.5),
      RigError, r"^rig constant teeth must be a whole number >= 1, got 160\.5$"),
+    (lambda: synthetic_measurements(steps=0),
+     errors.SceneError, r"^synthetic_measurements: steps must be a whole number >= 1, got 0$"),
+    (lambda: process_session("/nonexistent", jobs=0),
+     SessionError, r"^jobs must be a whole number >= 1, got 0$"),
 ])
 def test_hand_written_checks_now_name_parameter_value_and_range(call, error, message):
     with pytest.raises(error, match=message) as info:

@@ -199,9 +199,7 @@ def bilinear_response(torque_nm, *, k_u, k_l, tau_c, theta_start="centred") -> n
             raise AnalysisError(f"theta_start must be a number (rad) or 'centred', got {theta_start!r}")
         start = _bilinear_centred_start(tau, c_u, c_l, float(tau_c))
     else:
-        start = float(theta_start)
-        if not np.isfinite(start):
-            raise AnalysisError(f"theta_start must be finite, got {theta_start!r}")
+        start = check_number(theta_start, name="theta_start", error=AnalysisError, unit="rad")
     un, lo = _bilinear_increments(tau, float(tau_c))
     return start + c_u * un + c_l * lo
 

@@ -51,6 +51,7 @@ from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
+from ..validate import check_number
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
@@ -443,8 +444,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
     """
-    if jobs is not None and jobs < 1:
-        raise SessionError(f"jobs must be >= 1, got {jobs}")
+    if jobs is not None:
+        jobs = check_number(jobs, name="jobs", error=SessionError, low=1, whole=True)
     jobs = jobs or _default_jobs()
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session

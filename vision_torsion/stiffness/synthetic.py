@@ -542,8 +542,8 @@ def synthetic_measurements(
     np.int64(5)
     """
     law = SaturatingStiffness() if law is None else law
-    if steps < 1 or cycles < 1:
-        raise SceneError(f"steps and cycles must be >= 1, got {steps} and {cycles}")
+    _check_parameters("synthetic_measurements", [("steps", steps, dict(low=1, whole=True)),
+                                                 ("cycles", cycles, dict(low=1, whole=True))])
     rng = np.random.default_rng(seed)
     half, hyst = backlash_deg / 2, hysteresis_deg
     frac = np.arange(steps + 1) / steps
