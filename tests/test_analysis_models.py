@@ -65,11 +65,11 @@ def test_loop_energy_of_fine_bilinear_loop_matches_closed_form():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(k_u=0.0, k_l=K_L, tau_c=TAU_C), "k_u must be a positive finite number"),
-    (dict(k_u=K_U, k_l=-1, tau_c=TAU_C), "k_l must be a positive finite number"),
-    (dict(k_u=K_U, k_l=K_L, tau_c=-0.1), "tau_c must be a non-negative finite torque"),
+    (dict(k_u=0.0, k_l=K_L, tau_c=TAU_C), r"k_u must be a finite number > 0 \(N·m/rad\), got 0\.0"),
+    (dict(k_u=K_U, k_l=-1, tau_c=TAU_C), r"k_l must be a finite number > 0 \(N·m/rad\), got -1"),
+    (dict(k_u=K_U, k_l=K_L, tau_c=-0.1), r"tau_c must be a finite number >= 0 \(N·m\), got -0\.1"),
     (dict(k_u=K_U, k_l=K_L, tau_c=TAU_C, theta_start="middle"), "theta_start must be a number"),
-    (dict(k_u=K_U, k_l=K_L, tau_c=TAU_C, theta_start=np.nan), "theta_start must be finite"),
+    (dict(k_u=K_U, k_l=K_L, tau_c=TAU_C, theta_start=np.nan), r"theta_start must be a finite number \(rad\), got nan"),
 ])
 def test_bilinear_response_rejects_bad_parameters(kwargs, match):
     with pytest.raises(AnalysisError, match=match):

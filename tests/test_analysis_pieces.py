@@ -165,7 +165,7 @@ def test_rig_is_validated():
         analyze_session(df, torque_correlation="pieces", **FAST)
     with pytest.raises(AnalysisError, match=r"rig: missing key\(s\) \['mass_std_kg'\]"):
         analyze_session(df, rig={k: v for k, v in RIG.items() if k != "mass_std_kg"}, **FAST)
-    with pytest.raises(AnalysisError, match="rig: step_mass_kg must be a positive finite number"):
+    with pytest.raises(AnalysisError, match="rig: step_mass_kg must be a finite number > 0"):
         check_rig(dict(RIG, step_mass_kg=0.0))
     with pytest.raises(AnalysisError, match="torque_correlation must be one of pieces, level, independent"):
         analyze_session(df, torque_correlation="pan", **FAST)

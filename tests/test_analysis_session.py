@@ -175,7 +175,7 @@ def test_invalid_options_raise():
         analyze_session(df, n_draws=1)
     with pytest.raises(AnalysisError, match="secant_interval must be fractions"):
         analyze_session(df, secant_interval=(0.8, 0.2))
-    with pytest.raises(AnalysisError, match="max_torque_nm must be a positive torque"):
+    with pytest.raises(AnalysisError, match=r"max_torque_nm must be a finite number > 0 \(N·m\)"):
         analyze_session(df, max_torque_nm=-1)
     with pytest.raises(AnalysisError, match="must be a pandas DataFrame"):
         analyze_session([1, 2])

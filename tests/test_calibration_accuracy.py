@@ -185,7 +185,7 @@ def test_reference_table_reads(tmp_path):
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("tolerance_deg = -1\n", r"spec\.toml: tolerance_deg must be a positive number, got -1"),
+        ("tolerance_deg = -1\n", r"spec\.toml: tolerance_deg must be a finite number > 0 \(degrees\), got -1"),
         ("tolerance = 0.1\n", r"spec\.toml: unknown key\(s\) tolerance"),
         ("[markers]\npolarity = 'grey'\n", r"spec\.toml: \[markers\]: polarity must be one of"),
         ("tolerance_deg = [\n", r"spec\.toml: not valid TOML"),

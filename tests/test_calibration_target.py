@@ -99,7 +99,7 @@ def test_target_errors():
         calibrate_from_target([blank], fit_distortion=True)
     with pytest.raises(CalibrationError, match=r"pattern must be one of \('chessboard', 'circles'\)"):
         calibrate_from_target([blank], pattern="dots")
-    with pytest.raises(CalibrationError, match=r"square_mm must be positive"):
+    with pytest.raises(CalibrationError, match=r"square_mm must be a finite number > 0 \(mm\)"):
         calibrate_from_target([blank], square_mm=0)
     with pytest.raises(CalibrationError, match=r"no target images given"):
         calibrate_from_target([])

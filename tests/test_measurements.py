@@ -63,7 +63,8 @@ def test_missing_value_after_failed_rows_names_its_csv_line(tmp_path):
     table.loc[1:2, "status"] = "failed"
     table.loc[4, "angle_deg"] = np.nan  # ok row at position 4: line 6 (was "data row 3")
     path = _write(tmp_path, table)
-    with pytest.raises(RecordError, match=r"column 'angle_deg' has a missing or non-numeric value \(blank\) on line 6"):
+    with pytest.raises(RecordError, match=r"column 'angle_deg' has a missing, non-numeric or infinite value "
+                                          r"\(blank\) on line 6"):
         read_record(path)
 
 
@@ -123,7 +124,7 @@ def test_torque_rig_from_session_config_is_checked_once():
                            protocol=ProtocolConfig(orientations_deg=(0.0,), max_torque_nm=0.3, step_mass_kg=0.02))
     rig = config.torque_rig
     assert rig == TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.05, friction_torque_std_nm=0.002)
-    with pytest.raises(RigError, match="rig: arm_radius_m must be a positive finite number, got 0.0"):
+    with pytest.raises(RigError, match="rig: arm_radius_m must be a finite number > 0, got 0.0"):
         TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.0)
     with pytest.raises(RigError, match=r"rig: missing key\(s\) \['mass_std_kg'\], unknown key\(s\) \['mass'\]"):
         TorqueRig.from_mapping({"step_mass_kg": 0.02, "arm_radius_m": 0.05, "mass": 1})

@@ -95,8 +95,8 @@ def test_refuses_to_overwrite(tmp_path):
 
 @pytest.mark.parametrize("kw, message", [
     (dict(max_torque_nm=0.01), r"max_torque_nm 0\.01 is less than one step"),
-    (dict(arm_radius_m=0), r"rig\.arm_radius_m: expected a number > 0"),
-    (dict(cycles=0), r"protocol\.cycles: expected a whole number >= 1"),
+    (dict(arm_radius_m=0), r"rig\.arm_radius_m: must be a finite number > 0"),
+    (dict(cycles=0), r"protocol\.cycles: must be a whole number >= 1"),
     (dict(image_suffix=".gif"), r"image_suffix '\.gif' is not an image type"),
 ])
 def test_invalid_parameters(tmp_path, kw, message):
@@ -242,7 +242,7 @@ def test_no_rated_torque_no_levels(tmp_path):
      None),
     (dict(rated_torque_nm=1.2),  # 3 % = 1.83 -> 2, 4 % = 2.45 -> 2 (18 % off): the same pieces
      r"level ±4 % .* is realised by the same 2 piece\(s\) of 0\.02 kg per pan as the level ±3 %"),
-    (dict(rated_torque_nm=-1), r"rated_torque_nm must be a number > 0 \(N·m\), got -1"),
+    (dict(rated_torque_nm=-1), r"rated_torque_nm must be a finite number > 0 \(N·m\), got -1"),
 ])
 def test_rated_torque_messages(tmp_path, kw, message):
     args = dict(steps=10, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), **kw)

@@ -81,7 +81,7 @@ def test_virgin_loading_is_kept_apart(realistic):
 def test_hold_speed_option_is_checked():
     syn = realistic_encoder_record(seed=5, samples=4000, cycles=1)
     record = filter_record(as_record(syn.frame, rig=syn.rig))
-    with pytest.raises(Exception, match="hold_speed_deg_per_s must be > 0"):
+    with pytest.raises(Exception, match=r"hold_speed_deg_per_s must be a finite number > 0 \(degrees/s\), got 0\.0"):
         split_branches(record, hold_speed_deg_per_s=0.0)
 
 

@@ -45,7 +45,6 @@ File format (TOML or JSON, chosen by the suffix; the same keys in both)::
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -56,6 +55,7 @@ from .errors import CalibrationError
 from .fileio import atomic_write_text
 from .pair import PairMeasurement
 from .textfiles import decode_utf8, read_toml
+from .validate import check_number
 
 __all__ = ["PlaneCorrection", "load_correction", "check_suffix", "FORMAT_NAME", "FORMAT_VERSION"]
 
@@ -113,9 +113,7 @@ class PlaneCorrection:
         H = H / H[2, 2]
         H.setflags(write=False)
         object.__setattr__(self, "homography", H)
-        k1 = float(self.k1)
-        if not math.isfinite(k1):
-            raise CalibrationError(f"k1 must be finite, got {self.k1!r}")
+        k1 = check_number(self.k1, name="k1", error=CalibrationError)
         object.__setattr__(self, "k1", k1)
         if k1 != 0.0:
             if self.centre is None or self.focal_length_px is None or not float(self.focal_length_px) > 0:
@@ -348,9 +346,7 @@ def check_suffix(p: Path) -> str:
 
 
 def _number(v, name, source) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise CalibrationError(f"{source}: field '{name}' must be a finite number, got {v!r}")
-    return float(v)
+    return check_number(v, name=f"{source}: field '{name}'", error=CalibrationError)
 
 
 def _matrix(v, source) -> np.ndarray:

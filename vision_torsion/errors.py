@@ -17,6 +17,19 @@ default code of each class; raise with ``reason=...`` to be more specific:
 'low_contrast'
 >>> FitError("no convergence").reason
 'fit_failed'
+
+Each class also derives from the built-in exception that matches it, so code that
+knows nothing of vision-torsion catches it as it would any library's error: bad
+values and bad input are :class:`ValueError` (a fit that fails too, as numpy's
+``LinAlgError`` is); a file that cannot be read as an image (as Pillow's
+``UnidentifiedImageError``) and results that cannot be written are
+:class:`OSError`:
+
+>>> try:
+...     raise SessionError("rig.arm_radius_m must be a finite number > 0 (m), got -1")
+... except ValueError as exc:
+...     exc.reason
+'bad_session'
 """
 
 from __future__ import annotations
@@ -62,73 +75,73 @@ class VisionTorsionError(Exception):
             self.reason = reason
 
 
-class ImageReadError(VisionTorsionError):
+class ImageReadError(VisionTorsionError, OSError):
     """An image file is missing, unreadable, corrupt, truncated or of an unsupported kind."""
 
     reason = "unreadable_image"
 
 
-class MarkerError(VisionTorsionError):
+class MarkerError(VisionTorsionError, ValueError):
     """The markers needed for a measurement were not found, or are unusable."""
 
     reason = "marker_error"
 
 
-class FitError(VisionTorsionError):
+class FitError(VisionTorsionError, ValueError):
     """A fit could not be carried out (too few points, degenerate geometry, no convergence)."""
 
     reason = "fit_failed"
 
 
-class SceneError(VisionTorsionError):
+class SceneError(VisionTorsionError, ValueError):
     """A synthetic scene description is invalid."""
 
     reason = "bad_scene"
 
 
-class ManifestError(VisionTorsionError):
+class ManifestError(VisionTorsionError, ValueError):
     """A session manifest (manifest.csv) has bad rows."""
 
     reason = "bad_manifest"
 
 
-class SessionError(VisionTorsionError):
+class SessionError(VisionTorsionError, ValueError):
     """A session folder or its session.toml is invalid."""
 
     reason = "bad_session"
 
 
-class ReferenceTableError(VisionTorsionError):
+class ReferenceTableError(VisionTorsionError, ValueError):
     """A reference table (reference.csv of an accuracy check) is invalid."""
 
     reason = "bad_reference_table"
 
 
-class CalibrationError(VisionTorsionError):
+class CalibrationError(VisionTorsionError, ValueError):
     """A calibration (plane or lens correction) cannot be computed or applied."""
 
     reason = "bad_calibration"
 
 
-class AnalysisError(VisionTorsionError):
+class AnalysisError(VisionTorsionError, ValueError):
     """Torque-angle data cannot give the requested figure."""
 
     reason = "analysis_failed"
 
 
-class RigError(VisionTorsionError):
+class RigError(VisionTorsionError, ValueError):
     """Rig constants (arm radius, transmission ratio, sensor stiffness, ...) are invalid."""
 
     reason = "bad_rig"
 
 
-class RecordError(VisionTorsionError):
+class RecordError(VisionTorsionError, ValueError):
     """A torque/angle record (encoder rig CSV or measurements table) is invalid."""
 
     reason = "bad_record"
 
 
-class OutputError(VisionTorsionError):
+class OutputError(VisionTorsionError, OSError):
     """Results cannot be written: the output folder is read-only, not a folder, or
     the disk is full; the message names the path and the reason."""
 
@@ -146,7 +159,7 @@ class MeasurementsError(AnalysisError, RecordError):
     reason = "bad_measurements"
 
 
-class CampaignError(VisionTorsionError):
+class CampaignError(VisionTorsionError, ValueError):
     """A campaign database or a report to be added to it is unusable: not a report,
     a report of another schema version, a file that is not a campaign database, a
     database that cannot be written. The message names the file."""
@@ -154,7 +167,7 @@ class CampaignError(VisionTorsionError):
     reason = "bad_campaign"
 
 
-class TargetError(VisionTorsionError):
+class TargetError(VisionTorsionError, ValueError):
     """A target description (layout of the dots on the disk) is invalid or cannot be
     read; the message names the file and the field."""
 

@@ -9,10 +9,17 @@ nothing is ever returned half-read.
 
 What is checked, and why
 ------------------------
-- The size the header states, before decoding: an image smaller than
+- The file's size and signature before it is read whole
+  (:func:`read_image_bytes`): a file over :data:`MAX_IMAGE_FILE_BYTES`, or one
+  that is no image, is refused after reading 16 bytes.
+- The size the header states, before decoding, for every format (PNG's IHDR,
+  TIFF's first directory, BMP's and JPEG's frame headers): an image smaller than
   :data:`MIN_SIDE_PX` on a side or larger than :data:`MAX_IMAGE_PIXELS` pixels is
   refused with its size (a PNG header claiming 50000x50000 would otherwise make
-  OpenCV fail an assertion, or try to allocate gigabytes).
+  OpenCV fail an assertion, a 1 MB deflate TIFF of 32000x32000 px decode 2 GB);
+  a header that states no size is refused as corrupt.
+- Fewer than 8 bits per grey sample (a 1-bit black-and-white PNG or TIFF) is
+  refused: the markers' edges are fitted to grey levels.
 - JPEGs are decoded by libjpeg-turbo through ``simplejpeg`` in strict mode: the
   decoder's warnings ("Corrupt JPEG data: 77 extraneous bytes before marker 0xd9",
   "premature end of data segment") make the image fail with the decoder's words.
@@ -42,7 +49,7 @@ import numpy as np
 from .errors import ImageReadError
 
 __all__ = ["GreyImage", "load_image", "decode_image", "as_grey_array", "IMAGE_SUFFIXES", "write_image",
-           "MAX_IMAGE_PIXELS", "MIN_SIDE_PX", "image_size"]
+           "MAX_IMAGE_PIXELS", "MIN_SIDE_PX", "image_size", "read_image_bytes", "MAX_IMAGE_FILE_BYTES"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,6 +59,9 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg")
 #: Largest image accepted, in pixels (2**28, 268 Mpx: 1 GB as float32). Larger
 #: headers are refused before decoding.
 MAX_IMAGE_PIXELS = 1 << 28
+#: Largest image file read (bytes, 2 GiB): an uncompressed 16-bit colour image of
+#: :data:`MAX_IMAGE_PIXELS` is 1.6 GB. Checked before the file is read.
+MAX_IMAGE_FILE_BYTES = 1 << 31
 #: Smallest side accepted, in pixels (the marker finder needs at least this).
 MIN_SIDE_PX = 8
 
@@ -152,15 +162,42 @@ def _png_significant_bits(raw: bytes) -> int | None:
     return None
 
 
+def _tiff_tags(raw: bytes, tags) -> dict:
+    """First value of each of `tags` in a TIFF's first image file directory (IFD0)."""
+    order = "<" if raw[:2] == b"II" else ">"
+    (offset,) = struct.unpack(order + "I", raw[4:8])
+    (count,) = struct.unpack(order + "H", raw[offset:offset + 2])
+    found = {}
+    for i in range(count):
+        entry = raw[offset + 2 + 12 * i:offset + 14 + 12 * i]
+        tag, kind, n = struct.unpack(order + "HHI", entry[:8])
+        if tag not in tags or kind not in (3, 4):  # SHORT or LONG
+            continue
+        size = 2 if kind == 3 else 4
+        if n * size <= 4:  # the value is in the entry
+            at = entry[8:8 + size]
+        else:  # the entry holds the offset of the values
+            (where,) = struct.unpack(order + "I", entry[8:12])
+            at = raw[where:where + size]
+        found[tag] = struct.unpack(order + ("H" if kind == 3 else "I"), at)[0]
+    return found
+
+
 def image_size(raw: bytes, kind: str) -> tuple[int, int] | None:
     """(width, height) in pixels as the file's header states it, or None if the
-    header does not say (TIFF, or an unusual JPEG)."""
+    header does not say (a corrupt header, or a JPEG whose scan comes before its
+    frame header)."""
     try:
         if kind == "png" and raw[12:16] == b"IHDR":
             return struct.unpack(">II", raw[16:24])
         if kind == "bmp" and len(raw) >= 26:
+            if struct.unpack("<I", raw[14:18])[0] == 12:  # OS/2 BITMAPCOREHEADER: 16-bit sides
+                return struct.unpack("<HH", raw[18:22])
             w, h = struct.unpack("<ii", raw[18:26])
             return abs(w), abs(h)
+        if kind == "tiff":
+            tags = _tiff_tags(raw, (256, 257))  # ImageWidth, ImageLength
+            return (tags[256], tags[257]) if len(tags) == 2 else None
         if kind == "jpeg":
             pos = 2
             while pos + 4 <= len(raw):
@@ -177,14 +214,28 @@ def image_size(raw: bytes, kind: str) -> tuple[int, int] | None:
                 if marker == 0xDA:  # start of scan before any frame header
                     return None
                 pos += 2 + length
-    except struct.error:
+    except (struct.error, IndexError, KeyError):
         return None
     return None
 
 
-def _check_size(size, name: str) -> None:
+def _sample_bits(raw: bytes, kind: str) -> int | None:
+    """Bits per grey sample the header states, for the kinds that can hold fewer than
+    8 (PNG greyscale, TIFF); None when it does not say or the file holds palette
+    indices (expanded to colour by the decoder)."""
+    try:
+        if kind == "png" and raw[12:16] == b"IHDR" and raw[25] == 0:  # colour type 0: grey
+            return raw[24]
+        if kind == "tiff":
+            return _tiff_tags(raw, (258,)).get(258, 1)  # BitsPerSample, 1 when absent (TIFF 6.0)
+    except (struct.error, IndexError):
+        return None
+    return None
+
+
+def _check_size(size, name: str, kind: str = "") -> None:
     if size is None:
-        return
+        raise ImageReadError(f"{name}: corrupt {kind.upper()} header (it does not state the image size)")
     w, h = size
     if w * h > MAX_IMAGE_PIXELS:
         raise ImageReadError(f"{name}: image larger than the limit ({w}x{h} px = {w * h / 1e6:.0f} Mpx; "
@@ -247,11 +298,12 @@ def load_image(path, *, bit_depth: int | None = None, keep_integers: bool = Fals
     Raises
     ------
     ImageReadError
-        The file is missing, empty, not an image, truncated, corrupt (a JPEG the
-        decoder warns about included), smaller than :data:`MIN_SIDE_PX` or larger
-        than :data:`MAX_IMAGE_PIXELS`, of an unsupported sample type, or has
-        samples above the stated bit depth. The message names the file and the
-        reason.
+        The file is missing, empty, larger than :data:`MAX_IMAGE_FILE_BYTES`, not an
+        image, truncated, corrupt (a JPEG the decoder warns about included, a header
+        that states no size), smaller than :data:`MIN_SIDE_PX` or larger than
+        :data:`MAX_IMAGE_PIXELS`, of fewer than 8 bits or an unsupported sample
+        type, or has samples above the stated bit depth. The message names the file
+        and the reason.
 
     Examples
     --------
@@ -263,17 +315,47 @@ def load_image(path, *, bit_depth: int | None = None, keep_integers: bool = Fals
     >>> img.data.shape, img.bit_depth, float(img.data[0, 0])
     ((8, 10), 8, 7.0)
     """
+    name = str(Path(path))
+    return decode_image(read_image_bytes(path), name=name, bit_depth=bit_depth, keep_integers=keep_integers)
+
+
+def read_image_bytes(path, *, signature: bool = True) -> bytes:
+    """The bytes of an image file, its size and kind checked before it is read whole.
+
+    The file's size (at most :data:`MAX_IMAGE_FILE_BYTES`) and, with `signature`,
+    its first bytes (a PNG, TIFF, BMP or JPEG signature) are checked first, so a
+    huge file, or one that is no image, is refused without reading it; the header's
+    image size is checked by :func:`decode_image` before decoding. A caller that
+    records a failure by the file's content (a cache keyed by its hash) passes
+    ``signature=False`` and lets :func:`decode_image` refuse a non-image.
+
+    Raises
+    ------
+    ImageReadError
+        Naming the file: no such file (a broken link included), a folder, a link
+        that loops or cannot be read (permissions, I/O error), empty, larger than
+        :data:`MAX_IMAGE_FILE_BYTES`, or not an image (unrecognised header).
+    """
     p = Path(path)
     name = str(p)
-    if not p.exists():
-        raise ImageReadError(f"{name}: no such file")
-    if p.is_dir():
-        raise ImageReadError(f"{name}: is a folder, not an image file")
     try:
-        raw = p.read_bytes()
+        with open(p, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            if size > MAX_IMAGE_FILE_BYTES:
+                raise ImageReadError(f"{name}: {size} bytes, larger than an image file may be "
+                                     f"({MAX_IMAGE_FILE_BYTES} bytes)", reason="too_large")
+            head = fh.read(16)
+            if signature and head and _kind_from_magic(head) is None:
+                raise ImageReadError(f"{name}: not a PNG, TIFF, BMP or JPEG image (unrecognised file header)")
+            return head + fh.read(MAX_IMAGE_FILE_BYTES + 1 - len(head))
+    except FileNotFoundError:
+        raise ImageReadError(f"{name}: no such file", reason="not_found") from None
+    except IsADirectoryError:
+        raise ImageReadError(f"{name}: is a folder, not an image file") from None
+    except ImageReadError:
+        raise
     except OSError as exc:
         raise ImageReadError(f"{name}: cannot be read ({exc.strerror or exc})") from exc
-    return decode_image(raw, name=name, bit_depth=bit_depth, keep_integers=keep_integers)
 
 
 def decode_image(raw: bytes, *, name: str, bit_depth: int | None = None, keep_integers: bool = False) -> GreyImage:
@@ -312,7 +394,12 @@ def decode_image(raw: bytes, *, name: str, bit_depth: int | None = None, keep_in
     why = _check_complete(raw, kind, name)
     if why:
         raise ImageReadError(f"{name}: {why}")
-    _check_size(image_size(raw, kind), name)
+    _check_size(image_size(raw, kind), name, kind)
+    bits = _sample_bits(raw, kind)
+    if bits is not None and bits < 8:
+        raise ImageReadError(f"{name}: {bits}-bit {kind.upper()} (black and white or few grey levels); the "
+                             "markers' edges are fitted to grey levels: save 8-, 12- or 16-bit grey",
+                             reason="unsupported_image")
     if kind == "jpeg":
         decoded = _decode_jpeg(raw, name)
         if decoded is not None:

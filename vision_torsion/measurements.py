@@ -20,7 +20,7 @@ beside :mod:`.settings`.
 
 from __future__ import annotations
 
-import math
+import io
 import os
 from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import MeasurementsError, RigError
+from .textfiles import read_text_bytes
+from .validate import check_number, number_problem
 
 if TYPE_CHECKING:  # pandas is imported where a table is read (see _read_csv)
     import pandas as pd
@@ -42,6 +44,7 @@ __all__ = [
     "MANIFEST_OPTIONAL_COLUMNS",
     "RESULT_COLUMNS",
     "MEASUREMENT_COLUMNS",
+    "MAX_TABLE_MAGNITUDE",
     "NUMERIC_COLUMNS",
     "MEASUREMENTS_NAME",
     "RESULTS_DIRNAME",
@@ -84,6 +87,11 @@ NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm",
                    "torque_std_nm", "torque_common_std_nm", "angle_deg", "angle_std_deg")
 #: Numeric columns that may not be negative (masses and standard uncertainties).
 _NON_NEGATIVE = ("mass_kg", "torque_std_nm", "torque_common_std_nm", "angle_std_deg")
+#: Largest magnitude of any number in the table: no torque (N·m), mass (kg), angle
+#: or orientation (degrees), cycle or step of a gear test comes near it; a value
+#: beyond it is a typing or unit slip, refused with its row before any analysis
+#: (one such outlier made the analysis' normal matrix singular).
+MAX_TABLE_MAGNITUDE = 1e6
 #: Text columns (read as str; a blank cell is "").
 _TEXT_COLUMNS = ("image", "phase", "status", "message", "torque_source")
 #: File name of the table ``process`` writes.
@@ -95,6 +103,7 @@ RESULTS_DIRNAME = "results"
 def output_folder(folder, out_dir=None) -> Path:
     """`out_dir`, or the default output folder ``folder/results`` when it is None."""
     return Path(out_dir) if out_dir is not None else Path(folder) / RESULTS_DIRNAME
+_TABLE_RANGE = dict(low=-MAX_TABLE_MAGNITUDE, high=MAX_TABLE_MAGNITUDE)
 #: Name of the index of a table :func:`read_measurements` returns (CSV line numbers).
 _LINE = "line"
 #: At most this many problems are listed in one error (then "and N more").
@@ -184,15 +193,8 @@ class TorqueRig:
 
     def __post_init__(self):
         for f in fields(self):
-            v = getattr(self, f.name)
-            try:
-                v = float(v)
-            except (TypeError, ValueError):
-                raise RigError(f"rig: {f.name} must be a number, got {v!r}") from None
-            positive = f.name in self._POSITIVE
-            if not math.isfinite(v) or (v <= 0 if positive else v < 0):
-                raise RigError(f"rig: {f.name} must be a {'positive' if positive else 'non-negative'} "
-                               f"finite number, got {v!r}")
+            v = check_number(getattr(self, f.name), name=f"rig: {f.name}", error=RigError, low=0,
+                             low_open=f.name in self._POSITIVE)
             object.__setattr__(self, f.name, v)
 
     @classmethod
@@ -245,12 +247,13 @@ def csv_line(position: int) -> int:
 def _read_csv(path: Path, name: str) -> pd.DataFrame:
     import pandas as pd  # here, not at the top: `process` uses this module without pandas
 
+    if not path.exists():
+        raise MeasurementsError(f"{name}: no such file", reason="not_found")
+    raw = read_text_bytes(path, what="a measurements table", error=MeasurementsError)  # size checked first
     try:
         # blank cells are missing values; text such as "NA" is not silently one
-        return pd.read_csv(path, keep_default_na=False, na_values=[""])
-    except FileNotFoundError:
-        raise MeasurementsError(f"{name}: no such file", reason="not_found") from None
-    except (OSError, UnicodeDecodeError, ValueError, pd.errors.ParserError) as exc:
+        return pd.read_csv(io.BytesIO(raw), keep_default_na=False, na_values=[""])
+    except (UnicodeDecodeError, ValueError, pd.errors.ParserError) as exc:
         raise MeasurementsError(f"{name}: cannot be read as CSV ({exc})", reason="unreadable") from None
 
 
@@ -284,7 +287,9 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
     MeasurementsError
         The file is missing or not CSV; `source` is neither a path nor a DataFrame;
         a needed column is missing; or rows have problems: text that is not a number
-        in a numeric column, a negative mass or uncertainty, an unknown phase. Every
+        in a numeric column, a number that is infinite or beyond
+        :data:`MAX_TABLE_MAGNITUDE` (checked here, at read time, so no analysis
+        overflows), a negative mass or uncertainty, an unknown phase. Every
         row problem is listed (the first 20, then a count), each with its CSV line
         number and column.
 
@@ -338,6 +343,10 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
             bad = num.isna() & raw.notna() & (text != "") & (text.str.lower() != "nan")
             problems += [(line, f"column {col} is not a number ({raw[line]!r})") for line in raw.index[bad]]
             out[col] = num
+        with np.errstate(invalid="ignore"):  # NaN is a blank cell, not a huge one
+            huge = np.abs(out[col].to_numpy()) > MAX_TABLE_MAGNITUDE  # inf included
+        problems += [(line, f"column {col} {number_problem(float(out[col][line]), **_TABLE_RANGE)}")
+                     for line in out.index[huge]]
         if col in _NON_NEGATIVE:
             neg = out[col] < 0
             problems += [(line, f"{col} is negative ({out[col][line]:g})") for line in out.index[neg]]

@@ -72,6 +72,7 @@ from scipy import optimize
 
 from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
+from ..validate import check_number
 from .uncertainty import (
     least_squares_weights,
     linearised_covariance,
@@ -102,8 +103,7 @@ def _as_torque(torque_nm) -> np.ndarray:
 
 def _check_stiffness(**values) -> None:
     for name, v in values.items():
-        if not (np.isfinite(v) and v > 0):
-            raise AnalysisError(f"{name} must be a positive finite number, got {v!r}")
+        check_number(v, name=name, error=AnalysisError, low=0, low_open=True, unit="N·m/rad")
 
 
 def _loading_part(a: np.ndarray, b: np.ndarray, tau_c: float) -> np.ndarray:
@@ -192,17 +192,14 @@ def bilinear_response(torque_nm, *, k_u, k_l, tau_c, theta_start="centred") -> n
     """
     tau = _as_torque(torque_nm)
     _check_stiffness(k_u=k_u, k_l=k_l)
-    if not (np.isfinite(tau_c) and tau_c >= 0):
-        raise AnalysisError(f"tau_c must be a non-negative finite torque (N·m), got {tau_c!r}")
+    check_number(tau_c, name="tau_c", error=AnalysisError, low=0, unit="N·m")
     c_u, c_l = 1.0 / float(k_u), 1.0 / float(k_l)
     if isinstance(theta_start, str):
         if theta_start != "centred":
             raise AnalysisError(f"theta_start must be a number (rad) or 'centred', got {theta_start!r}")
         start = _bilinear_centred_start(tau, c_u, c_l, float(tau_c))
     else:
-        start = float(theta_start)
-        if not np.isfinite(start):
-            raise AnalysisError(f"theta_start must be finite, got {theta_start!r}")
+        start = check_number(theta_start, name="theta_start", error=AnalysisError, unit="rad")
     un, lo = _bilinear_increments(tau, float(tau_c))
     return start + c_u * un + c_l * lo
 

@@ -68,6 +68,7 @@ from scipy import special  # stdtrit is scipy.stats.t.ppf, without importing sci
 
 from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
+from ..validate import check_number
 from . import checks, metrics
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
 from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
@@ -1116,9 +1117,9 @@ def analyze_session(
     fr = list(lost_motion_fractions)
     if not fr or not all(isinstance(f, (int, float)) and 0 < f < 1 for f in fr):
         raise AnalysisError(f"lost_motion_fractions must be fractions in (0, 1), got {lost_motion_fractions}")
-    for name, v in (("rated_torque_nm", rated_torque_nm), ("gear_ratio", gear_ratio)):
-        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-            raise AnalysisError(f"{name} must be a positive number, got {v!r}")
+    for name, v, unit in (("rated_torque_nm", rated_torque_nm, "N·m"), ("gear_ratio", gear_ratio, "")):
+        if v is not None:
+            check_number(v, name=name, error=AnalysisError, low=0, low_open=True, unit=unit)
     if catalogue_breaks_nm is not None:
         cb = [float(v) for v in catalogue_breaks_nm]
         if len(cb) != 2 or not (0 < cb[0] < cb[1]):
@@ -1135,8 +1136,9 @@ def analyze_session(
     data_max = float(np.max(np.abs(usable["torque_nm"])))
     if max_torque_nm is None:
         max_torque_nm = data_max
-    elif not (np.isfinite(max_torque_nm) and max_torque_nm > 0):
-        raise AnalysisError(f"max_torque_nm must be a positive torque (N·m), got {max_torque_nm!r}")
+    else:
+        max_torque_nm = check_number(max_torque_nm, name="max_torque_nm", error=AnalysisError, low=0,
+                                     low_open=True, unit="N·m")
     if secant_interval_nm is None:
         secant_interval_nm = (secant_interval[0] * max_torque_nm, secant_interval[1] * max_torque_nm)
     elif not (len(secant_interval_nm) == 2 and 0 <= secant_interval_nm[0] < secant_interval_nm[1]):

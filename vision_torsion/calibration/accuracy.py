@@ -65,6 +65,7 @@ from ..measurements import output_folder
 from ..pair import measure_pair
 from ..settings import MeasureSettings
 from ..textfiles import csv_delimiter, decode_utf8, read_toml
+from ..validate import check_number
 
 __all__ = [
     "AccuracyResult",
@@ -221,15 +222,8 @@ def load_spec(path) -> AccuracySpec:
         raise ReferenceTableError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
     for key in ("tolerance_deg", "reference_std_deg"):
         v = d.get(key, 0.0 if key == "reference_std_deg" else DEFAULT_TOLERANCE_DEG)
-        if (
-            isinstance(v, bool)
-            or not isinstance(v, (int, float))
-            or not v >= 0
-            or (key == "tolerance_deg" and not v > 0)
-        ):
-            raise ReferenceTableError(
-                f"{p}: {key} must be a {'positive' if key == 'tolerance_deg' else 'non-negative'} number, got {v!r}"
-            )
+        check_number(v, name=f"{p}: {key}", error=ReferenceTableError, low=0, low_open=key == "tolerance_deg",
+                     unit="degrees")
     try:
         settings = MeasureSettings.from_dict(d["markers"]) if "markers" in d else None
     except (VisionTorsionError, TypeError) as exc:
@@ -353,9 +347,8 @@ def check_accuracy(
     if spec is not None and not isinstance(spec, AccuracySpec):
         spec = load_spec(spec)
     spec = spec or AccuracySpec()
-    tol = float(spec.tolerance_deg if tolerance_deg is None else tolerance_deg)
-    if not tol > 0:
-        raise ReferenceTableError(f"tolerance must be positive, got {tol!r} deg")
+    tol = check_number(spec.tolerance_deg if tolerance_deg is None else tolerance_deg, name="tolerance",
+                       error=ReferenceTableError, low=0, low_open=True, unit="degrees")
     settings = settings or spec.settings or MeasureSettings()
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)

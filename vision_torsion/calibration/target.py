@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ..images import as_grey_array
+from ..validate import check_number
 from .correction import PlaneCorrection, normalised
 
 __all__ = ["calibrate_from_target", "PATTERNS", "find_pattern"]
@@ -120,8 +121,7 @@ def calibrate_from_target(
     images = list(images)
     if not images:
         raise CalibrationError("no target images given")
-    if not square_mm > 0:
-        raise CalibrationError(f"square_mm must be positive, got {square_mm!r}")
+    check_number(square_mm, name="square_mm", error=CalibrationError, low=0, low_open=True, unit="mm")
     if not 0 <= plane_image < len(images):
         raise CalibrationError(f"plane_image {plane_image} is out of range for {len(images)} image(s)")
     fit_distortion = len(images) >= 3 if fit_distortion is None else bool(fit_distortion)

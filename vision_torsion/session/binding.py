@@ -32,6 +32,7 @@ from pathlib import Path, PurePosixPath
 from ..errors import SessionError
 from ..fileio import atomic_write_text
 from ..textfiles import decode_utf8
+from ..validate import number_problem
 
 __all__ = ["Binding", "load_binding", "write_binding", "BINDING_NAME"]
 
@@ -95,14 +96,19 @@ class Binding:
                 "missing": list(self.missing)}
 
 
+#: How the files were bound: bind's two orders (:mod:`.camera`), or as they came (``watch``).
+_ORDERS = ("time", "name", "watch")
+
+
 def load_binding(session_dir) -> Binding | None:
     """The binding of a session folder, or None when it has none.
 
     Raises
     ------
     SessionError
-        binding.json is not valid JSON or lacks ``camera_dir``/``images``, or a bound
-        name is absolute or leaves the camera folder ('..').
+        binding.json is not valid JSON or lacks ``camera_dir``/``images``, a bound
+        name is absolute or leaves the camera folder ('..'), or ``by``, ``skipped``
+        or ``missing`` has the wrong type (a hand edit); the message names the key.
     """
     path = Path(session_dir) / BINDING_NAME
     try:
@@ -125,9 +131,18 @@ def load_binding(session_dir) -> Binding | None:
         if not isinstance(name, str) or posix.is_absolute() or ".." in posix.parts:
             raise SessionError(f"{path}: {image!r} is bound to {name!r}; expected a file name "
                                "inside the camera folder")
+    by, skipped, missing = doc.get("by", "time"), doc.get("skipped", []), doc.get("missing", [])
+    if by not in _ORDERS:
+        raise SessionError(f"{path}: 'by' is {by!r}; expected one of {', '.join(map(repr, _ORDERS))}; run "
+                           "`vision-torsion bind` again to rewrite it")
+    if not isinstance(skipped, list) or not all(isinstance(x, str) for x in skipped):
+        raise SessionError(f"{path}: 'skipped' is {skipped!r}; expected a list of camera file names; run "
+                           "`vision-torsion bind` again to rewrite it")
+    if not isinstance(missing, list) or any(number_problem(x, low=2, whole=True) for x in missing):
+        raise SessionError(f"{path}: 'missing' is {missing!r}; expected a list of manifest line numbers "
+                           "(whole numbers >= 2); run `vision-torsion bind` again to rewrite it")
     return Binding(camera_dir=Path(doc["camera_dir"]), images=dict(doc["images"]),
-                   by=str(doc.get("by", "time")), skipped=tuple(doc.get("skipped", ())),
-                   missing=tuple(int(x) for x in doc.get("missing", ())))
+                   by=by, skipped=tuple(skipped), missing=tuple(int(x) for x in missing))
 
 
 def write_binding(session_dir, binding: Binding, *, durable: bool = True) -> Path:

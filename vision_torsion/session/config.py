@@ -27,6 +27,7 @@ from ..measurements import TorqueRig
 from ..settings import MeasureSettings
 from ..targets import Target, load_target, target_from_dict
 from ..textfiles import read_toml
+from ..validate import number_problem
 
 __all__ = [
     "RigConfig",
@@ -242,23 +243,21 @@ class _Problems:
             raise SessionError(f"{source}: {len(self.items)} problem(s)\n  {lines}")
 
 
+_UNITS = (("_m_per_s2", "m/s²"), ("_nm", "N·m"), ("_kg", "kg"), ("_m", "m"), ("_deg", "degrees"), ("_c", "°C"))
+
+
 def _number(table, key, problems, prefix, *, required, default=None, positive=False, nonnegative=False):
     name = f"{prefix}.{key}"
     if key not in table:
         if required:
             problems.add(name, "missing; expected a number")
         return default
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        problems.add(name, f"expected a finite number, got {value!r}")
+    unit = next((u for suffix, u in _UNITS if key.endswith(suffix)), "")
+    why = number_problem(table[key], low=0 if positive or nonnegative else None, low_open=positive, unit=unit)
+    if why is not None:
+        problems.add(name, why)
         return default
-    if positive and value <= 0:
-        problems.add(name, f"expected a number > 0, got {value!r}")
-        return default
-    if nonnegative and value < 0:
-        problems.add(name, f"expected a number >= 0, got {value!r}")
-        return default
-    return float(value)
+    return float(table[key])
 
 
 def _table(data, key, problems, *, required):
@@ -321,16 +320,19 @@ def _protocol_from(table, problems) -> ProtocolConfig | None:
     max_torque = _number(table, "max_torque_nm", problems, "protocol", required=True, positive=True)
     step = _number(table, "step_mass_kg", problems, "protocol", required=True, positive=True)
     cycles = table.get("cycles", 1)
-    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
-        problems.add("protocol.cycles", f"expected a whole number >= 1, got {cycles!r}")
+    why = number_problem(cycles, low=1, whole=True)
+    if why is not None:
+        problems.add("protocol.cycles", why)
         cycles = None
+    else:
+        cycles = int(cycles)
     orient = table.get("orientations_deg")
     if orient is None:
         problems.add("protocol.orientations_deg", "missing; expected a list of angles in degrees")
     elif (
         not isinstance(orient, list)
         or not orient
-        or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in orient)
+        or any(number_problem(v) is not None for v in orient)
     ):
         problems.add("protocol.orientations_deg", f"expected a non-empty list of numbers (degrees), got {orient!r}")
         orient = None
@@ -369,7 +371,7 @@ def _numbers(table, key, problems, prefix, *, length=None, check=None, what=""):
         not isinstance(v, list)
         or not v
         or (length is not None and len(v) != length)
-        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in v)
+        or any(number_problem(x) is not None for x in v)
         or (check is not None and not check([float(x) for x in v]))
     ):
         problems.add(f"{prefix}.{key}", f"expected {what}, got {v!r}")

@@ -31,7 +31,8 @@ from pathlib import Path, PurePosixPath
 from ..errors import ManifestError
 from ..images import IMAGE_SUFFIXES
 from ..measurements import MANIFEST_COLUMNS, MANIFEST_OPTIONAL_COLUMNS, PHASES, ZERO_TORQUE_PHASES
-from ..textfiles import csv_delimiter, decode_utf8
+from ..textfiles import csv_delimiter, decode_utf8, read_text_bytes
+from ..validate import number_problem
 from .binding import BINDING_NAME, load_binding
 
 __all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
@@ -191,8 +192,12 @@ class _RowChecker:
             real = os.path.realpath(path)
             try:
                 st = os.stat(path)
-            except OSError:  # a broken link: no such file
+            except FileNotFoundError:  # a broken link: no such file
                 st = None
+            except OSError as exc:  # a link to itself or in a loop: never a photograph
+                self.add(line, f"image {shown} is a symbolic link that cannot be followed "
+                               f"({exc.strerror or exc})")
+                return
         else:
             real = os.path.join(self._real_folder(os.path.dirname(path)), os.path.basename(path))
         if real != root and not real.startswith(os.path.join(root, "")):
@@ -220,6 +225,9 @@ class _RowChecker:
             self.add(line, f"{column} {text!r} is not a number; expected {expected}")
         elif nonnegative and value < 0:
             self.add(line, f"{column} {text!r} is negative; expected {expected}")
+            return None
+        elif (why := number_problem(value)) is not None:
+            self.add(line, f"{column} {why}; expected {expected}")
             return None
         return value
 
@@ -260,6 +268,10 @@ def _parse_row(check: _RowChecker, line: int, rec: dict[str, str], has: set[str]
     if phase in ZERO_TORQUE_PHASES and mass:
         check.add(line, f"mass_kg {rec['mass_kg']!r} on a {phase} row; a {phase} "
                         "image is taken at zero load (mass_kg 0)")
+    elif phase in _LOADING_PHASES and step and mass == 0 and torque is None:
+        check.add(line, f"mass_kg {rec['mass_kg']!r} on step {step} of a {phase} row; a loading "
+                        "step has weights on its pans (mass_kg > 0; only an unloading phase ends "
+                        "at 0)")
     if None in (image, orient, cycle, step, phase) or (mass is None and torque is None):
         return None
     return dict(image=image, orientation_deg=orient, cycle=cycle, phase=phase, step=step,
@@ -299,17 +311,16 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
             reference.setdefault(row.orientation_deg, row.line)
 
 
+#: Phases whose steps 1, 2, ... add weights: none of them is at zero mass.
+_LOADING_PHASES = ("negative_loading", "positive_loading")
 _NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm", "torque_std_nm")
 
 
 def _read_records(path: Path):
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
+    if not path.exists():
         raise ManifestError(f"{path}: no such file (a session folder needs "
-                            f"{MANIFEST_NAME})") from None
-    except OSError as exc:
-        raise ManifestError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+                            f"{MANIFEST_NAME})")
+    raw = read_text_bytes(path, what="a manifest", error=ManifestError)
     text = decode_utf8(raw, name=path, error=ManifestError, what="the manifest")
     sep = csv_delimiter(text.split("\n", 1)[0], REQUIRED_COLUMNS)
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=sep)
@@ -325,7 +336,19 @@ def _read_records(path: Path):
                 else f"repeated column(s) {', '.join(repeated)}")
         raise ManifestError(f"{path}: line 1: {what}; expected the header "
                             f"{','.join(REQUIRED_COLUMNS)}[,torque_nm,torque_std_nm]")
-    records = [(reader.line_num, fields) for fields in reader if any(f.strip() for f in fields)]
+    records = []
+    while True:
+        start = reader.line_num + 1
+        try:
+            fields = next(reader, None)
+        except csv.Error as exc:  # a field over csv.field_size_limit(): an unclosed quote
+            raise ManifestError(f"{path}: line {start}: cannot be read as CSV ({exc}); a field "
+                                "that long is usually a quote (\") opened and never closed",
+                                reason="bad_csv") from None
+        if fields is None:
+            break
+        if any(f.strip() for f in fields):
+            records.append((reader.line_num, fields))
     if sep == ";":  # decimal commas go with semicolons: 0,02 is 0.02
         numeric = [i for i, c in enumerate(columns) if c in _NUMERIC_COLUMNS]
         for _, fields in records:

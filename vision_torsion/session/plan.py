@@ -54,12 +54,14 @@ from ..fileio import atomic_write_text, check_replaceable
 from ..images import IMAGE_SUFFIXES
 from ..measurements import CYCLE_PHASES, PHASES
 from ..targets import Target, load_target
+from ..validate import check_number
 from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
 from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
+from .plausibility import check_config_numbers
 from .torque import couple_torque
 
 __all__ = ["SessionPlan", "LostMotionLevel", "plan_session", "plan_rows", "lost_motion_levels",
-           "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE", "HEADER_KEYS"]
+           "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE", "HEADER_KEYS", "MAX_PLAN_IMAGES"]
 
 logger = logging.getLogger(__name__)
 
@@ -68,6 +70,9 @@ CAPTURE_SHEET_NAME = "capture_sheet.md"
 HEADER_KEYS = {"gear": ("gear", "name"), "serial": ("gear", "serial"), "operator": ("test", "operator"),
                "date": ("test", "date"), "notes": ("test", "notes")}
 
+#: Most images a plan may have, checked before anything is written (a manifest row,
+#: a capture-sheet line and a photograph each; ~10 MB of files at this size).
+MAX_PLAN_IMAGES = 100_000
 #: Lost-motion levels as fractions of the rated torque: ±3 % (GB/T 35089) and ±4 %
 #: (harmonic-drive catalogues).
 LOST_MOTION_FRACTIONS = (0.03, 0.04)
@@ -124,12 +129,8 @@ def lost_motion_levels(rated_torque_nm: float, *, step_mass_kg: float, torque_pe
     ...     6.0, step_mass_kg=0.02, torque_per_step_nm=0.01962, steps_per_phase=20)]
     [(9, 0.17658), (12, 0.23544)]
     """
-    try:
-        rated = float(rated_torque_nm)
-    except (TypeError, ValueError):
-        rated = math.nan
-    if isinstance(rated_torque_nm, bool) or not math.isfinite(rated) or rated <= 0:
-        raise SessionError(f"plan_session: rated_torque_nm must be a number > 0 (N·m), got {rated_torque_nm!r}")
+    rated = check_number(rated_torque_nm, name="plan_session: rated_torque_nm", error=SessionError,
+                         low=0, low_open=True, unit="N·m")
     # one piece per pan making 1 % of T_R realises 3 % and 4 % exactly
     one_percent_kg = step_mass_kg * (0.01 * rated) / torque_per_step_nm
     suggest = (f"a step mass of {one_percent_kg:.4g} kg ({one_percent_kg * 1000:.4g} g, 1 % of the rated "
@@ -497,7 +498,13 @@ def plan_session(
         `max_torque_nm` and `steps`, a maximum torque below one step, or a folder
         that already holds a session; lost-motion levels the weight pieces cannot
         realise; a target that is neither ``equal``, ``distinct`` nor a readable
-        target description (the reason of its :class:`TargetError` kept).
+        target description (the reason of its :class:`TargetError` kept); numbers
+        ``process`` would refuse as implausible
+        (:func:`~vision_torsion.session.plausibility.check_config_numbers`: an arm
+        radius in mm, g in cm/s², more than
+        :data:`~vision_torsion.session.plausibility.MAX_STEPS_PER_PHASE` pieces per
+        pan); more than :data:`MAX_PLAN_IMAGES` images. All checked before anything
+        is written.
 
     Examples
     --------
@@ -510,12 +517,10 @@ def plan_session(
     folder = Path(out_dir)
     if (max_torque_nm is None) == (steps is None):
         raise SessionError("plan_session: give either max_torque_nm or steps (steps per phase), not both or neither")
-    if steps is not None and (isinstance(steps, bool) or int(steps) != steps or steps < 1):
-        raise SessionError(f"plan_session: steps must be a whole number >= 1, got {steps!r}")
-    if int(preconditioning_cycles) != preconditioning_cycles or preconditioning_cycles < 0:
-        raise SessionError(
-            f"plan_session: preconditioning_cycles must be a whole number >= 0, got {preconditioning_cycles!r}"
-        )
+    if steps is not None:
+        steps = check_number(steps, name="plan_session: steps", error=SessionError, low=1, whole=True)
+    preconditioning_cycles = check_number(preconditioning_cycles, name="plan_session: preconditioning_cycles",
+                                          error=SessionError, low=0, whole=True)
     if steps is not None:
         max_torque_nm = float(f"{steps * 2.0 * step_mass_kg * gravity_m_per_s2 * arm_radius_m:.12g}")
     markers = {"polarity": polarity}
@@ -573,6 +578,7 @@ def plan_session(
     if described is not None:
         doc["target"] = {"name": described.name, **{k: v for k, v in described.spec if v is not None}}
     config = config_from_dict(doc, source="plan_session")
+    check_config_numbers(config, source="plan_session")  # what process would refuse, refused now
     if image_suffix.lower() not in IMAGE_SUFFIXES:
         raise SessionError(
             f"plan_session: image_suffix {image_suffix!r} is not an image "
@@ -585,6 +591,13 @@ def plan_session(
         raise SessionError(
             f"plan_session: max_torque_nm {max_torque_nm:g} is less than one "
             f"step (2·step_mass_kg·g·r = {per_step:.6g} N·m)"
+        )
+    images = len(config.protocol.orientations_deg) * (2 + 4 * n * config.protocol.cycles + bool(closing))
+    if images > MAX_PLAN_IMAGES:
+        raise SessionError(
+            f"plan_session: {images} images ({len(config.protocol.orientations_deg)} orientation(s) × "
+            f"(2 + 4 phases × {n} steps × {config.protocol.cycles} cycle(s))), more than the "
+            f"{MAX_PLAN_IMAGES} a plan may have; fewer orientations, cycles or steps"
         )
     levels = () if rated_torque_nm is None else lost_motion_levels(
         rated_torque_nm, step_mass_kg=step_mass_kg, torque_per_step_nm=per_step, steps_per_phase=n)

@@ -8,7 +8,9 @@ the likely slip in the message:
 
 - ``[rig] arm_radius_m`` within :data:`ARM_RADIUS_RANGE_M`; ``gravity_m_per_s2``
   within :data:`GRAVITY_RANGE_M_PER_S2` (the Earth's surface);
-  ``[protocol] step_mass_kg`` within :data:`STEP_MASS_RANGE_KG`;
+  ``[protocol] step_mass_kg`` within :data:`STEP_MASS_RANGE_KG`; at most
+  :data:`MAX_STEPS_PER_PHASE` weight pieces per pan at ``max_torque_nm`` (a torque
+  in N·mm, or a step mass in tonnes, would ask for millions);
 - every manifest ``mass_kg`` a whole number of ``step_mass_kg`` pieces, and no more
   pieces than the protocol loads at ``max_torque_nm`` (what ``plan`` would put on
   a pan); a mass 1000 times too large is asked about as grams;
@@ -16,8 +18,12 @@ the likely slip in the message:
   protocol's ``max_torque_nm`` (beyond that it is a unit slip, N·mm for N·m, not a
   sensor reading a little above the plan).
 
-:func:`check_session_numbers` lists every problem at once, like the manifest's own
-checks: the configuration's by key, the manifest's by CSV line.
+These are the one home of the rules: ``plan`` applies the configuration's
+(:func:`check_config_numbers`) before it writes anything, ``process`` and every
+command that loads a session apply them all (:func:`check_session_numbers`), so a
+plan that ``process`` would refuse is never written. Each lists every problem at
+once, like the manifest's own checks: the configuration's by key, the manifest's by
+CSV line.
 """
 
 from __future__ import annotations
@@ -26,8 +32,8 @@ import math
 
 from ..errors import ManifestError, SessionError
 
-__all__ = ["check_session_numbers", "ARM_RADIUS_RANGE_M", "GRAVITY_RANGE_M_PER_S2",
-           "STEP_MASS_RANGE_KG", "TORQUE_SLIP_FACTOR"]
+__all__ = ["check_session_numbers", "check_config_numbers", "ARM_RADIUS_RANGE_M", "GRAVITY_RANGE_M_PER_S2",
+           "STEP_MASS_RANGE_KG", "TORQUE_SLIP_FACTOR", "MAX_STEPS_PER_PHASE"]
 
 #: Radius of a torque arm or disk where the wires pull (m): 1 mm to 2 m.
 ARM_RADIUS_RANGE_M = (1e-3, 2.0)
@@ -36,6 +42,9 @@ ARM_RADIUS_RANGE_M = (1e-3, 2.0)
 GRAVITY_RANGE_M_PER_S2 = (9.76, 9.84)
 #: One weight piece (kg): 0.1 g to 50 kg.
 STEP_MASS_RANGE_KG = (1e-4, 50.0)
+#: Most weight pieces on one pan at the protocol's maximum torque (steps per phase):
+#: each is placed by hand and photographed four times per cycle.
+MAX_STEPS_PER_PHASE = 1000
 #: A measured torque this many times the planned maximum is a unit slip.
 TORQUE_SLIP_FACTOR = 10.0
 # masses are typed with a few decimals: 0.02 * 18 is written 0.36
@@ -62,14 +71,42 @@ def _config_problems(config) -> list[str]:
     if not lo <= m <= hi:
         hint = ": grams? (write kg, e.g. 0.02)" if lo <= m / 1000 <= hi else ""
         problems.append(f"protocol.step_mass_kg = {m:g} kg is outside {lo:g}..{hi:g} kg{hint}")
+    if not problems and _pieces(config) > MAX_STEPS_PER_PHASE:
+        problems.append(f"protocol.max_torque_nm = {proto.max_torque_nm:g} N·m needs "
+                        f"{_pieces(config):.3g} pieces of {m:g} kg per pan, more than the "
+                        f"{MAX_STEPS_PER_PHASE} a protocol may load (N·mm for N·m? a step mass too small?)")
     return problems
+
+
+def check_config_numbers(config, *, source=None) -> None:
+    """Check the rig and protocol of a session.toml for unit slips (the module docstring).
+
+    Parameters
+    ----------
+    config : SessionConfig
+        The validated session.toml.
+    source : path or str, optional
+        The file (or ``"plan_session"``), for the message.
+
+    Raises
+    ------
+    SessionError
+        Every implausible value listed, by key, with its unit and the likely slip.
+    """
+    problems = _config_problems(config)
+    if problems:
+        where = f"{source}: " if source is not None else ""
+        raise SessionError(f"{where}{len(problems)} implausible value(s)\n  " + "\n  ".join(problems))
+
+
+def _pieces(config) -> float:
+    rig, proto = config.rig, config.protocol
+    return proto.max_torque_nm / (2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m)
 
 
 def _max_pieces(config) -> int:
     """Pieces per pan at the protocol's maximum torque (tau = 2 m g r), as plan loads."""
-    rig, proto = config.rig, config.protocol
-    pieces = proto.max_torque_nm / (2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m)
-    return int(math.floor(pieces + 1e-6))
+    return int(math.floor(_pieces(config) + 1e-6))
 
 
 def _row_problems(config, manifest) -> list[str]:
@@ -122,10 +159,7 @@ def check_session_numbers(config, manifest, *, config_path=None) -> None:
         protocol loads, or measured torques far beyond the protocol's maximum
         (every one listed, by CSV line).
     """
-    problems = _config_problems(config)
-    if problems:
-        where = f"{config_path}: " if config_path is not None else ""
-        raise SessionError(f"{where}{len(problems)} implausible value(s)\n  " + "\n  ".join(problems))
+    check_config_numbers(config, source=config_path)
     problems = _row_problems(config, manifest)
     if problems:
         raise ManifestError(f"{manifest.path}: {len(problems)} problem(s) (line numbers are CSV lines, "

@@ -32,6 +32,7 @@ Only the output folder (``SESSION_DIR/results/`` by default) is written.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import math
@@ -50,6 +51,7 @@ from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
+from ..validate import check_number
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
 from .shots import image_warnings, polarity_note
@@ -219,6 +221,7 @@ def _progress_bar(total: int, progress: bool):
 def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
     """Yield each task's result in task order: in this process with `jobs` up to
     :data:`_MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
+    jobs = _jobs_within_open_files(jobs, len(tasks))
     bar = _progress_bar(len(tasks), progress)
     try:
         if jobs <= _MAX_THREAD_JOBS or len(tasks) <= 1:
@@ -243,8 +246,45 @@ def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, kn
                 bar.update()
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
+    except OSError as exc:
+        if exc.errno != errno.EMFILE:
+            raise
+        raise SessionError(f"too many open files (the limit is {_open_file_limit()}, `ulimit -n`): run with "
+                           "fewer --jobs, or raise the limit", reason="too_many_open_files") from None
     finally:
         bar.close()
+
+
+#: Open files a worker process costs its parent (its sentinel and pipes), and the
+#: files kept free for everything else (images being read, cache logs, results).
+_FILES_PER_WORKER, _FILES_RESERVED = 3, 8
+
+
+def _open_file_limit() -> int | None:
+    """The soft limit on open files (``ulimit -n``), or None where there is none."""
+    try:
+        import resource
+    except ImportError:  # not a POSIX system
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    return None if soft == resource.RLIM_INFINITY else soft
+
+
+def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
+    """`jobs`, or the threads of this process (at most :data:`_MAX_THREAD_JOBS`) when
+    the open-file limit has no room for `jobs` worker processes (logged)."""
+    limit = _open_file_limit()
+    if jobs <= _MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
+        return jobs
+    try:
+        in_use = len(os.listdir("/proc/self/fd"))
+    except OSError:  # no /proc: the standard streams at least
+        in_use = 3
+    if in_use + _FILES_RESERVED + _FILES_PER_WORKER * jobs <= limit:
+        return jobs
+    logger.warning("only %d files may be open (ulimit -n), too few for %d worker processes; measuring "
+                   "with %d threads of this process instead", limit, jobs, _MAX_THREAD_JOBS)
+    return _MAX_THREAD_JOBS
 
 
 def _read_ahead(tasks, *, readers: int):
@@ -403,8 +443,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
     """
-    if jobs is not None and jobs < 1:
-        raise SessionError(f"jobs must be >= 1, got {jobs}")
+    if jobs is not None:
+        jobs = check_number(jobs, name="jobs", error=SessionError, low=1, whole=True)
     jobs = jobs or _default_jobs()
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session

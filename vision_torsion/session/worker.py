@@ -20,7 +20,6 @@ import os
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -28,7 +27,8 @@ import xxhash
 from threadpoolctl import threadpool_limits
 
 from ..batch import attempt
-from ..images import GreyImage, decode_image
+from ..errors import ImageReadError
+from ..images import GreyImage, decode_image, read_image_bytes
 from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
 from .cache import CacheLog, cache_key
@@ -130,9 +130,10 @@ def read_task(task: tuple[str, str, str]) -> ReadImage:
     """
     path = task[0]
     try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        why = json.dumps({"status": "failed", "message": f"{path}: cannot be read ({exc.strerror or exc})"})
+        data = read_image_bytes(path, signature=False)  # its size checked before it is read; a non-image
+        # is refused by decode_image below, a failure cached by the file's hash
+    except ImageReadError as exc:
+        why = json.dumps({"status": "failed", "message": str(exc)})
         return ReadImage("", result=("", why, "unread"))
     return prepare_task(data, task)
 

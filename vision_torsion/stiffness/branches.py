@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import AnalysisError
+from ..validate import check_number
 from .records import TorqueAngleRecord
 
 __all__ = ["BRANCH_KINDS", "LOADING_KINDS", "HOLD_SPEED_FRACTION", "Branch", "BranchSplit", "zero_band",
@@ -179,8 +180,9 @@ def zero_band(torque_nm, *, raw_torque_nm=None, threshold_nm: float | None = Non
         raw = t if raw_torque_nm is None else np.asarray(raw_torque_nm, dtype=float)
         span = float(np.ptp(t)) if t.size else 0.0
         threshold_nm = max(THRESHOLD_SIGMAS * robust_noise_std(raw), 1e-3 * span)
-    elif not threshold_nm > 0:
-        raise AnalysisError(f"threshold_nm must be > 0, got {threshold_nm!r}")
+    else:
+        threshold_nm = check_number(threshold_nm, name="threshold_nm", error=AnalysisError, low=0, low_open=True,
+                                    unit="N·m")
     return level, float(threshold_nm)
 
 
@@ -202,9 +204,8 @@ def hold_speed(record: TorqueAngleRecord, *, hold_speed_deg_per_s: float | None 
     """
     speed = np.abs(np.gradient(record.drive_deg, record.time_s))
     if hold_speed_deg_per_s is not None:
-        if not hold_speed_deg_per_s > 0:
-            raise AnalysisError(f"hold_speed_deg_per_s must be > 0, got {hold_speed_deg_per_s!r}")
-        return float(hold_speed_deg_per_s)
+        return check_number(hold_speed_deg_per_s, name="hold_speed_deg_per_s", error=AnalysisError, low=0,
+                            low_open=True, unit="degrees/s")
     typical = float(np.percentile(speed, 90))
     if not typical > 0:
         raise AnalysisError(f"{record.name}: the drive never moves (input position constant)")

@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..errors import AnalysisError, RigError
+from ..validate import check_number
 
 __all__ = [
     "MESHING_ZONES",
@@ -75,9 +76,8 @@ def meshing_pairs(stiffness_nm_per_rad, *, tooth_stiffness_nm_per_rad: float):
     >>> meshing_pairs([3300.0, 16500.0], tooth_stiffness_nm_per_rad=330.0)
     array([10., 50.])
     """
-    ks = float(tooth_stiffness_nm_per_rad)
-    if not np.isfinite(ks) or ks <= 0:
-        raise RigError(f"rig constant tooth_stiffness_nm_per_rad must be > 0, got {ks!r}")
+    ks = check_number(tooth_stiffness_nm_per_rad, name="rig constant tooth_stiffness_nm_per_rad", error=RigError,
+                      low=0, low_open=True, unit="N·m/rad")
     return np.asarray(stiffness_nm_per_rad, dtype=float) / ks
 
 

@@ -19,6 +19,7 @@ is line 1), the one row-numbering rule of :mod:`vision_torsion.measurements`.
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,6 +28,8 @@ import pandas as pd
 
 from ..errors import RecordError, RigError
 from ..measurements import MEASUREMENT_COLUMNS, PHASES, csv_line, read_measurements
+from ..textfiles import read_text_bytes
+from ..validate import MAX_MAGNITUDE, number_problem
 from .rig import RigConstants, output_angle_deg, pulses_to_input_deg
 
 __all__ = [
@@ -129,10 +132,17 @@ def _numeric(frame: pd.DataFrame, column: str, name: str, lines=None) -> np.ndar
         row = bad[0]
         line = csv_line(row) if lines is None else int(lines[row])
         value = frame[column].iloc[row]
+        shown = ("(blank)" if pd.isna(value) else repr(float(value)) if isinstance(value, (float, np.floating))
+                 else repr(value))
         raise RecordError(
-            f"{name}: column {column!r} has a missing or non-numeric value "
-            f"{'(blank)' if pd.isna(value) else repr(value)} on line {line}"
+            f"{name}: column {column!r} has a missing, non-numeric or infinite value {shown} on line {line}"
         )
+    huge = np.flatnonzero(np.abs(values) > MAX_MAGNITUDE)
+    if huge.size:
+        row = huge[0]
+        line = csv_line(row) if lines is None else int(lines[row])
+        raise RecordError(f"{name}: line {line}: column {column!r} "
+                          f"{number_problem(float(values[row]))}", reason="bad_value")
     return values
 
 
@@ -169,8 +179,10 @@ def record_from_encoder(frame: pd.DataFrame, *, rig: RigConstants, name: str = "
     Raises
     ------
     RecordError
-        A column is missing or holds a non-numeric value, fewer than
-        :data:`MIN_RECORD_POINTS` rows, or ``time_s`` is not strictly increasing.
+        A column is missing or holds a non-numeric, infinite or absurdly large
+        (beyond :data:`~vision_torsion.validate.MAX_MAGNITUDE`) value, fewer than
+        :data:`MIN_RECORD_POINTS` rows, or ``time_s`` is not strictly increasing
+        (a repeated time included). Each names the CSV line.
     RigError
         ``pulses_per_rev`` is missing for a record with ``input_pulses``.
     """
@@ -262,11 +274,13 @@ def read_record(path, *, rig: RigConstants | None = None) -> TorqueAngleRecord:
         An encoder record is read without rig constants.
     """
     p = Path(path)
+    if not p.exists():
+        raise RecordError(f"record file {p} does not exist")
+    raw = read_text_bytes(p, what="a torque-angle record", error=RecordError)
     try:
-        frame = pd.read_csv(p)
-    except FileNotFoundError:
-        raise RecordError(f"record file {p} does not exist") from None
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        # blank cells are missing; "nan" or "NA" typed in a cell is text, shown as written
+        frame = pd.read_csv(io.BytesIO(raw), keep_default_na=False, na_values=[""])
+    except (ValueError, pd.errors.ParserError) as exc:
         raise RecordError(f"record file {p} cannot be read as CSV: {exc}") from None
     if {"phase", "status"} <= set(frame.columns):
         return record_from_measurements(frame, name=p.name)

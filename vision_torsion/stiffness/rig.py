@@ -33,7 +33,6 @@ Every key is optional; the checks that need a constant say which one is missing.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -41,6 +40,7 @@ import numpy as np
 
 from ..errors import RigError
 from ..textfiles import read_toml
+from ..validate import check_number
 
 __all__ = ["RigConstants", "load_rig", "pulses_to_input_deg", "output_angle_deg"]
 
@@ -58,16 +58,10 @@ _TABLES = {
 
 
 def _positive(name: str, value, *, allow_none: bool = True) -> float | None:
-    """One validation helper for every scalar constant: finite and > 0."""
+    """A scalar constant: finite and > 0 (None when not given)."""
     if value is None and allow_none:
         return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise RigError(f"rig constant {name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise RigError(f"rig constant {name} must be a finite number > 0, got {value!r}")
-    return v
+    return check_number(value, name=f"rig constant {name}", error=RigError, low=0, low_open=True)
 
 
 @dataclass(frozen=True)
@@ -110,7 +104,7 @@ class RigConstants:
     >>> RigConstants(transmission_ratio=0)
     Traceback (most recent call last):
     ...
-    vision_torsion.errors.RigError: rig constant transmission_ratio must be a finite non-zero number, got 0
+    vision_torsion.errors.RigError: rig constant transmission_ratio must be a finite number, not 0, got 0
     """
 
     pulses_per_rev: float | None = None
@@ -124,15 +118,8 @@ class RigConstants:
     check_pairs: tuple[float, ...] | None = None
 
     def __post_init__(self):
-        ratio = self.transmission_ratio
-        try:
-            r = float(ratio)
-        except (TypeError, ValueError):
-            r = math.nan
-        if not math.isfinite(r) or r == 0:
-            raise RigError(
-                f"rig constant transmission_ratio must be a finite non-zero number, got {ratio!r}"
-            )
+        r = check_number(self.transmission_ratio, name="rig constant transmission_ratio", error=RigError,
+                         nonzero=True)
         object.__setattr__(self, "transmission_ratio", r)
         for name in (
             "pulses_per_rev",
@@ -143,10 +130,8 @@ class RigConstants:
         ):
             object.__setattr__(self, name, _positive(name, getattr(self, name)))
         if self.teeth is not None:
-            teeth = _positive("teeth", self.teeth)
-            if teeth != int(teeth):
-                raise RigError(f"rig constant teeth must be a whole number, got {self.teeth!r}")
-            object.__setattr__(self, "teeth", int(teeth))
+            object.__setattr__(self, "teeth", check_number(self.teeth, name="rig constant teeth", error=RigError,
+                                                           low=1, whole=True))
         if (self.reference_torque_nm is None) != (self.reference_pairs is None):
             raise RigError(
                 "rig constants reference_torque_nm and reference_pairs must be given together"
@@ -159,8 +144,12 @@ class RigConstants:
             return
         if torque is None or pairs is None:
             raise RigError("rig constants check_torque_nm and check_pairs must be given together")
-        torque = tuple(float(v) for v in np.atleast_1d(torque))
-        pairs = tuple(_positive("check_pairs", v) for v in np.atleast_1d(pairs))
+        for name, value in (("check_torque_nm", torque), ("check_pairs", pairs)):
+            if isinstance(value, (str, bytes, dict)) or np.ndim(value) != 1:
+                raise RigError(f"rig constant {name} must be a list of numbers, got {value!r}")
+        torque = tuple(check_number(v, name=f"rig constant check_torque_nm[{i}]", error=RigError)
+                       for i, v in enumerate(torque))
+        pairs = tuple(_positive(f"check_pairs[{i}]", v) for i, v in enumerate(pairs))
         if len(torque) != len(pairs) or len(torque) < 3:
             raise RigError(
                 "rig constants check_torque_nm and check_pairs must be lists of equal "

@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import SceneError
+from ..validate import check_number
 from .records import MEASUREMENT_COLUMNS
 from .rig import RigConstants
 
@@ -156,6 +157,13 @@ def _cycle_path(law, *, max_torque, backlash_rad, centre_rad, hysteresis_rad, de
     return pieces
 
 
+def _check_parameters(function: str, checks) -> None:
+    """Each (name, value, range) through :func:`~vision_torsion.validate.check_number`
+    (SceneError naming the function, the parameter, its value and its range)."""
+    for name, value, allowed in checks:
+        check_number(value, name=f"{function}: {name}", error=SceneError, **allowed)
+
+
 def synthetic_encoder_record(
     *,
     law: SaturatingStiffness | None = None,
@@ -204,7 +212,7 @@ def synthetic_encoder_record(
     Raises
     ------
     SceneError
-        A parameter is out of range.
+        A parameter is out of range: the message names it, its value and the range.
 
     Examples
     --------
@@ -221,12 +229,18 @@ def synthetic_encoder_record(
                            tooth_stiffness_nm_per_rad=law.tooth_stiffness_nm_per_rad)
     if rig.pulses_per_rev is None:
         raise SceneError("the synthetic rig needs pulses_per_rev")
+    _check_parameters("synthetic_encoder_record", [
+        ("max_torque_nm", max_torque_nm, dict(low=0, low_open=True, unit="N·m")),
+        ("backlash_deg", backlash_deg, dict(low=0, low_open=True, unit="degrees")),
+        ("backlash_centre_deg", backlash_centre_deg, dict(unit="degrees")),
+        ("hysteresis_deg", hysteresis_deg, dict(unit="degrees")),
+        ("cycles", cycles, dict(low=1, whole=True)),
+        ("torque_noise_nm", torque_noise_nm, dict(low=0, unit="N·m")),
+        ("sampling_rate_hz", sampling_rate_hz, dict(low=0, low_open=True, unit="Hz")),
+        ("drive_speed_deg_per_s", drive_speed_deg_per_s, dict(low=0, low_open=True, unit="degrees/s")),
+    ])
     hysteresis = np.deg2rad(hysteresis_deg)
     min_compliance = 1.0 / law.stiffness(max_torque_nm)
-    if not (max_torque_nm > 0 and backlash_deg > 0 and cycles >= 1 and torque_noise_nm >= 0
-            and sampling_rate_hz > 0 and drive_speed_deg_per_s > 0):
-        raise SceneError("max_torque_nm, backlash_deg, cycles, sampling_rate_hz and "
-                         "drive_speed_deg_per_s must be > 0, torque_noise_nm >= 0")
     if not 0 <= hysteresis * np.pi / max_torque_nm < min_compliance:
         raise SceneError(f"hysteresis_deg = {hysteresis_deg} is negative or so large that "
                          "the unloading branch would turn back")
@@ -366,7 +380,7 @@ def realistic_encoder_record(
     Raises
     ------
     SceneError
-        A parameter is out of range.
+        A parameter is out of range: the message names it, its value and the range.
 
     Examples
     --------
@@ -374,11 +388,22 @@ def realistic_encoder_record(
     >>> len(rec.frame), sorted(set(rec.true_cycle.tolist()))
     (20000, [0, 1, 2, 3])
     """
+    _check_parameters("realistic_encoder_record", [
+        ("samples", samples, dict(low=1000, whole=True)),
+        ("hum_hz", hum_hz, dict(low=0, low_open=True, unit="Hz")),
+        ("sampling_rate_hz", sampling_rate_hz, dict(low=2 * hum_hz, low_open=True, unit="Hz, above 2·hum_hz")),
+        ("max_torque_nm", max_torque_nm, dict(low=0, low_open=True, unit="N·m")),
+        ("backlash_deg", backlash_deg, dict(low=0, low_open=True, unit="degrees")),
+        ("backlash_centre_deg", backlash_centre_deg, dict(unit="degrees")),
+        ("friction_ratio", friction_ratio, dict(low=0, high=0.5, high_open=True)),
+        ("bedding_in_deg", bedding_in_deg, dict(low=0, high=backlash_deg, high_open=True,
+                                                unit="degrees, below backlash_deg")),
+        ("cycles", cycles, dict(low=1, whole=True)),
+        ("dwell_s", dwell_s, dict(low=0, unit="s")),
+        ("torque_noise_nm", torque_noise_nm, dict(low=0, unit="N·m")),
+        ("hum_nm", hum_nm, dict(low=0, unit="N·m")),
+    ])
     law = stiffening_law(max_torque_nm=max_torque_nm) if law is None else law
-    if not (samples >= 1000 and sampling_rate_hz > 2 * hum_hz > 0 and max_torque_nm > 0
-            and backlash_deg > 0 and 0 <= friction_ratio < 0.5 and 0 <= bedding_in_deg < backlash_deg
-            and cycles >= 1 and dwell_s >= 0 and torque_noise_nm >= 0 and hum_nm >= 0):
-        raise SceneError("realistic_encoder_record: a parameter is out of range (see the docstring)")
     rig = RigConstants(pulses_per_rev=51200, transmission_ratio=100, sensor_stiffness_nm_per_rad=2.0e4,
                        teeth=160, tooth_stiffness_nm_per_rad=law.tooth_stiffness_nm_per_rad)
     dense = 3000
@@ -518,8 +543,8 @@ def synthetic_measurements(
     np.int64(5)
     """
     law = SaturatingStiffness() if law is None else law
-    if steps < 1 or cycles < 1:
-        raise SceneError(f"steps and cycles must be >= 1, got {steps} and {cycles}")
+    _check_parameters("synthetic_measurements", [("steps", steps, dict(low=1, whole=True)),
+                                                 ("cycles", cycles, dict(low=1, whole=True))])
     rng = np.random.default_rng(seed)
     half, hyst = backlash_deg / 2, hysteresis_deg
     frac = np.arange(steps + 1) / steps
