@@ -40,16 +40,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vision_torsion.analysis import (  # noqa: E402
+from vision_torsion.analysis import (
     analyze_session,
     bilinear_loop_energy,
     bilinear_loop_width,
     bilinear_response,
     loop_energy,
-    simulate_measurements,
-    torque_levels,
 )
 from vision_torsion.fileio import write_json  # noqa: E402
+from vision_torsion.synthetic import simulate_measurements, torque_levels
 
 #: figure in analysis summary -> (truth key, target kind, target value)
 TARGETS = {

@@ -37,11 +37,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from vision_torsion.fileio import write_json  # noqa: E402
-from vision_torsion.stiffness import (  # noqa: E402
-    analyze_stiffness_curve,
-    realistic_encoder_record,
-    synthetic_encoder_record,
-)
+from vision_torsion.stiffness import analyze_stiffness_curve
+from vision_torsion.synthetic import realistic_encoder_record, synthetic_encoder_record
 
 REALISTIC_SEEDS = (1, 2, 3, 4, 5)
 #: Bedding-in of the realistic record's virgin loading (its default), degrees.

@@ -9,9 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from vision_torsion.analysis import analyze_session, bilinear_response, simulate_measurements
+from vision_torsion.analysis import analyze_session, bilinear_response
 from vision_torsion.analysis.checks import flat_top
 from vision_torsion.analysis.uncertainty import tip_amplitude_response
+from vision_torsion.synthetic import simulate_measurements
 
 K0, A, S = 4.4, 0.4, 0.05  # Masing virgin curve θ = τ/k0 + a·(u − ln(1 + u))·sign τ, u = |τ|/s
 T = 0.36

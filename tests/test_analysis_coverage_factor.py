@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from scipy import special
 
-from vision_torsion.analysis import analyze_session, simulate_measurements
+from vision_torsion.analysis import analyze_session
 from vision_torsion.analysis.summary import mean_uncertainty, summarise_figures
 from vision_torsion.analysis.uncertainty import coverage_factor_t_normal
 from vision_torsion.errors import AnalysisError
+from vision_torsion.synthetic import simulate_measurements
 
 RIG = dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)
 

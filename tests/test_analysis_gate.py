@@ -18,11 +18,11 @@ from vision_torsion.analysis import (
     fit_switch,
     lack_of_fit,
     orientation_anova,
-    simulate_measurements,
 )
 from vision_torsion.analysis.checks import angle_sign_inverted, closure_checks
 from vision_torsion.errors import SessionError
 from vision_torsion.session.config import config_from_dict
+from vision_torsion.synthetic import simulate_measurements
 
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)
 FAST = dict(n_draws=40)

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vision_torsion.analysis import analyze_session, fit_bilinear, simulate_measurements
+from vision_torsion.analysis import analyze_session, fit_bilinear
 from vision_torsion.analysis.models import bilinear_response
 from vision_torsion.analysis.uncertainty import (
     check_rig,
@@ -22,6 +22,7 @@ from vision_torsion.analysis.uncertainty import (
 from vision_torsion.errors import AnalysisError
 from vision_torsion.session.config import RigConfig
 from vision_torsion.session.torque import couple_torque
+from vision_torsion.synthetic import simulate_measurements
 
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)
 STEP_NM = 2 * 0.02 * 9.81 * 0.05
@@ -114,7 +115,8 @@ def repeated():
 
 
 def _sampled_energy():
-    from vision_torsion.analysis import loop_energy, torque_levels
+    from vision_torsion.analysis import loop_energy
+    from vision_torsion.synthetic import torque_levels
 
     lv = torque_levels(T_MAX, STEP_NM)
     tau = np.concatenate([lv[::-1], -lv, -lv[::-1], lv])

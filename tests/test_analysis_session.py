@@ -11,10 +11,10 @@ from vision_torsion.analysis import (
     bilinear_loop_width,
     lost_motion,
     orientation_test,
-    simulate_measurements,
     validate_measurements,
 )
 from vision_torsion.errors import AnalysisError
+from vision_torsion.synthetic import simulate_measurements
 
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)
 T_MAX = 0.36

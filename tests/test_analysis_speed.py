@@ -4,7 +4,8 @@
 import numpy as np
 import pytest
 
-from vision_torsion.analysis import catalogue, models, simulate_measurements
+from vision_torsion.analysis import catalogue, models
+from vision_torsion.synthetic import simulate_measurements
 
 
 def _loop(seed):

@@ -405,7 +405,7 @@ def test_cli_round_trip(tmp_path, folders, capsys):
 
 
 def test_analyze_adds_its_report_to_a_campaign(tmp_path, capsys):
-    from vision_torsion.analysis import simulate_measurements
+    from vision_torsion.synthetic import simulate_measurements
 
     table = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, angle_std_deg=0.001, mass_std_kg=5e-5,
                                   rng=np.random.default_rng(2), n_cycles=1, torque_model="pieces")

@@ -6,13 +6,13 @@ import json
 import numpy as np
 import pytest
 
-from vision_torsion.analysis import simulate_measurements
 from vision_torsion.analysis.conformity import Limit, conformity, judge
 from vision_torsion.errors import AnalysisError, SessionError
 from vision_torsion.report import export_name
 from vision_torsion.report.analyze import analyze_table, spec_limits
 from vision_torsion.session.config import config_from_dict, config_to_dict, load_config
 from vision_torsion.session.plan import plan_session
+from vision_torsion.synthetic import simulate_measurements
 
 BASE = {
     "rig": {"arm_radius_m": 0.05, "mass_tolerance_kg": 1e-4},

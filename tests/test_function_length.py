@@ -19,7 +19,7 @@ EXCEPTIONS = {
     "session/sheet.py::capture_sheet_html": "one HTML page",
     "session/plan.py::plan_session": "the plan, step by step",
     "session/bind.py::bind_session": "binding, step by step",
-    "stiffness/synthetic.py::realistic_encoder_record": "one generator",
+    "synthetic/encoder.py::realistic_encoder_record": "one generator",
     "report/html.py::render_html": "one HTML page",
     "report/analyze.py::analyze_table": "the analysis of a table, step by step",
 }

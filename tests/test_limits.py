@@ -21,7 +21,6 @@ import pytest
 from helpers import draw_target, make_session, tree_digest
 
 from vision_torsion import images as images_module
-from vision_torsion.analysis.simulate import simulate_measurements
 from vision_torsion.cli import main
 from vision_torsion.errors import ImageReadError, ManifestError, RecordError, RigError, SessionError
 from vision_torsion.images import MAX_IMAGE_FILE_BYTES, image_size, load_image, read_image_bytes, write_image
@@ -31,6 +30,7 @@ from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_session
 from vision_torsion.session.plausibility import MAX_STEPS_PER_PHASE
 from vision_torsion.stiffness.records import read_record
 from vision_torsion.stiffness.rig import RigConstants, load_rig
+from vision_torsion.synthetic.tables import simulate_measurements
 
 
 def run(capsys, *argv):

@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vision_torsion.analysis import analyze_session, simulate_measurements
+from vision_torsion.analysis import analyze_session
 from vision_torsion.errors import AnalysisError, MeasurementsError, RecordError, RigError
 from vision_torsion.measurements import (
     CYCLE_PHASES,
@@ -19,6 +19,7 @@ from vision_torsion.measurements import (
 )
 from vision_torsion.session.config import ProtocolConfig, RigConfig, SessionConfig
 from vision_torsion.stiffness.records import read_record
+from vision_torsion.synthetic import simulate_measurements
 
 
 def _table():

@@ -7,9 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vision_torsion.analysis import analyze_session, simulate_measurements
+from vision_torsion.analysis import analyze_session
 from vision_torsion.errors import AnalysisError
 from vision_torsion.report import STIFFNESS_TABLE_COLUMNS, write_report
+from vision_torsion.synthetic import simulate_measurements
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,10 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from vision_torsion import __version__
-from vision_torsion.analysis import analyze_session, simulate_measurements
+from vision_torsion.analysis import analyze_session
 from vision_torsion.report import figures as fig
 from vision_torsion.report import write_report
+from vision_torsion.synthetic import simulate_measurements
 
 
 @pytest.fixture(scope="module")

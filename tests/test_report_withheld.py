@@ -5,9 +5,10 @@ traceback for an inverted angle sign)."""
 import numpy as np
 import pytest
 
-from vision_torsion.analysis import analyze_session, simulate_measurements
+from vision_torsion.analysis import analyze_session
 from vision_torsion.report import stiffness_table, write_report
 from vision_torsion.report.analyze import describe_withheld, withheld_by_kind
+from vision_torsion.synthetic import simulate_measurements
 
 # the demo's kind of loop: a stiffness switch at tau_c inside each loading phase
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)

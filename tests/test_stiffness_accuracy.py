@@ -11,15 +11,13 @@ import pytest
 from vision_torsion.errors import AnalysisError
 from vision_torsion.stiffness import (
     RigConstants,
-    SaturatingStiffness,
     analyze_stiffness_curve,
     calibrate_tooth_stiffness,
     check_linearity,
     stiffness_section,
-    synthetic_encoder_record,
-    synthetic_measurements,
     wrap_angle_rad,
 )
+from vision_torsion.synthetic import SaturatingStiffness, synthetic_encoder_record, synthetic_measurements
 
 
 def _middle(curve, max_torque):

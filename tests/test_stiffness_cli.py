@@ -7,7 +7,7 @@ import tomli_w
 
 from vision_torsion.cli import main
 from vision_torsion.fileio import RECORD_NAME
-from vision_torsion.stiffness import synthetic_encoder_record, synthetic_measurements
+from vision_torsion.synthetic import synthetic_encoder_record, synthetic_measurements
 
 
 def _write_inputs(folder):

@@ -14,16 +14,15 @@ import pytest
 from vision_torsion.stiffness import (
     StiffnessCurve,
     analyze_stiffness_curve,
-    realistic_encoder_record,
     split_branches,
     step_stiffness,
     summarise_curves,
     summarise_steps,
-    synthetic_measurements,
 )
 from vision_torsion.stiffness.analysis import as_record
 from vision_torsion.stiffness.filtering import filter_record
-from vision_torsion.stiffness.synthetic import SaturatingStiffness
+from vision_torsion.synthetic import realistic_encoder_record, synthetic_measurements
+from vision_torsion.synthetic.encoder import SaturatingStiffness
 
 
 @pytest.fixture(scope="module")

@@ -13,11 +13,10 @@ from vision_torsion.stiffness import (
     output_angle_deg,
     read_record,
     split_branches,
-    synthetic_encoder_record,
-    synthetic_measurements,
 )
 from vision_torsion.stiffness.filtering import filter_record
 from vision_torsion.stiffness.records import record_from_encoder
+from vision_torsion.synthetic import synthetic_encoder_record, synthetic_measurements
 
 
 def test_output_angle_removes_sensor_twist():

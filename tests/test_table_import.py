@@ -5,10 +5,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vision_torsion.analysis import simulate_measurements
 from vision_torsion.errors import MeasurementsError
 from vision_torsion.measurements import MEASUREMENT_COLUMNS
 from vision_torsion.report.analyze import analyze_table
+from vision_torsion.synthetic import simulate_measurements
 from vision_torsion.table_import import import_table, parse_column_map, phases_from_torque
 
 

@@ -17,14 +17,9 @@ from vision_torsion.errors import (
 )
 from vision_torsion.measurements import TorqueRig
 from vision_torsion.session.process import process_session
-from vision_torsion.stiffness import (
-    RigConstants,
-    meshing_pairs,
-    realistic_encoder_record,
-    synthetic_encoder_record,
-    synthetic_measurements,
-)
+from vision_torsion.stiffness import RigConstants, meshing_pairs
 from vision_torsion.stiffness.branches import zero_band
+from vision_torsion.synthetic import realistic_encoder_record, synthetic_encoder_record, synthetic_measurements
 from vision_torsion.textfiles import MAX_TOML_DEPTH, parse_toml, read_text_bytes, read_toml
 from vision_torsion.validate import MAX_MAGNITUDE, check_number, describe_range, number_problem
 

@@ -84,7 +84,7 @@ _LAZY = {
     "bilinear_response": "analysis",
     "fit_bilinear": "analysis",
     "fit_bouc_wen": "analysis",
-    "simulate_measurements": "analysis",
+    "simulate_measurements": "synthetic",
     "fit_preisach": "analysis",
     "write_report": "report",
     "analyze_table": "report.analyze",
@@ -104,7 +104,7 @@ _LAZY = {
     "load_rig": "stiffness",
     "meshing_pairs": "stiffness",
     "wrap_angle_rad": "stiffness",
-    "synthetic_encoder_record": "stiffness",
+    "synthetic_encoder_record": "synthetic",
 }
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

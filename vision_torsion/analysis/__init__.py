@@ -11,7 +11,6 @@ Modules, one job each:
 - :mod:`.loops` — validation of ``measurements.csv`` and loop assembly;
 - :mod:`.summary` — per-orientation and session summaries, orientation test;
 - :mod:`.session` — :func:`analyze_session`;
-- :mod:`.simulate` — synthetic measurement tables with known truth;
 - :mod:`.fitcheck` — the lack-of-fit gate, switching-phase stiffness, secant;
 - :mod:`.preisach` — the Preisach / Maxwell-slip model, fitted by NNLS;
 - :mod:`.catalogue` — K1, K2, K3 with catalogue (or fitted) break torques;
@@ -21,6 +20,6 @@ Modules, one job each:
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "preisach", "session", "simulate", "summary")
+_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "preisach", "session", "summary")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -1100,7 +1100,7 @@ def analyze_session(
     Examples
     --------
     >>> import numpy as np
-    >>> from vision_torsion.analysis import simulate_measurements
+    >>> from vision_torsion.synthetic import simulate_measurements
     >>> df = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, orientations_deg=(0,), torque_model="pieces",
     ...                            rng=np.random.default_rng(1))
     >>> rig = dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)

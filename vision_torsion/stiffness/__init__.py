@@ -14,8 +14,9 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.backlash` — the dead zone;
 - :mod:`.meshing` — meshing pairs, wrap angle, Ks calibration, linearity check;
 - :mod:`.analysis` — :func:`analyze_stiffness_curve`, the whole chain;
-- :mod:`.plots`, :mod:`.report` — figures and the session-report section;
-- :mod:`.synthetic` — records with known truth.
+- :mod:`.plots`, :mod:`.report` — figures and the session-report section.
+
+Records with known truth are made by :mod:`vision_torsion.synthetic.encoder`.
 """
 
 from ..lazy import attach
@@ -23,6 +24,6 @@ from ..lazy import attach
 # the modules whose __all__ make up this face, each imported on first use of one of its names
 # (so that reading a record does not load matplotlib for the plots)
 _LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "plots", "records", "report",
-         "rig", "steps", "synthetic")
+         "rig", "steps")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -458,7 +458,7 @@ def analyze_stiffness_curve(
 
     Examples
     --------
-    >>> from vision_torsion.stiffness.synthetic import synthetic_encoder_record
+    >>> from vision_torsion.synthetic.encoder import synthetic_encoder_record
     >>> syn = synthetic_encoder_record(seed=3)
     >>> result = analyze_stiffness_curve(syn.frame, rig=syn.rig)
     >>> round(result.backlash.width_deg, 2)

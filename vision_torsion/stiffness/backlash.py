@@ -196,7 +196,8 @@ def detect_backlash(record: TorqueAngleRecord, filtered: TorqueAngleRecord, spli
 
     Examples
     --------
-    >>> from vision_torsion.stiffness import synthetic, analysis, filtering, branches
+    >>> from vision_torsion.stiffness import analysis, filtering, branches
+    >>> from vision_torsion.synthetic import encoder as synthetic
     >>> syn = synthetic.synthetic_encoder_record(backlash_deg=0.2, seed=5)
     >>> rec = analysis.as_record(syn.frame, rig=syn.rig)
     >>> filt = filtering.filter_record(rec)

@@ -100,7 +100,7 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
 
     Examples
     --------
-    >>> from vision_torsion.stiffness.synthetic import synthetic_measurements
+    >>> from vision_torsion.synthetic.encoder import synthetic_measurements
     >>> section = stiffness_section(synthetic_measurements(steps=10))
     >>> sorted(section.figures), len(section.steps)
     (['step_stiffness'], 40)

@@ -84,7 +84,7 @@ def step_stiffness(measurements, *, name: str = "measurements table") -> pd.Data
 
     Examples
     --------
-    >>> from vision_torsion.stiffness.synthetic import synthetic_measurements
+    >>> from vision_torsion.synthetic.encoder import synthetic_measurements
     >>> steps = step_stiffness(synthetic_measurements(steps=4))
     >>> len(steps), sorted(set(steps["phase"]))[0]
     (16, 'negative_loading')
@@ -159,7 +159,7 @@ def summarise_steps(steps: pd.DataFrame) -> pd.DataFrame:
 
     Examples
     --------
-    >>> from vision_torsion.stiffness.synthetic import synthetic_measurements
+    >>> from vision_torsion.synthetic.encoder import synthetic_measurements
     >>> table = synthetic_measurements(steps=4, cycles=2, angle_noise_deg=1e-4, seed=1)
     >>> summary = summarise_steps(step_stiffness(table))
     >>> int(summary["n_loops"].max())

@@ -33,7 +33,8 @@ def base_summary(*, seed: int = 0, n_cycles: int = 2) -> dict:
     n_cycles : int
         Cycles per orientation.
     """
-    from ..analysis import analyze_session, simulate_measurements
+    from ..analysis import analyze_session
+    from ..synthetic import simulate_measurements
 
     rng = np.random.default_rng(seed)
     table = simulate_measurements(k_u=4.4, k_l=0.3, tau_c=0.15, max_torque_nm=0.36, angle_std_deg=0.001,

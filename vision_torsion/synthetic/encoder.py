@@ -25,9 +25,9 @@ import numpy as np
 import pandas as pd
 
 from ..errors import SceneError
+from ..stiffness.records import MEASUREMENT_COLUMNS
+from ..stiffness.rig import RigConstants
 from ..validate import check_number
-from .records import MEASUREMENT_COLUMNS
-from .rig import RigConstants
 
 __all__ = [
     "SaturatingStiffness",

@@ -31,9 +31,9 @@ import math
 import numpy as np
 import pandas as pd
 
+from ..analysis.loops import LOOP_PHASES
+from ..analysis.models import bilinear_response
 from ..errors import AnalysisError
-from .loops import LOOP_PHASES
-from .models import bilinear_response
 
 __all__ = ["torque_levels", "cycle_schedule", "simulate_measurements"]
 
