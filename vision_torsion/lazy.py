@@ -38,7 +38,10 @@ def module_all(module: str) -> list[str]:
     spec = find_spec(module)
     if spec is None:
         raise ImportError(f"no module named {module!r}", name=module)
-    source = spec.loader.get_source(module) if spec.loader is not None else None
+    # a loader that cannot give source (pytest's assertion rewriter, a zip without
+    # .py files): import the module instead
+    get_source = getattr(spec.loader, "get_source", None)
+    source = get_source(module) if get_source is not None else None
     if source is None:
         return list(import_module(module).__all__)
     import ast  # here: a face used only by its imported names never needs them

@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # pandas is imported where a table is read (see _read_csv)
     import pandas as pd
 
 __all__ = [
+    "couple_torque_nm",
     "PHASES",
     "CYCLE_PHASES",
     "ZERO_TORQUE_PHASES",
@@ -143,6 +144,19 @@ def pieces_per_pan(mass_kg, step_mass_kg):
     return int(n) if n.ndim == 0 else n
 
 
+def couple_torque_nm(mass_kg, *, gravity_m_per_s2: float, arm_radius_m: float):
+    """The torque of the rig's force couple, τ = 2·m·g·r (N·m): mass `mass_kg` (kg)
+    on each pan of the loaded pair, local g (m/s²), arm radius r (m) where the wires
+    pull. The one place this formula is written (paper's Eq. for the couple).
+
+    Examples
+    --------
+    >>> round(couple_torque_nm(0.1, gravity_m_per_s2=9.81, arm_radius_m=0.05), 6)
+    0.0981
+    """
+    return 2.0 * mass_kg * gravity_m_per_s2 * arm_radius_m
+
+
 @dataclass(frozen=True, kw_only=True)
 class TorqueRig:
     """The constants of the force-couple rig that the torque model needs (SI units).
@@ -229,6 +243,12 @@ class TorqueRig:
         :class:`vision_torsion.session.config.RigConfig`) and the step mass."""
         return cls(step_mass_kg=step_mass_kg,
                    **{f.name: getattr(rig, f.name) for f in fields(cls) if f.name != "step_mass_kg"})
+
+    @property
+    def step_torque_nm(self) -> float:
+        """The torque of one weight piece on each pan of the pair, 2·m·g·r (N·m)."""
+        return couple_torque_nm(self.step_mass_kg, gravity_m_per_s2=self.gravity_m_per_s2,
+                                arm_radius_m=self.arm_radius_m)
 
     def to_dict(self) -> dict:
         """The constants as a plain dict of floats (JSON-safe)."""

@@ -78,7 +78,7 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
         "mass per weight piece (kg)": proto.step_mass_kg,
         "mass standard uncertainty per piece (kg)": _g6(rig.mass_std_kg),
         "pulley friction torque std (N·m)": rig.friction_torque_std_nm,
-        "torque per step, 2·m·g·r (N·m)": _g6(2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m),
+        "torque per step, 2·m·g·r (N·m)": _g6(session.config.torque_rig.step_torque_nm),
         "maximum torque (N·m)": _g6(proto.max_torque_nm),
         "flexspline orientations (deg)": list(proto.orientations_deg),
         "cycles per orientation": proto.cycles,

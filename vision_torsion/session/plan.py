@@ -52,7 +52,7 @@ from pathlib import Path
 from ..errors import SessionError, TargetError
 from ..fileio import atomic_write_text, check_replaceable
 from ..images import IMAGE_SUFFIXES
-from ..measurements import CYCLE_PHASES, PHASES
+from ..measurements import CYCLE_PHASES, PHASES, couple_torque_nm
 from ..targets import Target, load_target
 from ..validate import check_number
 from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
@@ -522,7 +522,8 @@ def plan_session(
     preconditioning_cycles = check_number(preconditioning_cycles, name="plan_session: preconditioning_cycles",
                                           error=SessionError, low=0, whole=True)
     if steps is not None:
-        max_torque_nm = float(f"{steps * 2.0 * step_mass_kg * gravity_m_per_s2 * arm_radius_m:.12g}")
+        step_nm = couple_torque_nm(step_mass_kg, gravity_m_per_s2=gravity_m_per_s2, arm_radius_m=arm_radius_m)
+        max_torque_nm = float(f"{steps * step_nm:.12g}")
     markers = {"polarity": polarity}
     described = None
     if isinstance(target, str) and target in ("equal", "distinct"):
@@ -584,7 +585,7 @@ def plan_session(
             f"plan_session: image_suffix {image_suffix!r} is not an image "
             f"type; expected one of {', '.join(IMAGE_SUFFIXES)}"
         )
-    per_step = 2.0 * step_mass_kg * config.rig.gravity_m_per_s2 * arm_radius_m
+    per_step = config.torque_rig.step_torque_nm
     n = math.floor(max_torque_nm / per_step + 1e-9)
     planned_max = float(f"{n * per_step:.12g}")  # no 0.35316000000000003 in the file
     if n < 1:

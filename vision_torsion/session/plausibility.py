@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 
 from ..errors import ManifestError, SessionError
+from ..measurements import couple_torque_nm
 
 __all__ = ["check_session_numbers", "check_config_numbers", "ARM_RADIUS_RANGE_M", "GRAVITY_RANGE_M_PER_S2",
            "STEP_MASS_RANGE_KG", "TORQUE_SLIP_FACTOR", "MAX_STEPS_PER_PHASE"]
@@ -101,7 +102,8 @@ def check_config_numbers(config, *, source=None) -> None:
 
 def _pieces(config) -> float:
     rig, proto = config.rig, config.protocol
-    return proto.max_torque_nm / (2 * proto.step_mass_kg * rig.gravity_m_per_s2 * rig.arm_radius_m)
+    return proto.max_torque_nm / couple_torque_nm(proto.step_mass_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
+                                                  arm_radius_m=rig.arm_radius_m)
 
 
 def _max_pieces(config) -> int:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..measurements import PHASE_SIGN, PHASES, pieces_per_pan
+from ..measurements import PHASE_SIGN, PHASES, couple_torque_nm, pieces_per_pan
 from .config import RigConfig
 
 # PHASES, PHASE_SIGN and pieces_per_pan are defined in vision_torsion.measurements
@@ -95,7 +95,7 @@ def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: f
     sign = PHASE_SIGN[phase]
     g, r = rig.gravity_m_per_s2, rig.arm_radius_m
     n = pieces_per_pan(mass_kg, step_mass_kg)
-    tau = sign * 2.0 * mass_kg * g * r
+    tau = sign * couple_torque_nm(mass_kg, gravity_m_per_s2=g, arm_radius_m=r)
     var_g = (2.0 * mass_kg * r * rig.gravity_std_m_per_s2) ** 2
     var_r = (2.0 * mass_kg * g * rig.arm_radius_std_m) ** 2
     var_m = (g * r) ** 2 * 2.0 * n * rig.mass_std_kg**2

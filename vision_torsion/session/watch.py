@@ -194,7 +194,7 @@ class Watcher:
         self.folder_gone = False
         self.timings: list[dict] = []
         cfg = self.session.config
-        self.step_torque = 2.0 * cfg.protocol.step_mass_kg * cfg.rig.gravity_m_per_s2 * cfg.rig.arm_radius_m
+        self.step_torque = cfg.torque_rig.step_torque_nm
         self.torques = [self.session.torque(row).torque_nm for row in rows]
         self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
         self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)

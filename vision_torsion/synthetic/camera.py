@@ -34,6 +34,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..measurements import couple_torque_nm
 from .render import render
 from .scene import Scene
 
@@ -113,13 +114,15 @@ def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=
                         mass_tolerance_kg=spec.mass_tolerance_kg, polarity=scene.markers.polarity,
                         angle_sign=spec.angle_sign)
     rows = plan.rows
-    g_r = spec.gravity_m_per_s2 * spec.arm_radius_m
-    torque = np.array([_SIGN[r["phase"]] * 2 * float(r["mass_kg"]) * g_r for r in rows])
+    torque = np.array([_SIGN[r["phase"]] * couple_torque_nm(float(r["mass_kg"]), gravity_m_per_s2=spec.gravity_m_per_s2,
+                                                             arm_radius_m=spec.arm_radius_m) for r in rows])
     actual = torque.copy()
     if forgotten is not None:
         unloading = rows[forgotten]["phase"].endswith("unloading")
         sign = _SIGN[rows[forgotten]["phase"]]
-        actual[forgotten] += sign * (1 if unloading else -1) * spec.step_mass_kg * g_r
+        # one piece forgotten on one pan of the pair: half the step
+        actual[forgotten] += sign * (1 if unloading else -1) * couple_torque_nm(
+            spec.step_mass_kg, gravity_m_per_s2=spec.gravity_m_per_s2, arm_radius_m=spec.arm_radius_m) / 2
     angles = np.zeros(len(rows))
     orient = np.array([float(r["orientation_deg"]) for r in rows])
     for o in dict.fromkeys(orient):

@@ -33,6 +33,7 @@ import pandas as pd
 
 from ..errors import SceneError
 from ..fileio import write_csv, write_json
+from ..measurements import couple_torque_nm
 from ..progress import track
 from ..textfiles import read_toml
 from .folders import truth_row, write_rendered
@@ -240,7 +241,9 @@ def write_session_folder(
         },
         source=str(out),
     )
-    n = int(np.floor(spec.max_torque_nm / (2 * spec.step_mass_kg * spec.gravity_m_per_s2 * spec.arm_radius_m) + 1e-9))
+    step_nm = couple_torque_nm(spec.step_mass_kg, gravity_m_per_s2=spec.gravity_m_per_s2,
+                               arm_radius_m=spec.arm_radius_m)
+    n = int(np.floor(spec.max_torque_nm / step_nm + 1e-9))
     truth, params = session_truth(spec, plan_rows(config, max(n, 1), suffix=suffix), seed=seed)
     disk_angles = spec.angle_sign * truth["true_angle_deg"].to_numpy()
     for a in (disk_angles.min(), disk_angles.max()):

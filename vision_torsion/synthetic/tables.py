@@ -34,6 +34,7 @@ import pandas as pd
 from ..analysis.loops import LOOP_PHASES
 from ..analysis.models import bilinear_response
 from ..errors import AnalysisError
+from ..measurements import couple_torque_nm
 
 __all__ = ["torque_levels", "cycle_schedule", "simulate_measurements"]
 
@@ -120,7 +121,8 @@ def simulate_measurements(*, k_u, k_l, tau_c, max_torque_nm=0.36, step_mass_kg=0
         raise AnalysisError(f"mass_distribution must be 'normal' or 'uniform', got {mass_distribution!r}")
     if (angle_std_deg > 0 or mass_std_kg > 0) and rng is None:
         raise AnalysisError("simulate_measurements needs rng=numpy.random.default_rng(seed) when noise is on")
-    step = 2.0 * step_mass_kg * g_m_per_s2 * arm_radius_m
+    step = couple_torque_nm(step_mass_kg, gravity_m_per_s2=g_m_per_s2, arm_radius_m=arm_radius_m)
+    per_kg = couple_torque_nm(1.0, gravity_m_per_s2=g_m_per_s2, arm_radius_m=arm_radius_m)  # N·m per kg a pan
     if torque_model == "pieces":
         if not (max_torque_nm > 0 and step > 0):
             raise AnalysisError(f"max torque and step must be positive, got {max_torque_nm!r}, {step!r}")
@@ -174,7 +176,7 @@ def simulate_measurements(*, k_u, k_l, tau_c, max_torque_nm=0.36, step_mass_kg=0
         for i, (ph, st_, tn, sd, an) in enumerate(zip(phases, steps, nominal, std, angle)):
             rows.append({
                 "image": f"o{int(orient):03d}_{i:04d}.png", "orientation_deg": float(orient), "cycle": cycle_of[i],
-                "phase": ph, "step": st_, "mass_kg": abs(tn) / (2 * g_m_per_s2 * arm_radius_m),
+                "phase": ph, "step": st_, "mass_kg": abs(tn) / per_kg,
                 "torque_nm": tn, "torque_std_nm": sd, "angle_deg": float(an),
                 "angle_std_deg": float(angle_std_deg), "status": "ok", "message": "",
             })
