@@ -11,9 +11,9 @@ from vision_torsion.analysis import (
     fit_bilinear,
     fit_bouc_wen,
     loop_energy,
-    torque_levels,
 )
 from vision_torsion.errors import AnalysisError
+from vision_torsion.synthetic import torque_levels
 
 K_U, K_L, TAU_C, T_MAX = 4.4, 0.3, 0.15, 0.36
 STEP = 2 * 0.02 * 9.81 * 0.05
