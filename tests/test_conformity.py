@@ -83,7 +83,8 @@ def test_spec_round_trip_and_limits_in_analysis_units():
     [
         ({"k2_min_nm_per_rad": 1.0}, {}, r"spec.k2_min_nm_per_rad: needs gear.t1_nm and gear.t2_nm"),
         ({"lost_motion_max_arcmin": 1.0}, {}, r"spec.lost_motion_max_arcmin: needs gear.rated_torque_nm"),
-        ({"hysteresis_loss_max_arcmin": -1.0}, {}, rr"spec.hysteresis_loss_max_arcmin: must be a finite number > 0, got -1.0"),
+        ({"hysteresis_loss_max_arcmin": -1.0}, {},
+         r"spec.hysteresis_loss_max_arcmin: must be a finite number > 0, got -1\.0"),
         ({"k4_min": 1.0}, {}, r"spec.k4_min: unknown key"),
     ],
 )
