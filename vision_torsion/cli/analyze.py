@@ -22,6 +22,13 @@ def register(sub) -> None:
     )
     p.add_argument("table", metavar="TABLE.csv")
     p.add_argument("--session", metavar="FILE.toml", help="session.toml with the rig and the optional [gear]/[test]")
+    rig = p.add_argument_group(
+        "rig without a session.toml (all four together; without them or --session the figures are flagged "
+        "'torque uncertainty not modelled')")
+    rig.add_argument("--piece-tolerance", type=float, metavar="KG", help="tolerance of one weight piece, ±kg")
+    rig.add_argument("--pieces-per-step", type=int, metavar="N", help="pieces added to each pan per step")
+    rig.add_argument("--gravity", type=float, metavar="M/S2", help="local g, m/s²")
+    rig.add_argument("--arm-radius", type=float, metavar="M", help="arm radius r, m")
     add_output_option(p, "TABLE's folder/<TABLE stem>_analysis")
     add_common_options(p)
     # a short batch job: its own process runs it with the cyclic GC off (cli._ends_process)
@@ -31,7 +38,13 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..report.analyze import analyze_table, describe_withheld
 
-    res = analyze_table(args.table, session=args.session, out_dir=args.out_dir)
+    given = {"piece_tolerance_kg": args.piece_tolerance, "pieces_per_step": args.pieces_per_step,
+             "gravity_m_per_s2": args.gravity, "arm_radius_m": args.arm_radius}
+    rig_options = given if any(v is not None for v in given.values()) else None
+    res = analyze_table(args.table, session=args.session, out_dir=args.out_dir, rig_options=rig_options)
+    if not res.analysis.settings.get("torque_uncertainty_modelled", True):
+        print("torque uncertainty not modelled (no --session and no --piece-tolerance/--pieces-per-step/--gravity/"
+              "--arm-radius): every figure is flagged")
     withheld = ("every figure withheld until the angle sign is right" if res.angle_sign_advice
                 else describe_withheld(res.withheld_by_kind, res.n_flagged))
     print(f"{res.n_rows} rows, {res.n_failed} image(s) not usable; {withheld}")
