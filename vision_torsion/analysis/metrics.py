@@ -21,8 +21,12 @@ Definitions (formulas)
 - **Secant stiffness** over ``[τ_a, τ_b]`` (0 ≤ τ_a < τ_b ≤ Tmax) on the *loading*
   branches (ascending run for τ > 0, descending run for τ < 0):
   ``k_sec = (τ_b − τ_a) / mean(θ_asc(τ_b) − θ_asc(τ_a), θ_desc(−τ_a) − θ_desc(−τ_b))``.
-- **Loop energy** (paper): ``W = ∮ τ dθ`` over the closed polygon descending run →
-  ascending run → back to the start (trapezoids; positive for a dissipating loop), J.
+- **Loop energy** (paper): ``W = ∮ τ dθ`` of the continuous loop, J (positive for a
+  dissipating loop). :func:`loop_energy` is the closed polygon descending run →
+  ascending run → back to the start (trapezoids); its chords cut the loop's curvature,
+  so :mod:`.session` takes off the area they add on each branch (:func:`chord_area`,
+  with the bound of that estimate in the budget). Lost motion between levels is
+  corrected likewise for the interpolation (:func:`chord_error`).
 - **Loss factor** ``η = W / (2π·U)`` with ``U = ½·τ_a·θ_a`` the peak elastic energy
   of the equivalent linear spring through the loop tips
   (``τ_a``, ``θ_a`` = half the torque and angle ranges between the tips).
