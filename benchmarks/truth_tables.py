@@ -19,6 +19,14 @@ Loops (angle as a function of the torque path, rad, N·m):
   the elastic curve, shifted: K1–K3 are exact there);
 - ``masing``: a smooth Masing loop (softening after each reversal, twice-scaled virgin
   curve ``θ = τ/k₀ + a·(|τ|/s − ln(1 + |τ|/s))·sign τ``).
+
+Two truths are given for a loop. :func:`loop_truth` evaluates the figures' own
+definitions on the model sampled at the nominal levels (the issue-14 benchmark).
+:func:`physical_truth` is the **physical** quantity of the continuous loop (issue 27):
+``∮τ dθ`` integrated over the continuous loop, lost motion at exactly ``±x·T_R`` on the
+continuous branches, the generating break torques and stiffnesses. A coarser rig
+(:class:`Rig`: heavier pieces, fewer steps to the same maximum torque) is an option of
+:func:`session_table`.
 """
 
 from __future__ import annotations
@@ -120,28 +128,56 @@ def make_model(kind, scale=1.0):
 
 
 # ------------------------------------------------------------------ protocol ---
-def protocol(cycles):
+class Rig:
+    """A weight-piece rig: ``step_mass_kg`` per piece, ``n_steps`` pieces per pan at the top.
+
+    The default is the module's rig (0.02 kg, 18 steps, levels 0.0196 N·m apart);
+    ``Rig.coarse()`` reaches about the same maximum torque in 9 steps of 0.04 kg
+    (levels 0.039 N·m apart: no level between 0 and ±0.04 N·m).
+    """
+
+    def __init__(self, step_mass_kg=STEP_MASS_KG, n_steps=N_STEPS):
+        self.step_mass_kg, self.n_steps = step_mass_kg, n_steps
+
+    @classmethod
+    def coarse(cls):
+        return cls(step_mass_kg=0.04, n_steps=9)
+
+    @property
+    def t_max(self):
+        return 2 * self.n_steps * self.step_mass_kg * G * R_M
+
+    def levels(self):
+        """Nominal torque magnitudes, N·m (0 to t_max)."""
+        return np.array([2 * n * self.step_mass_kg * G * R_M for n in range(self.n_steps + 1)])
+
+    def as_analysis_rig(self):
+        return dict(step_mass_kg=self.step_mass_kg, mass_std_kg=MASS_STD_KG, gravity_m_per_s2=G, arm_radius_m=R_M)
+
+
+def protocol(cycles, n_steps=N_STEPS):
     """Rows (phase, cycle, step, pieces per pan, sign) of one orientation, in order."""
     rows = [("reference", 0, 0, 0, 0)]
     for c in range(1, cycles + 1):
         if c == 1:
-            rows.append(("positive_unloading", c, 0, N_STEPS, 1))
-        for k in range(1, N_STEPS + 1):
-            rows.append(("positive_unloading", c, k, N_STEPS - k, 1))
-        for k in range(1, N_STEPS + 1):
+            rows.append(("positive_unloading", c, 0, n_steps, 1))
+        for k in range(1, n_steps + 1):
+            rows.append(("positive_unloading", c, k, n_steps - k, 1))
+        for k in range(1, n_steps + 1):
             rows.append(("negative_loading", c, k, k, -1))
-        for k in range(1, N_STEPS + 1):
-            rows.append(("negative_unloading", c, k, N_STEPS - k, -1))
-        for k in range(1, N_STEPS + 1):
+        for k in range(1, n_steps + 1):
+            rows.append(("negative_unloading", c, k, n_steps - k, -1))
+        for k in range(1, n_steps + 1):
             rows.append(("positive_loading", c, k, k, 1))
     rows.append(("closing", cycles, 0, 0, 0))
     return rows
 
 
-def piece_masses(rng):
-    """The session's true piece masses (kg), ``(4, N_STEPS)``: pans +A, +B, −A, −B; the
+def piece_masses(rng, rig=None):
+    """The session's true piece masses (kg), ``(4, n_steps)``: pans +A, +B, −A, −B; the
     first draw of :func:`session_table` from its ``rng``."""
-    return STEP_MASS_KG + rng.uniform(-MASS_TOL_KG, MASS_TOL_KG, (4, N_STEPS))
+    rig = rig or Rig()
+    return rig.step_mass_kg + rng.uniform(-MASS_TOL_KG, MASS_TOL_KG, (4, rig.n_steps))
 
 
 #: 1σ of a loop tip's torque (N·m): the 2·N_STEPS pieces of one sign's pans.
@@ -165,6 +201,8 @@ def session_table(
     repeatability=0.02,
     creep_deg=0.0,
     fail=None,
+    rig=None,
+    rated_nm=None,
     rng,
 ):
     """A measurements table and the truth of every loop.
@@ -175,11 +213,15 @@ def session_table(
         ``measurements.csv`` columns.
     truth : dict
         ``{(orientation, cycle): {figure: value}}`` from the noise-free model on the
-        nominal path, with the loop's own stiffness scale.
+        nominal path, with the loop's own stiffness scale; with ``rated_nm`` (T_R,
+        N·m) the :func:`physical_truth` of the continuous loop instead (lost motion
+        at ±3 %, ±4 % of T_R).
     """
-    pieces = piece_masses(rng)
+    rig = rig or Rig()
+    pieces = piece_masses(rng, rig)
     rows, truth = [], {}
-    proto = protocol(cycles)
+    proto = protocol(cycles, rig.n_steps)
+    n_steps, step_mass = rig.n_steps, rig.step_mass_kg
     for o in orientations:
         o_scale = 1.0 + orientation_effect * math.cos(math.radians(o))
         tau_nom, tau_true, meta = [], [], []
@@ -187,7 +229,7 @@ def session_table(
             pans = pieces[:2] if s > 0 else pieces[2:]
             m_true = float(pans[:, :n].sum()) if n else 0.0
             tau_true.append(s * G * R_M * m_true)
-            tau_nom.append(s * 2 * n * STEP_MASS_KG * G * R_M)
+            tau_nom.append(s * 2 * n * step_mass * G * R_M)
             meta.append((phase, c, step, n))
         tau_nom, tau_true = np.array(tau_nom), np.array(tau_true)
         theta = np.zeros(tau_nom.size)
@@ -204,9 +246,11 @@ def session_table(
             th = th - th[0]
             base = theta[ii[0]] if c > 1 else 0.0
             theta[ii] = base + th
-            truth[(float(o), c)] = loop_truth(kind, model)
+            truth[(float(o), c)] = (
+                loop_truth(kind, model) if rated_nm is None else physical_truth(kind, model, rig=rig, rated_nm=rated_nm)
+            )
         i_close = len(meta) - 1
-        i_zero = [i for i, m in enumerate(meta) if m[0] == "positive_unloading" and m[1] == 1 and m[2] == N_STEPS][0]
+        i_zero = [i for i, m in enumerate(meta) if m[0] == "positive_unloading" and m[1] == 1 and m[2] == n_steps][0]
         theta[i_close] = theta[i_zero]  # the same load state (zero, unloaded from +Tmax)
         theta[0] = theta[i_zero]  # the reference: no weights
         t_frac = np.linspace(0.0, 1.0, theta.size)
@@ -220,7 +264,7 @@ def session_table(
                     "cycle": c,
                     "phase": phase,
                     "step": step,
-                    "mass_kg": n * STEP_MASS_KG,
+                    "mass_kg": n * step_mass,
                     "torque_nm": tau_nom[i],
                     "torque_std_nm": G * R_M * math.sqrt(2 * n) * MASS_STD_KG,
                     "angle_deg": theta_deg[i],
@@ -231,10 +275,10 @@ def session_table(
             )
     df = pd.DataFrame(rows)
     if fail == "zero":  # the zero-torque image after the first unloading, first orientation
-        m = (df.orientation_deg == orientations[0]) & (df.phase == "positive_unloading") & (df.step == N_STEPS)
+        m = (df.orientation_deg == orientations[0]) & (df.phase == "positive_unloading") & (df.step == n_steps)
         df.loc[m, ["status", "message"]] = ["failed", "marker not found"]
     elif fail == "half_phase":  # the upper half of positive loading, first orientation
-        m = (df.orientation_deg == orientations[0]) & (df.phase == "positive_loading") & (df.step > N_STEPS // 2)
+        m = (df.orientation_deg == orientations[0]) & (df.phase == "positive_loading") & (df.step > n_steps // 2)
         df.loc[m, ["status", "message"]] = ["failed", "marker not found"]
     return df, truth
 
@@ -301,4 +345,58 @@ def loop_truth(kind, model) -> dict:
         )
     if kind == "three_segment":
         out.update(k1=model.k[0], k2=model.k[1], k3=model.k[2])
+    return out
+
+
+# ------------------------------------------------------------------ physical truth ---
+#: Points per run of the dense path of :func:`physical_truth`.
+DENSE_POINTS = 20001
+
+
+def _dense_loop(model, t_max, extra=()):
+    """The periodic major loop between ±t_max on a dense torque path (with ``extra`` torques on it exactly):
+    ``(desc, asc)``, each ``(tau, theta)`` sorted by increasing torque."""
+    grid = np.unique(np.concatenate([np.linspace(-t_max, t_max, DENSE_POINTS), np.asarray(extra, float)]))
+    down, up = grid[::-1], grid[1:]
+    path = np.concatenate([down, up, down[1:], up])  # a warm-up cycle, then the measured one
+    th = model.path(path)
+    n = down.size + up.size
+    d = slice(n - 1, n - 1 + down.size)
+    a = slice(n - 2 + down.size, 2 * n - 1)
+    return (path[d][::-1], th[d][::-1]), (path[a], th[a])
+
+
+def physical_truth(kind, model, *, rig=None, rated_nm) -> dict:
+    """The physical figures of the continuous loop between ±Tmax of ``rig`` (issue 27).
+
+    - ``loop_energy``: ``∮τ dθ`` = the area between the branches, trapezoids on
+      :data:`DENSE_POINTS` points per run (error below 1e-6 of the value: the
+      trapezoid error falls as the step², here ~3e3× smaller than the levels');
+    - ``loss_factor``: that energy over ``2π·½·Tmax·θ_a`` (θ_a half the tip-to-tip
+      angle), the definition's own form;
+    - ``lost_motion_{3,4}pct``: the branches' mid-point at exactly ``±x·T_R`` (the
+      torques are points of the dense path);
+    - ``hysteresis_loss``: the width at zero torque;
+    - ``k1..k3``, ``t1``, ``t2``: the generating loading curve (bilinear: K1 = k_l
+      below T1 = τ_c, K2 = k_u; three-segment: K1–K3 at T1, T2); none for Masing.
+    """
+    rig = rig or Rig()
+    t_max = rig.t_max
+    xs = [f * rated_nm for f in (0.03, 0.04)]
+    (td, yd), (ta, ya) = _dense_loop(model, t_max, extra=[0.0, *xs, *(-x for x in xs)])
+    energy = float(np.trapezoid(yd, td) - np.trapezoid(ya, ta))
+    theta_a = 0.5 * (yd[-1] - yd[0])
+    out = {
+        "loop_energy": energy,
+        "loss_factor": energy / (2 * math.pi * 0.5 * t_max * theta_a),
+        "hysteresis_loss": math.degrees(_interp(td, yd, 0.0) - _interp(ta, ya, 0.0)),
+    }
+    for f, x in zip((0.03, 0.04), xs):
+        mid = lambda t: 0.5 * (_interp(td, yd, t) + _interp(ta, ya, t))  # noqa: E731
+        out[f"lost_motion_{round(f * 100)}pct"] = math.degrees(mid(x) - mid(-x))
+    if kind == "bilinear":
+        out.update(k1=model.k_l, k2=model.k_u, t1=model.tau_c, bilinear_k_u=model.k_u, bilinear_k_l=model.k_l,
+                   bilinear_tau_c=model.tau_c)
+    if kind == "three_segment":
+        out.update(k1=model.k[0], k2=model.k[1], k3=model.k[2], t1=model.t[0], t2=model.t[1])
     return out

@@ -18,6 +18,12 @@ valid answer ("two segments"), not a failure.
 
 Every fit goes through the lack-of-fit gate (:mod:`.fitcheck`); a rejected fit is
 **flagged** and its uncertainties multiplied by ``√χ²_red``.
+
+With fitted breaks the break torques are estimated from the same data as the
+stiffnesses, and the two are strongly correlated (a break placed later makes the
+segment below it softer). Their uncertainties are then those of
+:func:`break_bootstrap`: every draw refits the breaks too, so K1–K3 carry the
+break's uncertainty and T1/T2 get their own.
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ from ..numerics import first_least
 from .fitcheck import lack_of_fit
 from .uncertainty import linearised_covariance, torque_source_jacobian
 
-__all__ = ["fit_fixed_breaks", "fit_catalogue_breaks", "TWO_BREAK_ALPHA"]
+__all__ = ["fit_fixed_breaks", "fit_catalogue_breaks", "break_bootstrap", "TWO_BREAK_ALPHA"]
 
 #: Significance of the third segment when the breaks are fitted.
 TWO_BREAK_ALPHA = 0.01
@@ -168,6 +174,8 @@ def fit_fixed_breaks(
         "points_per_segment": counts,
         "compliance": comp,
         "residual_rad": resid,
+        "coef": coef,
+        "weights": w_fit,
     }
     if not with_uncertainty:
         return base
@@ -183,6 +191,160 @@ def fit_fixed_breaks(
     s_a = [math.sqrt(max(cov_a[j, j], 0.0)) * k[j - 2] ** 2 for j in range(2, a.shape[1])]
     s_t = [math.sqrt(max(cov_t[j, j], 0.0)) * k[j - 2] ** 2 for j in range(2, a.shape[1])]
     return {**base, "std_angle": s_a, "std_torque": s_t}
+
+
+def break_bootstrap(
+    torque_nm,
+    *,
+    branch,
+    fit,
+    angle_std_rad,
+    torque_sources,
+    n_draws=200,
+    seed=0,
+    iterations=10,
+) -> dict:
+    """Uncertainty of K1..K(m+1) **and** the fitted breaks: a parametric bootstrap that refits the breaks.
+
+    Parameters
+    ----------
+    torque_nm : array_like (n,)
+        The loading-branch torques of the fit (N·m); the angles enter through
+        ``fit`` (the draws are about the fitted model).
+    branch : array_like of ±1
+        As :func:`fit_fixed_breaks`.
+    fit : dict
+        The :func:`fit_fixed_breaks` result at the fitted breaks (its ``coef``,
+        ``breaks_nm``, ``weights``, ``compliance``).
+    angle_std_rad : array_like (n,)
+        1σ of each angle, rad.
+    torque_sources : array_like (n, m)
+        Loading matrix of the torque errors (N·m per unit source,
+        :func:`.uncertainty.torque_sources`), every correlation included.
+    n_draws : int
+        Draws per error source (angle, torque).
+    seed : int
+        Seed of ``numpy.random.default_rng``.
+    iterations : int
+        Levenberg–Marquardt iterations of each refit.
+
+    Returns
+    -------
+    dict
+        ``std_angle``, ``std_torque``: lists of the 1σ of each K (N·m/rad);
+        ``breaks_std_angle``, ``breaks_std_torque``: of each break (N·m);
+        ``draws``: the draws per source; ``valid``: the share of draws whose refit
+        converged to ordered breaks with positive compliances (the stds are over
+        those; NaN when fewer than half did).
+
+    Notes
+    -----
+    **Why a bootstrap, and which.** The break of a continuous hinge is weakly
+    identified (a few levels on each side of it), so K and T are strongly correlated
+    and the first-order covariance at fixed breaks understates K's scatter by an
+    order of magnitude; the linearisation in T is also poor once the break's scatter
+    reaches the spacing of the levels (the χ² is not differentiable where T crosses
+    a level). A profile likelihood would give T's interval but not K's without a
+    second profile per K. A *parametric* bootstrap gives all of them at once: the
+    fitted model plus draws of the stated noise, ``θ* = f̂(τ) + σθ·z`` (angle part)
+    and ``θ* = f̂(τ) + f̂'(τ)·L·ξ`` (torque part: the angle answers the true torque
+    ``τ + L·ξ``, read at the nominal one, with every correlation of the weight
+    pieces in ``L``), each refitted with its own breaks. The residuals are not
+    resampled: there are only ~2 per level, and a misfit is the lack-of-fit gate's
+    job (a rejected fit is flagged and its uncertainty inflated by ``√χ²_red``).
+
+    **The refit.** All draws at once: a vectorised Levenberg–Marquardt on
+    ``(θ₀₊, θ₀₋, c_1..c_{m+1}, T_1..T_m)`` from the fitted values, with the fit's
+    weights. Between measured levels the model at the samples is smooth in ``T``
+    (``∂θ/∂T_k = ±(c_{k−1} − c_k)`` for ``|τ| > T_k``, 0 below), so the steps cross
+    levels where the data ask for it. The number of breaks is the fitted model's.
+    A draw whose refit leaves a segment with fewer than two measured levels, an
+    unordered break or a non-positive compliance is not counted.
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    sign = np.sign(np.asarray(branch, float)).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), tau.shape)
+    L = np.asarray(torque_sources, float).reshape(tau.size, -1)
+    x = np.abs(tau)
+    brk0 = np.asarray(fit["breaks_nm"], float)
+    coef0 = np.asarray(fit["coef"], float)
+    w = np.asarray(fit["weights"], float)
+    m = brk0.size
+    is_pos = (sign > 0).astype(float)
+    offsets = np.column_stack([is_pos, 1.0 - is_pos])
+    levels = np.unique(x)
+    model0 = _design(tau, sign, list(brk0)) @ coef0
+    rng = np.random.default_rng(seed)
+    y_angle = model0[None, :] + rng.standard_normal((n_draws, tau.size)) * sa[None, :]
+    y_torque = model0[None, :] + (rng.standard_normal((n_draws, L.shape[1])) @ L.T) * fit["compliance"][None, :]
+
+    def design(brk):  # (D, n, m + 3) design and the (D, n, m) derivative mask [x > T_k]
+        d = brk.shape[0]
+        lo = np.concatenate([np.zeros((d, 1)), brk], axis=1)
+        hi = np.concatenate([brk, np.full((d, 1), np.inf)], axis=1)
+        cols = np.clip(x[None, :, None] - lo[:, None, :], 0.0, (hi - lo)[:, None, :]) * sign[None, :, None]
+        a = np.concatenate([np.broadcast_to(offsets, (d, *offsets.shape)), cols], axis=2)
+        return a, (x[None, :, None] > brk[:, None, :]) * sign[None, :, None]
+
+    def chi2_jac(p, y):
+        brk = p[:, m + 3 :]
+        a, above = design(brk)
+        r = y - (a @ p[:, : m + 3, None])[:, :, 0]
+        c = p[:, 2 : m + 3]
+        dt = above * (c[:, :-1] - c[:, 1:])[:, None, :]
+        return np.sum(w * r * r, axis=1), r, np.concatenate([a, dt], axis=2)
+
+    def refit(y):
+        d = y.shape[0]
+        p = np.tile(np.concatenate([coef0, brk0]), (d, 1))
+        lam = np.full(d, 1e-3)
+        chi, r, jac = chi2_jac(p, y)
+        eye = np.eye(p.shape[1])
+        for _ in range(iterations):
+            jw = jac * w[None, :, None]
+            jtj = jw.transpose(0, 2, 1) @ jac
+            diag = np.einsum("dkk->dk", jtj)
+            a_mat = jtj + lam[:, None, None] * diag[:, :, None] * eye + 1e-300 * eye
+            try:
+                step = np.linalg.solve(a_mat, jw.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                break
+            p_new = p + step
+            brk = p_new[:, m + 3 :]
+            ok = np.all(brk > 0, axis=1) & np.all(np.diff(brk, axis=1) > 0, axis=1) & (brk[:, -1] < levels[-1])
+            chi_new, r_new, jac_new = chi2_jac(np.where(ok[:, None], p_new, p), y)
+            better = ok & (chi_new < chi)
+            p = np.where(better[:, None], p_new, p)
+            chi = np.where(better, chi_new, chi)
+            r = np.where(better[:, None], r_new, r)
+            jac = np.where(better[:, None, None], jac_new, jac)
+            lam = np.where(better, lam * 0.3, lam * 10.0)
+        brk = p[:, m + 3 :]
+        edges_lo = np.concatenate([np.zeros((d, 1)), brk], axis=1)
+        edges_hi = np.concatenate([brk, np.full((d, 1), np.inf)], axis=1)
+        counts = np.searchsorted(levels, edges_hi + 1e-12, side="right") - np.searchsorted(
+            levels, edges_lo - 1e-12, side="left"
+        )
+        valid = np.all(counts >= 2, axis=1) & np.all(p[:, 2 : m + 3] > 0, axis=1) & np.all(np.isfinite(p), axis=1)
+        with np.errstate(divide="ignore"):
+            k = 1.0 / p[:, 2 : m + 3]
+        return k, brk, valid
+
+    def stds(values, valid):
+        if valid.sum() < max(2, valid.size // 2):
+            return [float("nan")] * values.shape[1]
+        return [float(v) for v in np.std(values[valid], axis=0, ddof=1)]
+
+    k_a, b_a, v_a = refit(y_angle)
+    k_t, b_t, v_t = refit(y_torque)
+    return {
+        "std_angle": stds(k_a, v_a),
+        "std_torque": stds(k_t, v_t),
+        "breaks_std_angle": stds(b_a, v_a),
+        "breaks_std_torque": stds(b_t, v_t),
+        "draws": int(n_draws),
+        "valid": float(min(v_a.mean(), v_t.mean())),
+    }
 
 
 class _BreakChi2:
@@ -281,12 +443,26 @@ def _first_best(chi2: _BreakChi2, candidates) -> tuple[float, list | None]:
 
 
 def fit_catalogue_breaks(
-    torque_nm, angle_rad, *, branch, angle_std_rad, torque_std_nm, torque_sources=None, gate_sources=None
+    torque_nm,
+    angle_rad,
+    *,
+    branch,
+    angle_std_rad,
+    torque_std_nm,
+    torque_sources=None,
+    gate_sources=None,
+    n_draws=200,
+    seed=0,
 ) -> dict:
     """Fit the break torques too: one break (two segments) or two (three), by the stated criterion.
 
     Returns the :func:`fit_fixed_breaks` dict of the chosen model plus
     ``n_breaks`` (1 or 2), ``delta_chi2`` (one break minus two) and ``criterion``.
+    With ``n_draws > 0`` its ``std_angle``/``std_torque`` are those of
+    :func:`break_bootstrap` (``n_draws`` draws per source, ``seed``): the breaks'
+    uncertainty included; ``breaks_std_angle``, ``breaks_std_torque`` (N·m),
+    ``draws`` and ``bootstrap_valid`` are added. With ``n_draws = 0`` the
+    uncertainties are first order with the breaks held (no break uncertainty).
 
     Raises
     ------
@@ -352,4 +528,17 @@ def fit_catalogue_breaks(
         delta_chi2=float(delta) if np.isfinite(delta) else None,
         criterion=f"two breaks kept when they lower χ² by more than {crit:.3g} (χ²₂ at {TWO_BREAK_ALPHA:g})",
     )
+    if n_draws:
+        src = np.diag(st) if torque_sources is None else torque_sources
+        boot = break_bootstrap(
+            tau, branch=sign, fit=out, angle_std_rad=sa, torque_sources=src, n_draws=n_draws, seed=seed
+        )
+        out.update(
+            std_angle=boot["std_angle"],
+            std_torque=boot["std_torque"],
+            breaks_std_angle=boot["breaks_std_angle"],
+            breaks_std_torque=boot["breaks_std_torque"],
+            draws=boot["draws"],
+            bootstrap_valid=boot["valid"],
+        )
     return out

@@ -21,8 +21,12 @@ Definitions (formulas)
 - **Secant stiffness** over ``[τ_a, τ_b]`` (0 ≤ τ_a < τ_b ≤ Tmax) on the *loading*
   branches (ascending run for τ > 0, descending run for τ < 0):
   ``k_sec = (τ_b − τ_a) / mean(θ_asc(τ_b) − θ_asc(τ_a), θ_desc(−τ_a) − θ_desc(−τ_b))``.
-- **Loop energy** (paper): ``W = ∮ τ dθ`` over the closed polygon descending run →
-  ascending run → back to the start (trapezoids; positive for a dissipating loop), J.
+- **Loop energy** (paper): ``W = ∮ τ dθ`` of the continuous loop, J (positive for a
+  dissipating loop). :func:`loop_energy` is the closed polygon descending run →
+  ascending run → back to the start (trapezoids); its chords cut the loop's curvature,
+  so :mod:`.session` takes off the area they add on each branch (:func:`chord_area`,
+  with the bound of that estimate in the budget). Lost motion between levels is
+  corrected likewise for the interpolation (:func:`chord_error`).
 - **Loss factor** ``η = W / (2π·U)`` with ``U = ½·τ_a·θ_a`` the peak elastic energy
   of the equivalent linear spring through the loop tips
   (``τ_a``, ``θ_a`` = half the torque and angle ranges between the tips).
@@ -56,6 +60,9 @@ __all__ = [
     "phase_secants",
     "loop_energy",
     "loss_factor",
+    "slope_changes",
+    "chord_area",
+    "chord_error",
     "phase_stiffness",
     "fit_three_segment",
 ]
@@ -216,6 +223,112 @@ def loop_energy(torque_nm, angle_rad):
     # no sign is imposed: in the order descending run → ascending run a dissipating
     # loop is positive, and a negative value would be worth seeing
     return _out(w, one_d)
+
+
+def slope_changes(x, y, *, pivot=0.0):
+    """Slope change at each end of every segment of a branch: ``(h, a, b)``, each ``(D, m − 1)``.
+
+    ``x`` (D, m) increasing along each row, ``y`` the branch's values. For segment
+    ``j`` (from ``x_j`` to ``x_{j+1}``, width ``h_j``, secant slope ``s_j``):
+    ``a_j = s_j − s_{j−1}`` (the change at its left end) and ``b_j = s_{j+1} − s_j``
+    (at its right end), NaN where that neighbour segment does not exist, and at a
+    sample within 1e-9 of ``pivot`` (N·m; zero torque, where a run turns from unloading
+    to loading: the change there is not a curvature of either side; None for none).
+    """
+    x, y = _rows(x, y)
+    h = np.diff(x, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.diff(y, axis=1) / h
+    nan = np.full((x.shape[0], 1), np.nan)
+    ds = np.diff(s, axis=1)
+    if pivot is not None:
+        ds = np.where(np.abs(x[:, 1:-1] - pivot) <= 1e-9, np.nan, ds)
+    return h, np.concatenate([nan, ds], axis=1), np.concatenate([ds, nan], axis=1)
+
+
+def chord_area(x, y, *, pivot=0.0):
+    """What the chords through a branch's samples add to its area, and how well that is known.
+
+    Parameters
+    ----------
+    x, y : ndarray (D, m) or (m,)
+        The branch, ``x`` increasing (N·m, rad).
+
+    Returns
+    -------
+    (mid, systematic, random) : ndarray (D,) or float
+        ``∫(chord − f) dx`` estimated as ``mid``, within ``±systematic`` (half-widths
+        of the segments whose curvature has one sign, added linearly) and
+        ``±random`` (those where it does not, in quadrature). NaN for fewer than
+        three samples.
+
+    Notes
+    -----
+    Between samples ``j`` and ``j+1`` a curve whose slope changes monotonically over
+    the segment and its neighbours (convex or concave there) lies between the chord
+    and the neighbouring secants extended: with ``a``, ``b`` of
+    :func:`slope_changes` of one sign, ``0 ≤ ∫(chord − f) ≤ A = h²·a·b / (2(a + b))``
+    (the triangle between the chord and the two extended secants; exact for a single
+    kink inside the segment). The estimate is ``A/2 ± A/2``. A segment with one
+    neighbour (a branch's end) has ``A = c·h²/2`` from its one slope change ``c``.
+    Where ``a`` and ``b`` disagree in sign (the curvature is below the noise, or a
+    kink sits on a measured level) the segment adds ``0 ± h²·min(|a|, |b|)/8`` (a
+    kink of the smaller change in its middle). A smooth branch gets ``A ≈ 3×`` its
+    true ``h³f''/12``, so the half-width covers it. A segment ending at ``pivot``
+    (zero torque) is bounded from its other neighbour only (:func:`slope_changes`).
+    """
+    one_d = np.ndim(x) == 1
+    h, a, b = slope_changes(x, y, pivot=pivot)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        both = np.isfinite(a) & np.isfinite(b)
+        same = both & (a * b > 0)
+        tri = np.where(same, h * h * a * b / (2.0 * (a + b)), 0.0)
+        end = np.where(np.isfinite(a), a, b)
+        tri = np.where(~both, 0.5 * end * h * h, tri)  # NaN for a segment with no neighbour: not bounded
+        mixed = both & ~same
+        rand = np.where(mixed, h * h * np.minimum(np.abs(a), np.abs(b)) / 8.0, 0.0)
+    mid = np.sum(tri / 2.0, axis=1)
+    sys_ = np.sum(np.abs(tri) / 2.0, axis=1)
+    rnd = np.sqrt(np.sum(rand * rand, axis=1))
+    return _out(mid, one_d), _out(sys_, one_d), _out(rnd, one_d)
+
+
+def chord_error(x, y, xq, *, pivot=0.0):
+    """Linear interpolation of a branch at ``xq`` minus the branch, and how well that is known.
+
+    Returns ``(mid, half)`` (rad, ``(D,)`` or float): the interpolated value exceeds the
+    curve by ``mid ± half``, from the same bounds as :func:`chord_area` at the point:
+    with one curvature sign, ``0 ≤ chord − f ≤ D = min(a·t, b·(h − t))`` (``t`` from
+    the segment's left end), so ``D/2 ± D/2``; with ``a``, ``b`` of opposite sign
+    ``0 ± min(|a|·t, |b|·(h − t))``; in an end segment ``c·(distance to the far end)``
+    from its one neighbour (also a segment ending at ``pivot``, zero torque:
+    :func:`slope_changes`); zero on a measured level. NaN when ``xq`` is outside the
+    branch, the branch has fewer than three samples, or the segment has no neighbour
+    to bound it.
+    """
+    one_d = np.ndim(x) == 1
+    x, y = _rows(x, y)
+    h, a, b = slope_changes(x, y, pivot=pivot)
+    xq = float(xq)
+    j = np.clip(np.sum(x <= xq, axis=1) - 1, 0, max(h.shape[1] - 1, 0))
+    rows = np.arange(x.shape[0])
+    if h.shape[1] < 2:
+        nan = np.full(x.shape[0], np.nan)
+        return _out(nan, one_d), _out(nan, one_d)
+    hj, aj, bj = h[rows, j], a[rows, j], b[rows, j]
+    t = xq - x[rows, j]
+    with np.errstate(invalid="ignore"):
+        both = np.isfinite(aj) & np.isfinite(bj)
+        same = both & (aj * bj > 0)
+        d_both = np.minimum(np.abs(aj) * t, np.abs(bj) * (hj - t))
+        d_left_only = np.abs(aj) * t  # the last segment: its left neighbour bounds it
+        d_right_only = np.abs(bj) * (hj - t)
+        d = np.where(both, d_both, np.where(np.isfinite(aj), d_left_only, d_right_only))
+        sgn = np.sign(np.where(np.isfinite(aj), aj, bj))
+        mid = np.where(same | ~both, sgn * d / 2.0, 0.0)
+        half = np.where(same | ~both, d / 2.0, d)
+        outside = (xq < x[:, 0]) | (xq > x[:, -1])
+    return _out(np.where(outside, np.nan, mid), one_d), _out(np.where(outside, np.nan, half), one_d)
 
 
 def loss_factor(energy_j, torque_top_nm, angle_top_rad, torque_bottom_nm, angle_bottom_rad):

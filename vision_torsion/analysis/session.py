@@ -17,6 +17,7 @@ lost_motion_<x>pct                     deg           Monte Carlo    ±x·T not b
 secant_stiffness                       nm_per_rad    Monte Carlo    ends not bracketed: withheld
 loop_energy, loss_factor               j, 1          Monte Carlo    gap in the levels: withheld
 k1, k2, k3 (catalogue T1, T2 fixed)    nm_per_rad    first order    lack of fit: **flagged**, u×√χ²_red
+k1..k3, t1, t2 (breaks fitted)         various       bootstrap      lack of fit: **flagged**, u×√χ²_red
 bilinear_k_u, _k_l, _tau_c             various       first order    lack of fit: **flagged**, u×√χ²_red
 preisach_residual_rms                  deg           (fit stat.)    lack of fit: **flagged**
 bouc_wen_* (optional)                  various       first order    lack of fit: flagged, u×√χ²_red;
@@ -88,7 +89,8 @@ from .uncertainty import (
 )
 
 __all__ = [
-    "ISSUE_KINDS", "Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA", "FIGURE_COLUMNS"]
+    "ISSUE_KINDS", "Issue", "SessionAnalysis", "analyze_session", "SUMMARY_SCHEMA", "FIGURE_COLUMNS",
+    "TORQUE_NOT_MODELLED"]
 
 #: Identifies the layout of :meth:`SessionAnalysis.to_dict` (summary.json).
 SUMMARY_SCHEMA = "vision-torsion/analysis-summary/2"
@@ -113,9 +115,17 @@ FIGURE_COLUMNS = [
     "flag",
     *[f"std_{k}" for k in SOURCE_KINDS],
     "std_lack_of_fit",
+    "std_sampling",
     "reduced_chi2",
     "coverage_factor",
 ]
+
+
+#: The flag of every figure of a table analysed without its torque-error model (``torque_model_declared=False``).
+TORQUE_NOT_MODELLED = (
+    "torque uncertainty not modelled: no rig (weight-piece tolerance, pieces per step, g, r) was given, so each "
+    "torque level's error was taken as its own and the pieces' accumulation step by step is missing from u95"
+)
 
 
 def _coverage_factor(std: float, parts_dof) -> float:
@@ -300,11 +310,17 @@ class _Collector:
         check=None,
         flag="",
         draws=None,
+        sampling=0.0,
     ):
         """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u.
 
         ``draws``: the angle part and each torque part were estimated from this many
         Monte Carlo draws (their ν = draws − 1 sets the coverage factor).
+        ``sampling``: half-width of the bound on the sampling of the continuous loop by
+        the measured levels (:func:`_sampling_bounds`): its 1σ (``half/√3``,
+        rectangular) is in ``std``, and ``u95`` is at least ``k·std_rest + half`` (a
+        bias known only to lie within the bound is added linearly to the rest's
+        interval: on a kinked loop the truth sits at the bound's edge).
         """
         infl, red = 1.0, np.nan
         if check is not None and check.testable:
@@ -315,7 +331,8 @@ class _Collector:
                     x for x in (flag, f"flagged, uncertainty ×{infl:.3g} (√χ²_red): {check.describe()}") if x
                 )
         std0 = float(np.hypot(std_angle, std_torque))
-        std = std0 * infl
+        std_rest = std0 * infl
+        std = float(np.hypot(std_rest, sampling / math.sqrt(3.0)))
         row = {
             "orientation_deg": self.loop.orientation_deg,
             "cycle": self.loop.cycle,
@@ -329,6 +346,7 @@ class _Collector:
             "method": method,
             "flag": flag,
             "std_lack_of_fit": std0 * math.sqrt(max(infl**2 - 1.0, 0.0)) if np.isfinite(std0) else np.nan,
+            "std_sampling": float(sampling) / math.sqrt(3.0),
             "reduced_chi2": red,
             "coverage_factor": COVERAGE_FACTOR,
         }
@@ -340,6 +358,9 @@ class _Collector:
             # estimate): Student's t at that dof (GUM G.3), never below 2
             k = max(COVERAGE_FACTOR, float(special.stdtrit(check.dof, 0.975)))
             row.update(coverage_factor=k, u95=k * std)
+        if sampling > 0 and np.isfinite(std) and std > 0:
+            u95 = max(row["u95"], row["coverage_factor"] * std_rest + sampling)
+            row.update(u95=u95, coverage_factor=u95 / std)
         for k in SOURCE_KINDS:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
         self.rows.append(row)
@@ -608,7 +629,10 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
     def evaluate(tau, th):
         td, yd, ta, ya = tau[:, is_desc], th[:, is_desc], tau[:, ~is_desc], th[:, ~is_desc]
         hyst, loss = metrics.loop_width(td, yd, ta, ya, tol=tol)
-        energy = metrics.loop_energy(tau, th)
+        (xd, fd), (xa, fa) = _branches(td, yd, ta, ya)
+        # ∮τ dθ of the continuous loop: the polygon through the samples, less what its chords add to the area
+        # between the branches (metrics.chord_area: the descending branch's chords raise it, the ascending's lower)
+        energy = metrics.loop_energy(tau, th) - metrics.chord_area(xd, fd)[0] + metrics.chord_area(xa, fa)[0]
         out = {
             "hysteresis": np.degrees(hyst),
             "hysteresis_loss": np.degrees(loss),
@@ -619,13 +643,85 @@ def _mc_evaluator(is_desc, top, bottom, settings, tol=_TOL):
             ),
         }
         for f in settings["lost_motion_fractions"]:
-            out[_lm_name(f)] = np.degrees(metrics.lost_motion(td, yd, ta, ya, torque_nm=f * lm_ref, tol=tol))
+            x = f * lm_ref
+            lm = metrics.lost_motion(td, yd, ta, ya, torque_nm=x, tol=tol)
+            # less the interpolation's own error at ±x (metrics.chord_error), from the branches' curvature
+            err = sum(
+                sgn * metrics.chord_error(xb, fb, sgn * x)[0] for xb, fb in ((xd, fd), (xa, fa)) for sgn in (1, -1)
+            )
+            out[_lm_name(f)] = np.degrees(lm - 0.5 * err)
         out.update(
             metrics.phase_secants(td, yd, ta, ya, top_nm=tau[0, top].mean(), bottom_nm=tau[0, bottom].mean(), tol=tol)
         )
         return out
 
     return evaluate
+
+
+def _branches(td, yd, ta, ya):
+    """The loop's two branches as ``(x, y)`` rows sorted by torque: the descending run, and the ascending run
+    from the bottom tip (the descending run's last image, where the ascending branch starts, unless the ascending
+    run has its own image there)."""
+    gaps = np.diff(np.unique(td[0]))
+    if gaps.size and ta[0].min() > td[0].min() + 0.5 * gaps.min():
+        ta = np.concatenate([td[:, -1:], ta], axis=1)
+        ya = np.concatenate([yd[:, -1:], ya], axis=1)
+    xa, fa = ta, ya
+    return _sorted_rows(td, yd), _sorted_rows(xa, fa)
+
+
+def _sorted_rows(x, y):
+    o = np.argsort(x, axis=1, kind="stable")
+    return np.take_along_axis(x, o, axis=1), np.take_along_axis(y, o, axis=1)
+
+
+def _sampling_bounds(tau, th, is_desc, settings) -> dict:
+    """Half-widths of the sampling terms of the loop figures (figure → half-width, in the figure's unit), from
+    the nominal loop.
+
+    The loop energy is ``∮τ dθ`` of the continuous loop estimated from the polygon through the measured levels
+    (corrected by :func:`.metrics.chord_area`); lost motion at ``±x`` between levels is corrected by
+    :func:`.metrics.chord_error`. The systematic half-widths are added linearly, the random ones (a
+    segment whose curvature is below the noise) in quadrature. NaN where a branch is too short to bound them.
+    """
+    td, yd, ta, ya = (v[None, :] for v in (tau[is_desc], th[is_desc], tau[~is_desc], th[~is_desc]))
+    (xd, fd), (xa, fa) = _branches(td, yd, ta, ya)
+    _, sd, rd = metrics.chord_area(xd, fd)
+    _, sa_, ra = metrics.chord_area(xa, fa)
+    energy = float(sd[0] + sa_[0]) + math.hypot(float(rd[0]), float(ra[0]))
+    out = {"loop_energy": energy}
+    top, bottom = float(tau.max()), float(tau.min())
+    u = 0.5 * (0.5 * (top - bottom)) * 0.5 * (float(th[np.argmax(tau)]) - float(th[np.argmin(tau)]))
+    out["loss_factor"] = energy / (2 * math.pi * u) if u > 0 else float("nan")
+    for f in settings["lost_motion_fractions"]:
+        x = f * settings["lost_motion_reference_nm"]
+        half = sum(float(metrics.chord_error(xb, fb, sgn * x)[1][0]) for xb, fb in ((xd, fd), (xa, fa))
+                   for sgn in (1, -1))
+        out[_lm_name(f)] = math.degrees(0.5 * half)
+    return out
+
+
+def _unbounded_reasons(nominal, sampling, tau, settings) -> dict:
+    """Why a loop figure's sampling term cannot be bounded (figure → reason): the bound needs a measured
+    neighbour segment beside the one that holds the evaluation torque, and a lost motion whose interpolation
+    bound exceeds the figure itself is not determined by the levels measured."""
+    out = {}
+    lv = np.unique(np.abs(tau))
+    for name in ("loop_energy", "loss_factor"):
+        if not np.isfinite(sampling.get(name, np.nan)):
+            out[name] = ("a branch has a segment between measured levels with no measured neighbour to bound the "
+                         "continuous loop's area there: withheld")
+    for f in settings["lost_motion_fractions"]:
+        name, x = _lm_name(f), f * settings["lost_motion_reference_nm"]
+        lo, hi = float(lv[lv <= x].max(initial=0.0)), float(lv[lv >= x].min(initial=np.inf))
+        where = f"±{x:.4g} N·m lies between the measured levels {lo:.4g} and {hi:.4g} N·m"
+        half, v = sampling.get(name, np.nan), float(nominal[name][0])
+        if not np.isfinite(half):
+            out[name] = f"{where}, which have no measured neighbour on a branch to bound the interpolation: withheld"
+        elif np.isfinite(v) and half > abs(v):
+            out[name] = (f"{where}: too far apart to bound the interpolation usefully (its bound ±{half:.2g}° "
+                         f"exceeds the figure, {v:.2g}°): withheld")
+    return out
 
 
 #: Figures of the phases whose torque part the loop's Monte Carlo carries (their value and angle part stay
@@ -720,6 +816,8 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
     )
     method = "monte-carlo (torque errors with the loop's amplitude)"
     gaps = _gap_reasons(settings, tau, is_desc, levels)
+    sampling = _sampling_bounds(tau, th, is_desc, settings)
+    gaps.update({k: v for k, v in _unbounded_reasons(nominal, sampling, tau, settings).items() if k not in gaps})
     for name in _PHASE_SECANTS:
         if np.isfinite(std_t.get(name, np.nan)):
             col.set_torque_part(
@@ -740,7 +838,7 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
                     "the width at zero torque (hysteresis_loss) is not biased"
                 )
             col.add(name, unit, v, std_a[name], std_t[name], method, parts=by_kind[name], flag=flag,
-                    draws=settings["n_draws"])
+                    draws=settings["n_draws"], sampling=sampling.get(name, 0.0))
         else:
             col.fail(name, unit, _mc_reason(name, tau, settings))
     return tau, th, th_std, is_desc, sources, kinds
@@ -762,8 +860,8 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
             res = fit_fixed_breaks(t, y, breaks_nm=breaks, **data)
             method = "linear least squares, catalogue T1/T2 fixed"
         elif settings["fit_breaks"]:
-            res = fit_catalogue_breaks(t, y, **data)
-            method = "breaks fitted (uncertainty with the breaks held)"
+            res = fit_catalogue_breaks(t, y, **data, n_draws=settings["n_draws"], seed=settings["seed"])
+            method = "breaks fitted; uncertainty by a parametric bootstrap that refits the breaks"
         else:
             for n, u in names:
                 col.fail(n, u, "no catalogue T1/T2 given and fitting the breaks is off")
@@ -773,16 +871,18 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
             col.fail(n, u, str(exc))
         return
     chk = res["check"]
+    draws = res.get("draws")
     for j, (n, u) in enumerate(names):
         if j < len(res["k"]):
-            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk)
+            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk, draws=draws)
         else:
             col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}",
                      kind="not_applicable")
     if breaks is None and settings["fit_breaks"]:
         for j, n in enumerate(("t1", "t2")):
             if j < len(res["breaks_nm"]):
-                col.add(n, "nm", res["breaks_nm"][j], method="fitted break (no uncertainty: profiled)")
+                col.add(n, "nm", res["breaks_nm"][j], res["breaks_std_angle"][j], res["breaks_std_torque"][j],
+                        method, check=chk, draws=draws)
             else:
                 col.fail(n, "nm", "one break describes the loading branches (two segments)", kind="not_applicable")
 
@@ -1036,6 +1136,7 @@ def analyze_session(
     seed=0,
     fit_bouc_wen=False,
     fit_preisach=True,
+    torque_model_declared=True,
 ) -> SessionAnalysis:
     """Analyse the torque–angle table of a session: every figure of every loop, checked.
 
@@ -1086,6 +1187,13 @@ def analyze_session(
         the sharp bilinear loop, and its gate says so).
     fit_preisach : bool
         Fit the Preisach model (:mod:`.preisach`), also used to find outliers.
+    torque_model_declared : bool
+        False when the caller has no torque-error model to declare (a table analysed
+        without its rig and without explicit rig options, :func:`vision_torsion.report.analyze_table`):
+        then, without a ``rig``, every figure is **flagged**
+        :data:`TORQUE_NOT_MODELLED` (each level's ``torque_std_nm`` taken as its own
+        error misses the weight pieces' accumulation step by step, which moves slopes
+        and the loop energy) and a session issue says so.
 
     Returns
     -------
@@ -1166,6 +1274,10 @@ def analyze_session(
         "rig": None if rig is None else rig.to_dict(),
     }
     issues: list[Issue] = []
+    unmodelled = not torque_model_declared and rig is None
+    settings["torque_uncertainty_modelled"] = not unmodelled
+    if unmodelled:
+        issues.append(Issue(None, None, "torque uncertainty", TORQUE_NOT_MODELLED, kind="flagged"))
     if torque_correlation == "pieces":
         issues.extend(_rig_issues(usable, rig))
     for r in failed.itertuples(index=False):
@@ -1251,6 +1363,10 @@ def analyze_session(
                 for r in col.rows:
                     if np.isfinite(r["value"]) and not r["flag"]:
                         r["flag"] = "flagged: creep or drift in this orientation (see checks)"
+            if unmodelled:
+                for r in col.rows:
+                    if np.isfinite(r["value"]):
+                        r["flag"] = "; ".join(x for x in (r["flag"], "flagged: " + TORQUE_NOT_MODELLED) if x)
             rows.extend(col.rows)
     figures = pd.DataFrame(rows, columns=FIGURE_COLUMNS)
     figures = figures[figures["figure"] != "*"].reset_index(drop=True)

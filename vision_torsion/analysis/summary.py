@@ -238,6 +238,11 @@ def mean_uncertainty(sub) -> dict:
         u = _finite_mean(lof)
         budget["lack_of_fit"] = u
         total += u * u
+    if "std_sampling" in sub:  # the loop sampled by its levels: the same bias in every loop, not averaged down
+        u = _finite_mean(_col(sub, "std_sampling"))
+        if u > 0:
+            budget["sampling"] = u
+            total += u * u
     std = math.sqrt(total)
     dof = math.inf
     k = COVERAGE_FACTOR

@@ -31,6 +31,13 @@ def register(sub) -> None:
     t.add_argument("--units", metavar="MAP", help="units of headers that carry none: torque=N m,angle=arcmin")
     t.add_argument("--angle-std", type=float, metavar="DEG", help="1σ of every angle, deg, when the table has none")
     t.add_argument("--torque-std", type=float, metavar="NM", help="1σ of every torque, N·m, when the table has none")
+    rig = p.add_argument_group(
+        "rig without a session.toml (all four together; without them or --session the figures are flagged "
+        "'torque uncertainty not modelled')")
+    rig.add_argument("--piece-tolerance", type=float, metavar="KG", help="tolerance of one weight piece, ±kg")
+    rig.add_argument("--pieces-per-step", type=int, metavar="N", help="pieces added to each pan per step")
+    rig.add_argument("--gravity", type=float, metavar="M/S2", help="local g, m/s²")
+    rig.add_argument("--arm-radius", type=float, metavar="M", help="arm radius r, m")
     add_output_option(p, "TABLE's folder/<TABLE stem>_analysis")
     p.add_argument("--campaign", metavar="DB", help="also add the report to this campaign database")
     add_common_options(p)
@@ -43,11 +50,18 @@ def run(args) -> int:
     from ..table_import import parse_column_map
 
     units = parse_column_map(args.units, what="--units") if args.units else None
+    given = {"piece_tolerance_kg": args.piece_tolerance, "pieces_per_step": args.pieces_per_step,
+             "gravity_m_per_s2": args.gravity, "arm_radius_m": args.arm_radius}
+    rig_options = given if any(v is not None for v in given.values()) else None
     res = analyze_table(args.table, session=args.session, out_dir=args.out_dir,
                         columns=parse_column_map(args.columns) if args.columns else None, units=units,
-                        angle_std_deg=args.angle_std, torque_std_nm=args.torque_std, catalogue=args.catalogue)
+                        angle_std_deg=args.angle_std, torque_std_nm=args.torque_std, catalogue=args.catalogue,
+                        rig_options=rig_options)
     for note in res.import_notes:
         print(f"table: {note}")
+    if not res.analysis.settings.get("torque_uncertainty_modelled", True):
+        print("torque uncertainty not modelled (no --session and no --piece-tolerance/--pieces-per-step/--gravity/"
+              "--arm-radius): every figure is flagged")
     withheld = ("every figure withheld until the angle sign is right" if res.angle_sign_advice
                 else describe_withheld(res.withheld_by_kind, res.n_flagged))
     print(f"{res.n_rows} rows, {res.n_failed} image(s) not usable; {withheld}")

@@ -10,21 +10,31 @@ torque_nm, torque_std_nm, angle_deg, angle_std_deg, status, message``, optional
 uncertainty follows the weight pieces (its ``[rig]``), lost motion refers to the
 rated torque and K1–K3 to the catalogue breaks (its ``[gear]``), and the test's
 metadata (its ``[test]``) are shown in the report and written into summary.json.
+
+The torque-error model must be declared: a ``session.toml`` (its ``[rig]``), or the
+rig's constants as explicit options (``rig_options``: piece tolerance, pieces per
+step, g, r; :func:`rig_from_options`). Without either, every figure is flagged
+"torque uncertainty not modelled" (:data:`vision_torsion.analysis.session.TORQUE_NOT_MODELLED`).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from ..errors import AnalysisError
 
 __all__ = ["AnalyzeResult", "analyze_table", "analysis_options", "test_metadata", "withheld_by_kind",
            "describe_withheld", "angle_sign_advice", "spec_limits", "identity", "gear_options",
-           "merge_catalogue"]
+           "merge_catalogue", "rig_from_options", "RIG_OPTIONS"]
+
+#: Keys of ``rig_options`` (:func:`rig_from_options`), all required together.
+RIG_OPTIONS = ("piece_tolerance_kg", "pieces_per_step", "gravity_m_per_s2", "arm_radius_m")
 
 logger = logging.getLogger(__name__)
 
@@ -115,6 +125,52 @@ def describe_withheld(counts: dict, n_flagged: int | None = None) -> str:
     if n_flagged is not None:
         text += f"; {n_flagged} flagged"
     return text + "; each with its reason in the report"
+
+
+def rig_from_options(table: pd.DataFrame, *, piece_tolerance_kg, pieces_per_step, gravity_m_per_s2, arm_radius_m):
+    """The weight-piece rig of a table analysed without its session.toml, from explicit options.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        The table (its ``mass_kg`` column: the mass on each pan, kg).
+    piece_tolerance_kg : float
+        Tolerance of one weight piece, ±kg (a uniform distribution: 1σ = tolerance/√3).
+    pieces_per_step : int
+        Pieces added to each pan per step; one piece's mass is the table's mass step
+        (the smallest difference between its distinct positive ``mass_kg`` values, and
+        the smallest of them) divided by this.
+    gravity_m_per_s2, arm_radius_m : float
+        Local g (m/s²) and the arm radius r (m).
+
+    Returns
+    -------
+    vision_torsion.measurements.TorqueRig
+
+    Raises
+    ------
+    AnalysisError
+        A value out of range (named), or a table without a positive ``mass_kg``.
+    """
+    from ..measurements import TorqueRig
+
+    for name, v, lo in (("piece_tolerance_kg", piece_tolerance_kg, 0.0), ("gravity_m_per_s2", gravity_m_per_s2, None),
+                        ("arm_radius_m", arm_radius_m, None)):
+        ok = isinstance(v, (int, float)) and math.isfinite(v) and (v >= lo if lo is not None else v > 0)
+        if not ok:
+            raise AnalysisError(f"rig option {name} must be a {'non-negative' if lo is not None else 'positive'} "
+                                f"number, got {v!r}", reason="bad_rig")
+    if not (isinstance(pieces_per_step, int) and pieces_per_step >= 1):
+        raise AnalysisError(f"rig option pieces_per_step must be a whole number >= 1, got {pieces_per_step!r}",
+                            reason="bad_rig")
+    mass = pd.to_numeric(table["mass_kg"], errors="coerce").to_numpy(float) if "mass_kg" in table else np.zeros(0)
+    levels = np.unique(np.round(mass[np.isfinite(mass) & (mass > 0)], 9))
+    if levels.size == 0:
+        raise AnalysisError("the rig options need the table's mass_kg (the mass on each pan, kg); it has no "
+                            "positive value", reason="bad_rig")
+    step = float(min(levels[0], np.min(np.diff(levels)))) if levels.size > 1 else float(levels[0])
+    return TorqueRig(step_mass_kg=step / pieces_per_step, mass_std_kg=piece_tolerance_kg / math.sqrt(3.0),
+                     gravity_m_per_s2=float(gravity_m_per_s2), arm_radius_m=float(arm_radius_m))
 
 
 def analysis_options(config) -> dict:
@@ -279,6 +335,7 @@ def analyze_table(
     angle_std_deg=None,
     torque_std_nm=None,
     catalogue=None,
+    rig_options=None,
 ):
     """Analyse a torque–angle table and write summary.json, stiffness_table.csv, figures and report.html.
 
@@ -311,6 +368,10 @@ def analyze_table(
         A catalogue file (``[gear]`` and ``[spec]``,
         :func:`~vision_torsion.session.config.load_catalogue`): with or without a
         session, the catalogue values and the conformity verdict.
+    rig_options : dict, optional
+        Without ``session``: the rig's constants (:data:`RIG_OPTIONS`, see
+        :func:`rig_from_options`). Without either, every figure is flagged "torque
+        uncertainty not modelled".
 
     Returns
     -------
@@ -347,6 +408,17 @@ def analyze_table(
 
         config = dataclasses.replace(config, gear=gear, spec=spec)
     kw = analysis_options(config) if config is not None else gear_options(gear)
+    if rig_options is not None:
+        if config is not None:
+            raise AnalysisError(f"{name}: give the rig either by its session.toml or by the rig options, not both",
+                                reason="bad_rig")
+        missing = [k for k in RIG_OPTIONS if rig_options.get(k) is None]
+        if missing:
+            raise AnalysisError(f"{name}: the rig options go together; missing {', '.join(missing)}",
+                                reason="bad_rig")
+        kw["rig"] = rig_from_options(df, **{k: rig_options[k] for k in RIG_OPTIONS})
+    elif config is None:
+        kw["torque_model_declared"] = False
     try:
         analysis = analyze_session(df, n_draws=n_draws, seed=seed, **kw)
     except AnalysisError as exc:

@@ -320,6 +320,11 @@ def render_html(
         "<li>Slopes and model fits: first-order propagation through the least-squares estimate. Hysteresis, "
         f"lost motion, secant stiffness, loop energy, loss factor: Monte Carlo, {s['n_draws']} draws per error "
         f"source, seed {s['seed']}.</li>"
+        "<li>Loop energy ∮τ dθ is that of the continuous loop: the polygon through the measured levels, less the "
+        "area its chords add (bounded from the neighbouring secants); that bound is in u95 (the sampling term). "
+        "Lost motion between levels is corrected the same way for the interpolation, and withheld when the "
+        "levels around ±x cannot bound it. K1–K3 and T1/T2 with fitted breaks: a parametric bootstrap that "
+        "refits the breaks in every draw.</li>"
         "<li>Fit uncertainties reflect measurement noise only; compare the residual RMS of a model with the "
         "angle uncertainty to judge whether the model describes the data.</li></ul>",
         '<h2 id="failed-images">Failed images</h2>',
