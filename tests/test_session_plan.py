@@ -299,3 +299,12 @@ def test_printed_capture_sheet_repeats_the_head_and_numbers_every_page(tmp_path)
         assert f"page {number} of {len(pages)}" in p
         if number > 1:  # every page of the orientation: its title and the column names
             assert "Orientation 0° — CSF-20-100" in p and "save as" in p and "camera" in p
+
+
+def test_a_refused_plan_leaves_no_folder_behind(tmp_path, capsys):
+    from vision_torsion.cli import main
+
+    out = tmp_path / "new_session"
+    assert main(["plan", str(out), "--max-torque", "1", "--step-mass", "1e-9", "--arm-radius", "0.05"]) == 2
+    assert "error:" in capsys.readouterr().err
+    assert not out.exists()

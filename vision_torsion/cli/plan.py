@@ -87,24 +87,21 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     """Plan the session; returns 0."""
+    import contextlib
+    from pathlib import Path
+
     from ..fileio import check_output_dir
     from ..session.plan import plan_session
 
+    created = not Path(args.out_dir).exists()
     check_output_dir(args.out_dir)  # writable, with space, before anything is written
-
-    plan = plan_session(
-        args.out_dir, max_torque_nm=args.max_torque, step_mass_kg=args.step_mass,
-        arm_radius_m=args.arm_radius, orientations_deg=args.orientations,
-        cycles=args.cycles, gravity_m_per_s2=args.gravity,
-        gravity_std_m_per_s2=args.gravity_std, arm_radius_std_m=args.arm_radius_std,
-        mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
-        polarity=args.polarity, radius_range=args.radius_range,
-        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
-        target=args.target,
-        steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
-        header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date", "notes")
-                if getattr(args, k)},
-        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque, catalogue=args.catalogue)
+    try:
+        plan = _plan(args, plan_session)
+    except BaseException:
+        if created:  # a refused plan leaves no empty folder behind (only the one this run made)
+            with contextlib.suppress(OSError):
+                Path(args.out_dir).rmdir()
+        raise
     print(f"{plan.folder}: {len(plan.rows)} images in "
           f"{len(plan.config.protocol.orientations_deg)} orientations, "
           f"{plan.steps_per_phase} steps per phase, max torque "
@@ -121,3 +118,20 @@ def run(args) -> int:
     print(f"print {sheet} and save each image under the name it gives (or keep the "
           "camera's names and run `vision-torsion bind` or `watch`)")
     return 0
+
+
+def _plan(args, plan_session):
+    """plan_session with the command line's options."""
+    return plan_session(
+        args.out_dir, max_torque_nm=args.max_torque, step_mass_kg=args.step_mass,
+        arm_radius_m=args.arm_radius, orientations_deg=args.orientations,
+        cycles=args.cycles, gravity_m_per_s2=args.gravity,
+        gravity_std_m_per_s2=args.gravity_std, arm_radius_std_m=args.arm_radius_std,
+        mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
+        polarity=args.polarity, radius_range=args.radius_range,
+        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
+        target=args.target,
+        steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
+        header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date", "notes")
+                if getattr(args, k)},
+        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque, catalogue=args.catalogue)
