@@ -245,3 +245,11 @@ def test_analyze_command_prints_the_verdict_and_the_report_to_send(tmp_path, cap
     # lost motion here is tens of degrees against a 1 arcmin limit: the gear fails
     assert "verdict against the catalogue: FAIL: " in out and " 2 fail," in out
     assert f"report to send: {tmp_path / 'o' / 'CSF-17-100_report.html'}" in out
+
+
+def test_the_ready_catalogue_is_found_by_name():
+    from vision_torsion.session.config import load_catalogue
+
+    gear, spec = load_catalogue("paper_demo")
+    assert (gear.t1_nm, gear.t2_nm) == (0.15, 0.30)
+    assert spec.k1_min_nm_per_rad == 0.28 and spec.hysteresis_loss_max_arcmin == 1800.0

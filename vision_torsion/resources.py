@@ -13,13 +13,15 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["named_file", "available", "SCENES", "SPECS", "TARGETS"]
+__all__ = ["named_file", "available", "SCENES", "SPECS", "TARGETS", "CATALOGUES"]
 
 #: (package, folder) of the ready scenes and of the ready accuracy-check specs.
 SCENES = ("vision_torsion.synthetic", "scenes")
 SPECS = ("vision_torsion.calibration", "specs")
 #: (package, folder) of the ready target descriptions (``ring16``, ...).
 TARGETS = ("vision_torsion", "targets")
+#: (package, folder) of the ready gear catalogues (``[gear]`` and ``[spec]``: ``paper_demo``).
+CATALOGUES = ("vision_torsion", "catalogues")
 
 
 def available(kind: tuple[str, str]) -> list[str]:

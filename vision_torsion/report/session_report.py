@@ -325,7 +325,9 @@ def run_demo(
             logger.info("%s: rendered with seed %d; rendering it again with seed %d", session_dir, rendered, seed)
         scene, spec = demo_scene()
         logger.info("rendering the synthetic session into %s", session_dir)
-        write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True)
+        write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True,
+                             header=DEMO_HEADER | {"serial": f"DEMO-{seed}", "date": _today()},
+                             catalogue=DEMO_CATALOGUE)
         atomic_write_text(stamp, json.dumps({"seed": seed}) + "\n")
     else:
         logger.info("%s: reusing the session rendered earlier with seed %d (--force renders it again)",
@@ -335,6 +337,16 @@ def run_demo(
 
 #: The demo folder's record of the seed its session was rendered with.
 DEMO_STAMP = "demo.json"
+#: The demo gear's identity (its serial is the seed, its date the day it is rendered)
+#: and its type's catalogue (package data: T1/T2 and the limits of the verdict).
+DEMO_HEADER = {"gear": "paper-demo-gear (synthetic)", "operator": "vision-torsion demo"}
+DEMO_CATALOGUE = "paper_demo"
+
+
+def _today() -> str:
+    import datetime
+
+    return datetime.date.today().isoformat()
 
 
 def _demo_seed(stamp: Path) -> int | None:

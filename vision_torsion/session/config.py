@@ -24,6 +24,7 @@ import tomli_w
 from ..errors import SessionError, TargetError, VisionTorsionError
 from ..fileio import atomic_write_text
 from ..measurements import TorqueRig
+from ..resources import CATALOGUES, named_file
 from ..settings import MeasureSettings
 from ..targets import Target, load_target, target_from_dict
 from ..textfiles import read_toml
@@ -524,7 +525,8 @@ def load_catalogue(path) -> tuple[GearConfig, SpecConfig]:
     """Read a gear type's catalogue file: its ``[gear]`` and ``[spec]`` tables, with
     the keys and checks of session.toml (the same file serves every serial number of
     the type; ``plan --catalogue`` copies it into session.toml, ``analyze
-    --catalogue`` uses it directly).
+    --catalogue`` uses it directly). `path` is a file, or the name of a ready
+    catalogue shipped with the package (``paper_demo``: the demo's gear type).
 
     Raises
     ------
@@ -532,7 +534,7 @@ def load_catalogue(path) -> tuple[GearConfig, SpecConfig]:
         The file is missing or not TOML, has another table, or invalid keys (all
         listed, named ``gear.t1_nm``, ``spec.k1_min_nm_per_rad``, ...).
     """
-    p = Path(path)
+    p = named_file(path, CATALOGUES, error=SessionError, what="gear catalogue")
     data = read_toml(p, what="a catalogue file ([gear] and [spec] tables)", error=SessionError)
     problems = _Problems()
     _unknown(data, ("gear", "spec"), "", problems)

@@ -185,7 +185,8 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
 
 
 def write_session_folder(
-    scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False, overwrite: bool = False
+    scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False, overwrite: bool = False,
+    header: dict | None = None, catalogue=None,
 ) -> Path:
     """Plan and render a complete synthetic test session.
 
@@ -203,6 +204,10 @@ def write_session_folder(
         Show a progress bar.
     overwrite : bool
         Replace a session already in the folder.
+    header, catalogue : optional
+        The test's identity and the gear type's catalogue file, as
+        :func:`~vision_torsion.session.plan.plan_session` takes them (into
+        session.toml's ``[gear]``, ``[test]`` and ``[spec]``).
 
     Returns
     -------
@@ -260,6 +265,8 @@ def write_session_folder(
         mass_tolerance_kg=spec.mass_tolerance_kg,
         polarity=scene.markers.polarity,
         angle_sign=spec.angle_sign,
+        header=header,
+        catalogue=catalogue,
     )
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
