@@ -22,6 +22,9 @@ EXCEPTIONS = {
     "synthetic/encoder.py::realistic_encoder_record": "one generator",
     "report/html.py::render_html": "one HTML page",
     "report/analyze.py::analyze_table": "the analysis of a table, step by step",
+    "analysis/catalogue.py::fit_fixed_breaks": "numeric kernel: K1-K3 by least squares with its covariance",
+    "analysis/catalogue.py::fit_catalogue_breaks": "numeric kernel: the break search and its model choice",
+    "analysis/catalogue.py::break_bootstrap": "numeric kernel: the vectorised bootstrap refitting the breaks",
 }
 
 
