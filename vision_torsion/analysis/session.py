@@ -935,22 +935,42 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     return out
 
 
-def _outlier_issues(col: _Collector, pre):
-    loop = col.loop
+def _outlier_reference(loop, pre):
+    """The refit the outlier search uses (:func:`.checks.leave_one_out_outliers`) and σ_eff, or None.
+
+    The Preisach model (it describes bilinear, stiffening and smooth loops alike), refitted without the
+    point under test. (The bilinear model was tried as a rigid reference and listed innocent images
+    near zero torque: its prediction there carries the weight pieces' correlated errors, which σ_eff
+    of the point alone leaves out.)
+    """
     if pre is None:
-        return []
+        return None
+    sa, st, tau = loop.angle_std_rad, loop.local_std(), loop.torque_nm
+
+    def refit(keep):
+        fit = fit_preisach(tau[keep], loop.angle_rad[keep], angle_std_rad=sa[keep], torque_std_nm=st[keep])
+        return fit.predict(tau)
+
     model = loop.angle_rad - pre.residual_rad
-    comp = path_compliance(loop.torque_nm, model)
-    sig = np.sqrt(loop.angle_std_rad**2 + (comp * loop.local_std()) ** 2)
-    found = checks.outliers(loop.images, pre.residual_rad, sig)
+    return refit, np.sqrt(sa**2 + (path_compliance(tau, model) * st) ** 2)
+
+
+def _outlier_issues(col: _Collector, fit_set: dict):
+    loop = col.loop
+    ref = _outlier_reference(loop, fit_set.get("preisach"))
+    if ref is None:
+        return []
+    refit, sig = ref
+    found = checks.leave_one_out_outliers(loop.images, loop.angle_rad, sig, refit)
     for image, z in found:
         col.issues.append(
             Issue(
                 loop.orientation_deg,
                 loop.cycle,
                 "outlier",
-                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit): a forgotten or "
-                "extra weight, or a missed or extra shot?",
+                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit without it, leave-one-out): a "
+                "forgotten or extra weight, or a missed or extra shot? Check the image and its weights, "
+                "re-take it or mark it failed",
             )
         )
     return found
@@ -1223,7 +1243,7 @@ def analyze_session(
                 fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
                 runs = _model_free_figures(col, settings, seed + i, levels)
                 _catalogue_figures(col, settings, runs)
-                for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
+                for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]):
                     outlier_rows.append(
                         {"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image, "z": z}
                     )

@@ -33,6 +33,7 @@ HEADLINE_FIGURES = figure_rows(
 _PARTS = [
     ("angle_noise", "angle noise"),
     ("repeatability", "repeatability (Type A)"),
+    ("between_orientations", "spread between orientations (one cycle each)"),
     ("weights", "weights"),
     ("g_r", "g and r"),
     ("friction", "friction"),
