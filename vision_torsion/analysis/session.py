@@ -196,7 +196,9 @@ class SessionAnalysis:
     n_images : int
         Rows of the input table (including reference and failed images).
     checks : dict
-        ``angle_sign_inverted`` (bool), ``closure`` (list of closure/creep comparisons,
+        ``angle_sign_inverted`` (bool: the whole session), ``angle_sign_inverted_orientations``
+        (orientations whose sign alone is wrong, their figures withheld), ``angle_sign`` (per
+        orientation and run, :func:`.checks.angle_sign_by_run`), ``closure`` (list of closure/creep comparisons,
         :func:`.checks.closure_checks`), ``outliers`` (images beyond 4σ of their
         loop's model).
     """
@@ -742,7 +744,39 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
                     draws=settings["n_draws"])
         else:
             col.fail(name, unit, _mc_reason(name, tau, settings))
+    _loop_direction(col, settings)
     return tau, th, th_std, is_desc, sources, kinds
+
+
+def _loop_direction(col: _Collector, settings: dict) -> None:
+    """Withhold the loop-width figures of a loop that runs clockwise; flag an area not resolved from zero.
+
+    See :func:`.checks.loop_direction`: a passive gear's loop runs anticlockwise (positive energy).
+    """
+    row = next((r for r in col.rows if r["figure"] == "loop_energy"), None)
+    if row is None or not np.isfinite(row["value"]):
+        return
+    energy, u95 = row["value"], row["u95"]
+    direction = checks.loop_direction(energy, u95)
+    if direction == "clockwise":
+        names = {"hysteresis", "hysteresis_loss", "loop_energy", "loss_factor",
+                 *(_lm_name(f) for f in settings["lost_motion_fractions"])}
+        for r in col.rows:
+            if r["figure"] in names:
+                r.update(value=np.nan, std=np.nan, u95=np.nan, flag="")
+        col.issues.append(Issue(
+            col.loop.orientation_deg, col.loop.cycle, "loop figures",
+            f"the loop runs the other way round (clockwise: its area is {energy:+.3g} J, beyond its u95 "
+            f"{u95:.2g} J), but a gear's loop dissipates and runs anticlockwise: phases or torque signs "
+            "look mislabelled (check the phase and torque_nm columns). Hysteresis, lost motion, loop energy and "
+            "loss factor are withheld", kind="rejected"))
+    elif direction == "unresolved" and row["value"] < 0:
+        why = (f"flagged: the loop's area {energy:+.2g} J is within its u95 ({u95:.2g} J) of zero: no "
+               "dissipation is resolved, and a negative area is noise, not an energy")
+        for r in col.rows:
+            if r["figure"] in ("loop_energy", "loss_factor") and np.isfinite(r["value"]):
+                r["flag"] = "; ".join(x for x in (r["flag"], why) if x)
+                col.issues.append(Issue(col.loop.orientation_deg, col.loop.cycle, r["figure"], why, kind="flagged"))
 
 
 def _catalogue_figures(col: _Collector, settings: dict, runs):
@@ -1038,6 +1072,29 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
     return out
 
 
+def _sign_issues(signs: list, issues: list) -> dict:
+    """Orientations whose angle falls as the torque rises (:func:`.checks.angle_sign_by_run`) when the
+    session as a whole has the right sign: an issue each, and ``{orientation: why its figures are withheld}``."""
+    out = {}
+    for sg in signs:
+        if not sg["falls"]:
+            continue
+        o = sg["orientation_deg"]
+        t = ", ".join(f"{run} t = {v:+.3g}" for run, v in sg["t"].items())
+        if len(sg["falls"]) == len(checks.RUNS):
+            why = (f"the angle falls as the torque rises in orientation {o:g}° ({t}), not in the others: its "
+                   "angle sign is inverted (a mis-set orientation, or the camera flipped between orientations); "
+                   "check its images and setup, or multiply this orientation's angle_deg by -1. Its figures are "
+                   "withheld")
+        else:
+            why = (f"in orientation {o:g}° the angle falls as the torque rises on the {' and '.join(sg['falls'])} "
+                   f"run but not on the other ({t}): phases or torque signs look mislabelled; check the "
+                   "table's phase and torque_nm columns. Its figures are withheld")
+        out[o] = why
+        issues.append(Issue(o, None, "angle sign", why))
+    return out
+
+
 def analyze_session(
     measurements,
     *,
@@ -1190,7 +1247,10 @@ def analyze_session(
         orient = float(r.orientation_deg) if np.isfinite(r.orientation_deg) else None
         cycle = int(r.cycle) if np.isfinite(r.cycle) else None
         issues.append(Issue(orient, cycle, "*", f"image {r.image} ({r.phase}, step {r.step}) excluded: {r.message}"))
-    inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"])
+    signs = checks.angle_sign_by_run(usable)
+    inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"]) and all(
+        len(sg["falls"]) == len(checks.RUNS) for sg in signs)
+    wrong_sign = {} if inverted else _sign_issues(signs, issues)
     if inverted:
         issues.append(
             Issue(
@@ -1227,8 +1287,9 @@ def analyze_session(
         for lp in src_all:
             i = loops.index(lp)
             col = _Collector(lp, issues)
-            if inverted:
-                col.fail("*", "", "angle_sign looks inverted (set angle_sign = -1): figures withheld")
+            if inverted or float(orient) in wrong_sign:
+                col.fail("*", "", wrong_sign.get(float(orient),
+                                                 "angle_sign looks inverted (set angle_sign = -1): figures withheld"))
                 fits[(lp.orientation_deg, lp.cycle)] = {
                     "bilinear": None,
                     "bouc_wen": None,
@@ -1287,7 +1348,8 @@ def analyze_session(
         loop_data=loops,
         fits=fits,
         n_images=int(len(measurements)),
-        checks={"angle_sign_inverted": bool(inverted), "closure": closure, "outliers": outlier_rows},
+        checks={"angle_sign_inverted": bool(inverted), "angle_sign_inverted_orientations": sorted(wrong_sign),
+                "angle_sign": signs, "closure": closure, "outliers": outlier_rows},
     )
 
 
