@@ -44,6 +44,7 @@ __all__ = [
     "LackOfFit",
     "lack_of_fit",
     "path_compliance",
+    "side_compliance",
     "local_torque_std",
     "fit_switch",
     "secant",
@@ -139,6 +140,48 @@ def path_compliance(torque_nm, model_angle_rad) -> np.ndarray:
     both = np.vstack([left, right])
     cnt = np.sum(np.isfinite(both), axis=0)
     out = np.where(cnt > 0, np.nansum(both, axis=0) / np.maximum(cnt, 1), 0.0)
+    return out
+
+
+def side_compliance(predict, torque_nm, *, step_nm=None) -> np.ndarray:
+    """Local compliance (rad/(N·m)) of a model at each sample, from each side of the sample.
+
+    A torque error at sample ``i`` moves its angle along the model's own branch at that
+    sample: ``c₊`` for an error upwards, ``c₋`` downwards (one-sided derivatives of the
+    model along its path, only ``τᵢ`` moved by ``±h``). The effective compliance for a
+    symmetric error is their RMS ``√((c₊² + c₋²)/2)``: the compliance of the sample's own
+    side wherever the model is smooth there, and both sides at a kink. (The secants of
+    :func:`path_compliance` average a branch's stiffness across a kink that lies between
+    two levels, and mis-state the noise of the levels beside it.)
+
+    Parameters
+    ----------
+    predict : callable
+        ``predict(torque_path)`` → model angles (rad) along a torque path (N·m).
+    torque_nm : array_like (n,)
+        The sampled torque path.
+    step_nm : float, optional
+        The perturbation ``h``; default ``1e-6`` of the largest |torque|.
+
+    Examples
+    --------
+    >>> side_compliance(lambda t: np.where(np.asarray(t) > 1.0, 3.0 * np.asarray(t) - 2.0, t), [0.0, 1.0, 2.0, 3.0])
+    array([1.        , 2.23606798, 3.        , 3.        ])
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    h = float(step_nm) if step_nm else 1e-6 * max(float(np.max(np.abs(tau))), 1e-12)
+    # the path is evaluated with its first torque once more in front: a model anchored at its first
+    # sample (θ given there) then still moves that sample when its torque moves
+    path = np.concatenate([tau[:1], tau])
+    base = np.asarray(predict(path), float)
+    out = np.empty(tau.size)
+    for i in range(tau.size):
+        moved = path.copy()
+        moved[i + 1] = tau[i] + h
+        up = abs(float(predict(moved)[i + 1]) - base[i + 1]) / h
+        moved[i + 1] = tau[i] - h
+        down = abs(base[i + 1] - float(predict(moved)[i + 1])) / h
+        out[i] = math.sqrt(0.5 * (up * up + down * down))
     return out
 
 

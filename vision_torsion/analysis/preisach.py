@@ -50,7 +50,7 @@ from scipy import optimize
 from ..errors import AnalysisError
 from .fitcheck import LackOfFit, lack_of_fit, path_compliance
 
-__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states"]
+__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "torque_sensitivity"]
 
 
 def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
@@ -186,6 +186,65 @@ def preisach_response(
     return fit.predict(torque_nm)
 
 
+def _tips(tau: np.ndarray) -> list:
+    """Indices of the path's reversals, the first sample included (the path comes down from its top)."""
+    d = np.sign(np.diff(tau))
+    tips = [0]
+    last = d[0] if d.size else 0.0
+    for i in range(1, d.size):
+        if d[i] == 0:
+            continue
+        if last != 0 and d[i] != last:
+            tips.append(i)
+        last = d[i]
+    return tips
+
+
+def torque_sensitivity(torque_nm, model_angle_rad) -> np.ndarray:
+    """``A`` with ``δθ ≈ A·δτ`` (rad per N·m, (n, n)): how a model's angles answer torque errors
+    along a hysteretic path, the loop's **tips** included.
+
+    Each sample answers its own torque with the model's local compliance (the branch's
+    secant slope, :func:`.fitcheck.path_compliance`; a tip along the branch that arrived
+    there). A branch after a reversal remembers the reversal (the Masing rule, as
+    :func:`.uncertainty.tip_amplitude_response` states it): a tip torque wrong by ``δ_t``
+    moves the branch at a sample of slope ``s`` by ``S·δ_t``, ``S = clip(s_arr − s, 0, h)``
+    (``s_arr`` the slope arriving at the tip, ``h = s_arr − s_dep`` the hysteretic part
+    that switches there); a tip moved by earlier tips carries that shift to its whole
+    branch. The first sample is a tip (the path comes down from its top); its arriving
+    slope is that of the last segment arriving at the same torque from below.
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    th = np.asarray(model_angle_rad, float).reshape(-1)
+    n = tau.size
+    comp = path_compliance(tau, th)
+    dt, dth = np.diff(tau), np.diff(th)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seg = np.where(dt != 0, np.abs(dth / dt), np.nan)
+    tips = _tips(tau)
+    a = np.zeros((n, n))
+    shift = np.zeros(n)  # the current branch's translation by earlier tips' errors (a row of A)
+    for j, t in enumerate(tips):
+        if t == 0:
+            back = np.flatnonzero((np.abs(tau[1:] - tau[0]) <= 1e-12 * max(abs(tau[0]), 1.0)) & (dt > 0))
+            s_arr = float(seg[back[-1]]) if back.size else np.nan
+        else:
+            s_arr = float(seg[t - 1])
+        s_dep = float(seg[t]) if t < n - 1 else np.nan
+        end = tips[j + 1] if j + 1 < len(tips) else n - 1
+        tip_shift = shift.copy()
+        if np.isfinite(s_arr):
+            comp[t] = s_arr
+        h = s_arr - s_dep
+        for i in range(t + 1, end + 1):
+            a[i] += tip_shift
+            if np.isfinite(h) and h > 0:
+                a[i, t] += float(np.clip(s_arr - comp[i], 0.0, h))
+        shift = a[end].copy()
+    a[np.arange(n), np.arange(n)] += comp
+    return a
+
+
 def fit_preisach(
     torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, max_thresholds=64, torque_sources=None
 ) -> PreisachFit:
@@ -202,8 +261,11 @@ def fit_preisach(
     max_thresholds : int
         Most relay thresholds (mid-points between torque levels) used.
     torque_sources : array_like (n, m), optional
-        Accepted for symmetry with the other fits; not used by the gate (see the
-        comment in the code: the marginal ``torque_std_nm`` is used).
+        Loading matrix of the image-to-image torque errors (N·m per unit source). The
+        gate's noise is then each angle's marginal σ from :func:`torque_sensitivity`
+        and these sources: its own torque error and those of the loop tips its branch
+        remembers (with their correlations inside each angle's variance). Without it,
+        ``torque_std_nm`` through the local compliance.
 
     Returns
     -------
@@ -255,8 +317,15 @@ def fit_preisach(
     n_pos = int(np.sum(coef[2:] > 0)) + 1
     # the marginal (diagonal) noise, not the weight pieces' correlations: the NNLS active set is picked by
     # the data, and the projected χ² of the correlated model then reads about 2 on exact loops (found on
-    # simulated bilinear sessions); the marginal σ is the conservative choice here
-    check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
+    # simulated bilinear sessions); the marginal σ is the conservative choice here. With the sources, the
+    # marginal σ of each angle holds its own torque error and those of the tips its branch remembers.
+    if torque_sources is not None:
+        src = np.asarray(torque_sources, float).reshape(tau.size, -1)
+        st_eff = np.sqrt(np.sum((torque_sensitivity(tau, model) @ src) ** 2, axis=1))
+        check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st_eff, compliance_rad_per_nm=1.0,
+                            n_params=n_pos)
+    else:
+        check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
     return PreisachFit(
         alpha_nm=a,
         beta_nm=b,

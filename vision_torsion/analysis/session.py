@@ -70,7 +70,7 @@ from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
 from . import checks, metrics
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
-from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
+from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant, side_compliance
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
 from .preisach import fit_preisach
@@ -855,14 +855,15 @@ def _bilinear_jacobian(bil: BilinearFit, tau: np.ndarray) -> np.ndarray:
     return numeric_jacobian(f, p, np.array([1e-6, p[1] * 1e-6, p[2] * 1e-6, amp * 1e-7]))
 
 
-def _model_check(loop, model: np.ndarray, torque_std_nm, *, n_params: int, **options):
+def _model_check(loop, model: np.ndarray, torque_std_nm, *, n_params: int, compliance=None, **options):
     """Lack-of-fit test of a model of `loop` (its angle, rad, along the loop's torque path):
-    the residual, the model's path compliance and the loop's own torque sources."""
+    the residual, the model's compliance (``compliance``, else its path compliance) and the loop's
+    own torque sources."""
     return lack_of_fit(
         loop.angle_rad - model,
         angle_std_rad=loop.angle_std_rad,
         torque_std_nm=torque_std_nm,
-        compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+        compliance_rad_per_nm=path_compliance(loop.torque_nm, model) if compliance is None else compliance,
         n_params=n_params,
         torque_sources=loop.local_sources(),
         **options,
@@ -891,6 +892,7 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
             bil.predict(loop.torque_nm),
             st,
             n_params=4,
+            compliance=side_compliance(bil.predict, loop.torque_nm),
             jacobian=_bilinear_jacobian(bil, loop.torque_nm),
             weights=least_squares_weights(loop.angle_std_rad),
         )
