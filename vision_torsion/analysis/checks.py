@@ -74,6 +74,7 @@ __all__ = [
     "angle_sign_by_run",
     "loop_direction",
     "leave_one_out_outliers",
+    "backward_outliers",
 ]
 
 #: Closure differences beyond this many σ are reported as creep.
@@ -413,4 +414,50 @@ def leave_one_out_outliers(images, angle_rad, sigma_rad, refit, *, k=OUTLIER_K, 
             break
         found.append((str(np.asarray(images)[best]), float(best_z)))
         keep[best] = False
+    return found
+
+
+def backward_outliers(images, scores, *, k=OUTLIER_K, max_listed=3):
+    """Outliers by a backward search on a score that already accounts for the point itself.
+
+    Parameters
+    ----------
+    images : sequence of str
+        Image names, one per sample.
+    scores : callable
+        ``scores(keep)`` with a boolean mask (n,) returns each kept sample's score
+        as a lone outlier of the fit to the kept samples (e.g.
+        :func:`.fitcheck.spike_scores`; NaN where it cannot be judged); it may raise
+        :class:`vision_torsion.errors.AnalysisError` (the search then stops).
+    k, max_listed : float, int
+        As :func:`leave_one_out_outliers`.
+
+    Returns
+    -------
+    list of (str, float)
+        ``(image, score)`` worst first; after each, the fit is made again without it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> z = np.array([0.5, 12.0, 6.0, -1.0])  # a spike at 1 whose neighbour 2 shares part of it
+    >>> def scores(keep):
+    ...     return np.where(keep, z if keep[1] else np.array([0.5, 0.0, 1.0, -1.0]), np.nan)
+    >>> backward_outliers(["a", "b", "c", "d"], scores)
+    [('b', 12.0)]
+    """
+    keep = np.ones(len(images), bool)
+    found = []
+    while len(found) < max_listed and keep.any():
+        try:
+            z = np.where(keep, np.asarray(scores(keep), float), np.nan)
+        except AnalysisError:
+            break
+        if not np.any(np.isfinite(z)):
+            break
+        i = int(np.nanargmax(np.abs(z)))
+        if abs(z[i]) <= k:
+            break
+        found.append((str(np.asarray(images)[i]), float(z[i])))
+        keep[i] = False
     return found

@@ -45,6 +45,7 @@ __all__ = [
     "lack_of_fit",
     "path_compliance",
     "side_compliance",
+    "spike_scores",
     "local_torque_std",
     "fit_switch",
     "secant",
@@ -264,17 +265,7 @@ def lack_of_fit(
         cov = np.diag(sa**2) + cl @ cl.T
         noise = float(np.sqrt(np.mean(np.diag(cov))))
         if jacobian is not None:
-            jac = np.asarray(jacobian, float).reshape(r.size, -1)
-            w = np.ones(r.size) if weights is None else np.asarray(weights, float)
-            jw = jac * w[:, None]
-            try:
-                g = np.linalg.solve(jac.T @ jw, jw.T)
-            except np.linalg.LinAlgError:
-                g = np.linalg.pinv(jac.T @ jw) @ jw.T
-            proj = np.eye(r.size) - jac @ g
-            srr = proj @ cov @ proj.T
-            evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
-            keep = evals > evals.max() * 1e-10
+            evals, evecs, keep = _residual_eig(cov, jacobian, weights)
             z = (evecs[:, keep].T @ r) / np.sqrt(evals[keep])
             chi2 = float(z @ z)
             dof = int(keep.sum())
@@ -297,6 +288,54 @@ def lack_of_fit(
             chi2 = float(z @ z)
     p = float(special.chdtrc(dof, chi2))
     return LackOfFit(chi2, dof, chi2 / dof, p, bool(p < alpha), rms, noise)
+
+
+def _residual_eig(cov, jacobian, weights):
+    """Eigen-decomposition of the residuals' covariance ``S = R·C·Rᵀ``, ``R = I − J(JᵀWJ)⁻¹JᵀW``, and the
+    mask of its non-null eigenvalues (:func:`lack_of_fit`)."""
+    n = cov.shape[0]
+    jac = np.asarray(jacobian, float).reshape(n, -1)
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    jw = jac * w[:, None]
+    try:
+        g = np.linalg.solve(jac.T @ jw, jw.T)
+    except np.linalg.LinAlgError:
+        g = np.linalg.pinv(jac.T @ jw) @ jw.T
+    proj = np.eye(n) - jac @ g
+    srr = proj @ cov @ proj.T
+    evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
+    return evals, evecs, evals > evals.max() * 1e-10
+
+
+def spike_scores(residual_rad, *, angle_std_rad, compliance_rad_per_nm, torque_sources, jacobian, weights=None):
+    """Each sample's score as a lone outlier (a spike), against correlated noise: ``t_i = (S⁺r)_i/√(S⁺)_ii``.
+
+    ``S`` is the residuals' covariance of :func:`lack_of_fit` (angle noise, the torque sources through
+    the compliance, the fit's projection). ``t_i`` is the generalised-least-squares estimate of an
+    extra offset at sample ``i`` alone over its standard error, so noise shared by many samples (the
+    weight pieces' random walk) does not hide a spike nor make its neighbours look like one, and
+    ``t_i²`` is what removing sample ``i`` takes off the fit's χ². NaN where ``(S⁺)_ii`` is 0
+    (a sample the fit follows exactly).
+
+    Examples
+    --------
+    >>> x = np.linspace(-1.0, 1.0, 9)
+    >>> r = np.zeros(9); r[4] = 0.01
+    >>> t = spike_scores(r, angle_std_rad=np.full(9, 1e-3), compliance_rad_per_nm=1.0,
+    ...                  torque_sources=np.zeros((9, 1)), jacobian=np.column_stack([np.ones(9), x]))
+    >>> int(np.nanargmax(np.abs(t))), round(float(t[4]), 1)
+    (4, 9.4)
+    """
+    r = np.asarray(residual_rad, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), r.shape)
+    c = np.broadcast_to(np.asarray(compliance_rad_per_nm, float), r.shape)
+    cl = c[:, None] * np.asarray(torque_sources, float).reshape(r.size, -1)
+    evals, evecs, keep = _residual_eig(np.diag(sa**2) + cl @ cl.T, jacobian, weights)
+    v = evecs[:, keep]
+    pinv = (v / evals[keep]) @ v.T
+    d = np.diag(pinv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(d > 1e-12 * d.max(), (pinv @ r) / np.sqrt(d), np.nan)
 
 
 def secant(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm):

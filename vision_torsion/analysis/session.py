@@ -70,7 +70,15 @@ from ..errors import AnalysisError
 from ..numerics import numeric_jacobian
 from . import checks, metrics
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
-from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant, side_compliance
+from .fitcheck import (
+    LACK_OF_FIT_ALPHA,
+    fit_switch,
+    lack_of_fit,
+    path_compliance,
+    secant,
+    side_compliance,
+    spike_scores,
+)
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
 from .preisach import fit_preisach
@@ -971,42 +979,65 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     return out
 
 
-def _outlier_reference(loop, pre):
-    """The refit the outlier search uses (:func:`.checks.leave_one_out_outliers`) and σ_eff, or None.
+def _bilinear_spikes(loop, keep):
+    """Spike scores (:func:`.fitcheck.spike_scores`) of the bilinear fit to the kept samples of `loop`
+    (NaN at the others), with the loop's correlated torque sources."""
+    tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
+    bil = fit_bilinear(tau, th, angle_std_rad=sa)
+    out = np.full(loop.torque_nm.size, np.nan)
+    out[keep] = spike_scores(
+        th - bil.predict(tau),
+        angle_std_rad=sa,
+        compliance_rad_per_nm=side_compliance(bil.predict, tau),
+        torque_sources=loop.local_sources()[keep],
+        jacobian=_bilinear_jacobian(bil, tau),
+        weights=least_squares_weights(sa),
+    )
+    return out
 
-    The Preisach model (it describes bilinear, stiffening and smooth loops alike), refitted without the
-    point under test. (The bilinear model was tried as a rigid reference and listed innocent images
-    near zero torque: its prediction there carries the weight pieces' correlated errors, which σ_eff
-    of the point alone leaves out.)
+
+def _outliers_found(loop, fit_set: dict):
+    """Outliers of `loop` and the model they were judged by (see :mod:`.checks`), or ``([], "")``.
+
+    The bilinear model, with the weight pieces' correlated errors (:func:`.fitcheck.spike_scores`), when
+    it describes the loop but for its worst sample (its gate passes with that sample's ``t²`` taken out
+    of χ²); else the flexible Preisach model, refitted without each candidate
+    (:func:`.checks.leave_one_out_outliers`: it cannot tell a sample from its mirror image, which its
+    symmetry ties to it, and judges against each sample's marginal noise).
     """
+    chk = fit_set.get("checks", {}).get("bilinear")
+    if fit_set.get("bilinear") is not None and chk is not None and chk.testable and chk.dof > 1:
+        try:
+            t = _bilinear_spikes(loop, np.ones(loop.torque_nm.size, bool))
+        except AnalysisError:
+            t = np.full(1, np.nan)
+        if np.any(np.isfinite(t)) and special.chdtrc(
+                chk.dof - 1, max(chk.chi2 - float(np.nanmax(t**2)), 0.0)) >= LACK_OF_FIT_ALPHA:
+            return checks.backward_outliers(loop.images, lambda keep: _bilinear_spikes(loop, keep)), "bilinear fit"
+    pre = fit_set.get("preisach")
     if pre is None:
-        return None
+        return [], ""
     sa, st, tau = loop.angle_std_rad, loop.local_std(), loop.torque_nm
 
     def refit(keep):
         fit = fit_preisach(tau[keep], loop.angle_rad[keep], angle_std_rad=sa[keep], torque_std_nm=st[keep])
         return fit.predict(tau)
 
-    model = loop.angle_rad - pre.residual_rad
-    return refit, np.sqrt(sa**2 + (path_compliance(tau, model) * st) ** 2)
+    sig = np.sqrt(sa**2 + (path_compliance(tau, loop.angle_rad - pre.residual_rad) * st) ** 2)
+    return checks.leave_one_out_outliers(loop.images, loop.angle_rad, sig, refit), "Preisach fit, leave-one-out"
 
 
 def _outlier_issues(col: _Collector, fit_set: dict):
     loop = col.loop
-    ref = _outlier_reference(loop, fit_set.get("preisach"))
-    if ref is None:
-        return []
-    refit, sig = ref
-    found = checks.leave_one_out_outliers(loop.images, loop.angle_rad, sig, refit)
+    found, name = _outliers_found(loop, fit_set)
     for image, z in found:
         col.issues.append(
             Issue(
                 loop.orientation_deg,
                 loop.cycle,
                 "outlier",
-                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit without it, leave-one-out): a "
-                "forgotten or extra weight, or a missed or extra shot? Check the image and its weights, "
-                "re-take it or mark it failed",
+                f"image {image} is {z:+.1f}σ off the loop's model ({name}, without it): a forgotten or extra "
+                "weight, or a missed or extra shot? Check the image and its weights, re-take it or mark it failed",
             )
         )
     return found
