@@ -1013,7 +1013,10 @@ def _outliers_found(loop, fit_set: dict):
             t = np.full(1, np.nan)
         if np.any(np.isfinite(t)) and special.chdtrc(
                 chk.dof - 1, max(chk.chi2 - float(np.nanmax(t**2)), 0.0)) >= LACK_OF_FIT_ALPHA:
-            return checks.backward_outliers(loop.images, lambda keep: _bilinear_spikes(loop, keep)), "bilinear fit"
+            def scores(keep):  # the first round is the scores just computed
+                return t if keep.all() else _bilinear_spikes(loop, keep)
+
+            return checks.backward_outliers(loop.images, scores), "bilinear fit"
     pre = fit_set.get("preisach")
     if pre is None:
         return [], ""
