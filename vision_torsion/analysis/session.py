@@ -137,6 +137,10 @@ def _coverage_factor(std: float, parts_dof) -> float:
     return max(COVERAGE_FACTOR, float(special.stdtrit(std**4 / den, 0.975)))
 
 
+#: The flag of every figure of an orientation with a creep/closure finding.
+_CREEP_FLAG = "flagged: creep or drift in this orientation (see checks)"
+
+
 def _lm_name(fraction: float) -> str:
     return f"lost_motion_{round(100 * fraction, 6):g}pct".replace(".", "p")
 
@@ -254,7 +258,7 @@ class SessionAnalysis:
             },
             "summary": self.summary,
             "per_orientation": _records(self.per_orientation),
-            "loops": _records(self.loops),
+            "loops": _loop_records(self.loops, self.figures),
             "phases": _records(self.phases),
             "issues": [asdict(i) for i in self.issues],
             "failed_images": _records(self.failed_images),
@@ -267,6 +271,23 @@ class SessionAnalysis:
                 for m, chk in f.get("checks", {}).items()
             ],
         }
+
+
+def _loop_records(loops: pd.DataFrame, figures: pd.DataFrame) -> list:
+    """The wide loop records, each with ``flags`` (figure → why it is flagged, for the flagged ones)
+    and ``coverage_factors`` (figure → k of its u95) of its figures."""
+    out = _records(loops)
+    by_loop = {}
+    for r in figures.itertuples(index=False):
+        d = by_loop.setdefault((float(r.orientation_deg), int(r.cycle)), ({}, {}))
+        if r.flag:
+            d[0][r.figure] = r.flag
+        if np.isfinite(r.value) and np.isfinite(r.coverage_factor):
+            d[1][r.figure] = float(r.coverage_factor)
+    for rec in out:
+        flags, ks = by_loop.get((float(rec["orientation_deg"]), int(rec["cycle"])), ({}, {}))
+        rec["flags"], rec["coverage_factors"] = flags, ks
+    return out
 
 
 def _jsonable(obj):
@@ -1363,9 +1384,9 @@ def analyze_session(
                     "checks": {},
                 }
             if float(orient) in creep:
-                for r in col.rows:
-                    if np.isfinite(r["value"]) and not r["flag"]:
-                        r["flag"] = "flagged: creep or drift in this orientation (see checks)"
+                for r in col.rows:  # every figure of the orientation, beside any flag of its own
+                    if np.isfinite(r["value"]) and "creep or drift" not in r["flag"]:
+                        r["flag"] = "; ".join(x for x in (r["flag"], _CREEP_FLAG) if x)
             rows.extend(col.rows)
     figures = pd.DataFrame(rows, columns=FIGURE_COLUMNS)
     figures = figures[figures["figure"] != "*"].reset_index(drop=True)

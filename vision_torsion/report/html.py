@@ -95,7 +95,9 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
         ("images in table", str(analysis.n_images)),
         ("failed images", str(n_failed)),
         ("loops (orientation × cycle)", str(len(analysis.loops))),
-        ("max torque used for lost motion/secant", f"{analysis.settings['max_torque_nm']:.4g} N·m"),
+        ("lost motion at fractions of", f"{analysis.settings['lost_motion_reference_nm']:.4g} N·m "
+         f"({analysis.settings['lost_motion_reference']})"),
+        ("max torque (secant interval)", f"{analysis.settings['max_torque_nm']:.4g} N·m"),
     ]
     return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
 
