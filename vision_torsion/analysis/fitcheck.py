@@ -175,15 +175,26 @@ def side_compliance(predict, torque_nm, *, step_nm=None) -> np.ndarray:
     # sample (θ given there) then still moves that sample when its torque moves
     path = np.concatenate([tau[:1], tau])
     base = np.asarray(predict(path), float)
-    out = np.empty(tau.size)
-    for i in range(tau.size):
+    # samples inside a monotone run are moved together, every other one (moving a sample inside a run
+    # leaves the branch the next ones follow); the ends of runs (reversals, where a model may remember the
+    # torque) one at a time
+    d = np.sign(np.diff(path))
+    inner = np.zeros(path.size, bool)
+    inner[1:-1] = (d[:-1] == d[1:]) & (d[1:] != 0)
+    inner[0] = False
+    groups = [np.flatnonzero(inner & (np.arange(path.size) % 2 == r)) for r in (0, 1)]
+    groups += [np.array([i]) for i in np.flatnonzero(~inner)[1:]]
+    up = np.zeros(path.size)
+    down = np.zeros(path.size)
+    for g in groups:
+        if g.size == 0:
+            continue
         moved = path.copy()
-        moved[i + 1] = tau[i] + h
-        up = abs(float(predict(moved)[i + 1]) - base[i + 1]) / h
-        moved[i + 1] = tau[i] - h
-        down = abs(base[i + 1] - float(predict(moved)[i + 1])) / h
-        out[i] = math.sqrt(0.5 * (up * up + down * down))
-    return out
+        moved[g] += h
+        up[g] = np.abs(np.asarray(predict(moved), float)[g] - base[g]) / h
+        moved[g] -= 2 * h
+        down[g] = np.abs(base[g] - np.asarray(predict(moved), float)[g]) / h
+    return np.sqrt(0.5 * (up[1:] ** 2 + down[1:] ** 2))
 
 
 def _not_testable(dof: int, rms: float, noise: float, reason: str) -> LackOfFit:
