@@ -33,10 +33,14 @@ becomes part of the uncertainty budget).
 Every phase range starts at the phase's **starting image** (the last image of the
 phase before: the paper's "0 to −0.36" for negative loading).
 
-Checks on the data (:mod:`.checks`): the angle sign (an inverted sign withholds
-every figure with the advice to set ``angle_sign = -1``), gaps (nothing is
-interpolated across a failed image), loop closure and creep (the ``closing`` image),
-points far off their loop's model (listed by image). Each is an :class:`Issue`.
+Checks on the data (:mod:`.checks`): the angle sign, per orientation and run (an
+inverted sign withholds every figure with the advice to set ``angle_sign = -1``; one
+orientation whose sign alone is inverted is named and its figures withheld), the
+loop's direction (a loop running clockwise, negative area beyond its u95, has its
+width and energy figures withheld), gaps (nothing is interpolated across a failed
+image), loop closure and creep (the ``closing`` image; every figure of that
+orientation is flagged), points far off their loop's model (listed by image, judged
+by a fit that does not include them). Each is an :class:`Issue`.
 
 Torque errors follow the weight pieces when the rig is known (``rig=...``,
 ``torque_correlation="pieces"``), else one shared error per torque level
