@@ -34,21 +34,16 @@ them by :mod:`.session`); none of them changes the data.
   widths is biased upward by the noise (by about σ_w·E[max of m normals]) and its
   Monte Carlo spread does not show it; the figure is then flagged with the expected
   bias, and the width at zero (``hysteresis_loss``) is the unbiased one.
-- **Outliers** (:func:`outliers`, :func:`leave_one_out_outliers`): a point is
-  judged against a fit that does **not** include it (leave-one-out: the fit is
-  made without the point, and the point's deleted residual is divided by its
-  noise and the prediction's spread), so a flexible model (Preisach) cannot bend
-  to it. A bad point also pulls its neighbours' fits; so the worst point is
-  listed, the fit is made again without it, and the next worst is judged on that
-  fit (a backward, one-at-a-time search), until none is beyond
-  :data:`OUTLIER_K`. Only the offending image is listed. The score of a point is
-  ``sign·√(r·d)/σ`` with ``r`` its residual in the fit that includes it and ``d``
-  in the fit without it: for a model linear in its parameters ``r = (1 − h)·d``
-  (``h`` the point's leverage), so this is the studentised residual
-  ``r/(σ·√(1 − h))``, which neither lets a flexible fit hide a point (``r`` small,
-  ``d`` large) nor lists a point that alone determines a model term (``r ≈ 0``).
-  A point that two images determine together (a model symmetric in them) cannot
-  be told from its partner: the larger score is listed.
+- **Outliers** (:func:`backward_outliers`): a point is judged by a fit that cannot
+  absorb it: its score is that of a lone spike at the point
+  (:func:`.fitcheck.spike_scores`: the generalised-least-squares estimate of an extra
+  offset at that point alone over its standard error, with the fit's projection and
+  the correlated noise), so a flexible model cannot bend to it and noise shared by
+  many points neither hides it nor makes its neighbours look like one. The worst
+  point beyond :data:`OUTLIER_K` is listed, the fit is made again without it and the
+  next worst is judged on that fit (a backward, one-at-a-time search). Only the
+  offending image is listed; a point the fit follows exactly (its own model term)
+  cannot be judged.
 """
 
 from __future__ import annotations
@@ -69,11 +64,9 @@ __all__ = [
     "gap_between",
     "closure_checks",
     "flat_top",
-    "outliers",
     "SIGN_T",
     "angle_sign_by_run",
     "loop_direction",
-    "leave_one_out_outliers",
     "backward_outliers",
 ]
 
@@ -330,93 +323,6 @@ def flat_top(tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc, *, resolutio
     return {"levels": m, "sigma_rad": sigma, "bias_rad": sigma * float(special.ndtri((m - 0.375) / (m + 0.25)))}
 
 
-def outliers(images, residual_rad, sigma_rad, *, k=OUTLIER_K) -> list:
-    """``[(image, z), ...]`` of samples whose ``|r/σ|`` exceeds ``k``, largest first."""
-    r = np.asarray(residual_rad, float)
-    s = np.asarray(sigma_rad, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(s > 0, r / s, 0.0)
-    idx = np.flatnonzero(np.abs(z) > k)
-    idx = idx[np.argsort(-np.abs(z[idx]))]
-    return [(str(np.asarray(images)[i]), float(z[i])) for i in idx]
-
-
-#: Points whose score in the fit that includes them is below this are not refitted
-#: without them (:func:`leave_one_out_outliers`): an outlier of ``OUTLIER_K`` shows above it even when
-#: a flexible fit has taken half of it.
-OUTLIER_SCREEN = 2.0
-
-
-def leave_one_out_outliers(images, angle_rad, sigma_rad, refit, *, k=OUTLIER_K, candidates=4, max_listed=3):
-    """Outliers by a backward leave-one-out search (module notes).
-
-    Parameters
-    ----------
-    images : sequence of str
-        Image names, one per sample.
-    angle_rad, sigma_rad : array_like (n,)
-        Measured angles and their effective 1σ (rad).
-    refit : callable
-        ``refit(keep)`` with a boolean mask (n,) returns the model's angles (rad) at
-        **every** sample, fitted to the kept samples only; it may raise
-        :class:`vision_torsion.errors.AnalysisError` when the kept samples cannot be
-        fitted (the search then stops).
-    k : float
-        Score beyond which a sample is an outlier.
-    candidates : int
-        The samples with the largest ``|r/σ|`` (above :data:`OUTLIER_SCREEN`) that
-        are refitted without themselves, per round.
-    max_listed : int
-        Most samples listed per call (a loop with more is not an outlier problem).
-
-    Returns
-    -------
-    list of (str, float)
-        ``(image, score)`` in the order found (worst first).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> x = np.linspace(-1.0, 1.0, 21)
-    >>> y = 2.0 * x
-    >>> y[10] += 0.05  # 50σ
-    >>> def line(keep):
-    ...     c = np.polyfit(x[keep], y[keep], 1)
-    ...     return np.polyval(c, x)
-    >>> [(i, round(z)) for i, z in leave_one_out_outliers([f"im{j}" for j in range(21)], y, np.full(21, 1e-3), line)]
-    [('im10', 49)]
-    """
-    th = np.asarray(angle_rad, float)
-    sig = np.asarray(sigma_rad, float)
-    keep = np.ones(th.size, bool)
-    found = []
-    while len(found) < max_listed:
-        try:
-            full = th - refit(keep)
-        except AnalysisError:
-            break
-        with np.errstate(divide="ignore", invalid="ignore"):
-            zf = np.where(keep & (sig > 0), full / sig, 0.0)
-        order = np.argsort(-np.abs(zf))[:candidates]
-        order = order[np.abs(zf[order]) > OUTLIER_SCREEN]
-        best, best_z = None, 0.0
-        for i in order:
-            trial = keep.copy()
-            trial[i] = False
-            try:
-                d = th[i] - refit(trial)[i]
-            except AnalysisError:
-                continue
-            z = math.copysign(math.sqrt(max(float(full[i] * d), 0.0)), d) / sig[i]
-            if abs(z) > abs(best_z):
-                best, best_z = int(i), z
-        if best is None or abs(best_z) <= k:
-            break
-        found.append((str(np.asarray(images)[best]), float(best_z)))
-        keep[best] = False
-    return found
-
-
 def backward_outliers(images, scores, *, k=OUTLIER_K, max_listed=3):
     """Outliers by a backward search on a score that already accounts for the point itself.
 
@@ -429,8 +335,10 @@ def backward_outliers(images, scores, *, k=OUTLIER_K, max_listed=3):
         as a lone outlier of the fit to the kept samples (e.g.
         :func:`.fitcheck.spike_scores`; NaN where it cannot be judged); it may raise
         :class:`vision_torsion.errors.AnalysisError` (the search then stops).
-    k, max_listed : float, int
-        As :func:`leave_one_out_outliers`.
+    k : float
+        Score beyond which a sample is an outlier.
+    max_listed : int
+        Most samples listed (a loop with more is not an outlier problem).
 
     Returns
     -------

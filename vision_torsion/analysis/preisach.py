@@ -171,6 +171,19 @@ class PreisachFit:
         return x @ coef
 
 
+    def active_design(self, torque_nm) -> np.ndarray:
+        """d(model angles)/d(the fit's free parameters) along a torque path, shape ``(n, p)``.
+
+        The columns of the parameters the fit left free (``θ₀``, ``c₀`` when positive, the
+        positive weights): for fixed thresholds the model is linear, and the non-negative
+        fit is an ordinary least-squares fit in its active set (its ``n_params``).
+        """
+        tau = np.asarray(torque_nm, float).reshape(-1)
+        x = _design(tau, self.alpha_nm, self.beta_nm, -self.beta_nm, -self.alpha_nm)
+        active = np.concatenate([[self.elastic_compliance_rad_per_nm > 0], self.weight_rad > 0])
+        return np.column_stack([x[:, 0], x[:, 2:][:, active]])
+
+
 def preisach_response(
     torque_nm, *, alpha_nm, beta_nm, weight_rad, elastic_compliance_rad_per_nm, theta0_rad=0.0
 ) -> np.ndarray:

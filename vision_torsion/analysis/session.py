@@ -85,7 +85,7 @@ from .fitcheck import (
 )
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
-from .preisach import fit_preisach
+from .preisach import fit_preisach, torque_sensitivity
 from .summary import summarise_figures
 from .uncertainty import (
     COVERAGE_FACTOR,
@@ -1021,38 +1021,50 @@ def _bilinear_spikes(loop, keep):
     return out
 
 
+def _preisach_spikes(loop, keep):
+    """Spike scores of the Preisach fit to the kept samples of `loop` (NaN at the others): its active set
+    as the Jacobian, each angle's marginal noise as its gate has it (:func:`.preisach.fit_preisach`)."""
+    tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
+    src = loop.local_sources()[keep]
+    pre = fit_preisach(tau, th, angle_std_rad=sa, torque_std_nm=loop.local_std()[keep], torque_sources=src)
+    st_eff = np.sqrt(np.sum((torque_sensitivity(tau, th - pre.residual_rad) @ src) ** 2, axis=1))
+    out = np.full(loop.torque_nm.size, np.nan)
+    out[keep] = spike_scores(pre.residual_rad, angle_std_rad=sa, compliance_rad_per_nm=1.0,
+                             torque_sources=np.diag(st_eff), jacobian=pre.active_design(tau),
+                             weights=least_squares_weights(sa))
+    return out
+
+
 def _outliers_found(loop, fit_set: dict):
     """Outliers of `loop` and the model they were judged by (see :mod:`.checks`), or ``([], "")``.
 
-    The bilinear model, with the weight pieces' correlated errors (:func:`.fitcheck.spike_scores`), when
-    it describes the loop but for its worst sample (its gate passes with that sample's ``t²`` taken out
-    of χ²); else the flexible Preisach model, refitted without each candidate
-    (:func:`.checks.leave_one_out_outliers`: it cannot tell a sample from its mirror image, which its
-    symmetry ties to it, and judges against each sample's marginal noise).
+    Each sample's score as a lone spike (:func:`.fitcheck.spike_scores`) in the bilinear fit, with the
+    weight pieces' correlated errors, when that model describes the loop but for its worst sample (its
+    gate passes with that sample's ``t²`` taken out of χ²); else in the flexible Preisach fit (its
+    active set; a sample it follows exactly is not judged, and a sample its symmetry ties to its mirror
+    image cannot be told from it); none when neither model describes the loop. Found one at a time
+    (:func:`.checks.backward_outliers`).
     """
-    chk = fit_set.get("checks", {}).get("bilinear")
-    if fit_set.get("bilinear") is not None and chk is not None and chk.testable and chk.dof > 1:
+    n = loop.torque_nm.size
+    for model, spikes, name in (("bilinear", _bilinear_spikes, "bilinear fit"),
+                                ("preisach", _preisach_spikes, "Preisach fit")):
+        chk = fit_set.get("checks", {}).get(model)
+        if fit_set.get(model) is None or chk is None or not chk.testable or chk.dof <= 1:
+            continue
         try:
-            t = _bilinear_spikes(loop, np.ones(loop.torque_nm.size, bool))
+            t = spikes(loop, np.ones(n, bool))
         except AnalysisError:
-            t = np.full(1, np.nan)
-        if np.any(np.isfinite(t)) and special.chdtrc(
-                chk.dof - 1, max(chk.chi2 - float(np.nanmax(t**2)), 0.0)) >= LACK_OF_FIT_ALPHA:
-            def scores(keep):  # the first round is the scores just computed
-                return t if keep.all() else _bilinear_spikes(loop, keep)
+            continue
+        if not np.any(np.isfinite(t)):
+            continue
+        if special.chdtrc(chk.dof - 1, max(chk.chi2 - float(np.nanmax(t**2)), 0.0)) < LACK_OF_FIT_ALPHA:
+            continue
 
-            return checks.backward_outliers(loop.images, scores), "bilinear fit"
-    pre = fit_set.get("preisach")
-    if pre is None:
-        return [], ""
-    sa, st, tau = loop.angle_std_rad, loop.local_std(), loop.torque_nm
+        def scores(keep, t=t, spikes=spikes):  # the first round is the scores just computed
+            return t if keep.all() else spikes(loop, keep)
 
-    def refit(keep):
-        fit = fit_preisach(tau[keep], loop.angle_rad[keep], angle_std_rad=sa[keep], torque_std_nm=st[keep])
-        return fit.predict(tau)
-
-    sig = np.sqrt(sa**2 + (path_compliance(tau, loop.angle_rad - pre.residual_rad) * st) ** 2)
-    return checks.leave_one_out_outliers(loop.images, loop.angle_rad, sig, refit), "Preisach fit, leave-one-out"
+        return checks.backward_outliers(loop.images, scores), name
+    return [], ""
 
 
 def _outlier_issues(col: _Collector, fit_set: dict):
@@ -1064,7 +1076,7 @@ def _outlier_issues(col: _Collector, fit_set: dict):
                 loop.orientation_deg,
                 loop.cycle,
                 "outlier",
-                f"image {image} is {z:+.1f}σ off the loop's model ({name}, without it): a forgotten or extra "
+                f"image {image} is {z:+.1f}σ off the loop's model ({name}, as a lone spike): a forgotten or extra "
                 "weight, or a missed or extra shot? Check the image and its weights, re-take it or mark it failed",
             )
         )
