@@ -1004,11 +1004,11 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     return out
 
 
-def _bilinear_spikes(loop, keep):
+def _bilinear_spikes(loop, keep, fit=None):
     """Spike scores (:func:`.fitcheck.spike_scores`) of the bilinear fit to the kept samples of `loop`
-    (NaN at the others), with the loop's correlated torque sources."""
+    (NaN at the others), with the loop's correlated torque sources; `fit`: that fit, when made."""
     tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
-    bil = fit_bilinear(tau, th, angle_std_rad=sa)
+    bil = fit_bilinear(tau, th, angle_std_rad=sa) if fit is None else fit
     out = np.full(loop.torque_nm.size, np.nan)
     out[keep] = spike_scores(
         th - bil.predict(tau),
@@ -1021,12 +1021,14 @@ def _bilinear_spikes(loop, keep):
     return out
 
 
-def _preisach_spikes(loop, keep):
+def _preisach_spikes(loop, keep, fit=None):
     """Spike scores of the Preisach fit to the kept samples of `loop` (NaN at the others): its active set
-    as the Jacobian, each angle's marginal noise as its gate has it (:func:`.preisach.fit_preisach`)."""
+    as the Jacobian, each angle's marginal noise as its gate has it (:func:`.preisach.fit_preisach`);
+    `fit`: that fit, when made."""
     tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
     src = loop.local_sources()[keep]
-    pre = fit_preisach(tau, th, angle_std_rad=sa, torque_std_nm=loop.local_std()[keep], torque_sources=src)
+    pre = fit if fit is not None else fit_preisach(tau, th, angle_std_rad=sa, torque_std_nm=loop.local_std()[keep],
+                                                    torque_sources=src)
     st_eff = np.sqrt(np.sum((torque_sensitivity(tau, th - pre.residual_rad) @ src) ** 2, axis=1))
     out = np.full(loop.torque_nm.size, np.nan)
     out[keep] = spike_scores(pre.residual_rad, angle_std_rad=sa, compliance_rad_per_nm=1.0,
@@ -1052,7 +1054,7 @@ def _outliers_found(loop, fit_set: dict):
         if fit_set.get(model) is None or chk is None or not chk.testable or chk.dof <= 1:
             continue
         try:
-            t = spikes(loop, np.ones(n, bool))
+            t = spikes(loop, np.ones(n, bool), fit_set[model])
         except AnalysisError:
             continue
         if not np.any(np.isfinite(t)):
