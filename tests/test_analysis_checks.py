@@ -218,3 +218,35 @@ def test_one_cycle_per_orientation_spread_is_not_called_repeatability():
                         "flag": ""})
     summary, _ = summarise_figures(fig)
     assert "between_orientations" in summary["k"]["budget"] and "repeatability" not in summary["k"]["budget"]
+
+
+def _masing_table(seed):
+    """One orientation of the pieces rig, angles of a smooth Masing loop on the nominal torques (a branch
+    after a reversal at (τ_r, θ_r) is θ_r + 2f((τ − τ_r)/2)), angle noise 0.0005°."""
+    df = _table(seed, orientations=(0,))
+    loop = df["phase"] != "reference"
+    tau = df.loc[loop, "torque_nm"].to_numpy(float)
+
+    def f(x):
+        u = np.abs(x) / 0.05
+        return x / 4.4 + 0.4 * (u - np.log1p(u)) * np.sign(x)
+
+    rev, th_rev, d, prev, out = tau.max(), float(f(tau.max())), -1.0, tau[0], []
+    for t in tau:
+        s = np.sign(t - prev)
+        if s != 0 and s != d:
+            rev, th_rev, d = prev, out[-1], s
+        out.append(th_rev + 2 * float(f((t - rev) / 2)))
+        prev = t
+    df.loc[loop, "angle_deg"] = np.degrees(out) + np.random.default_rng(seed).normal(0, NOISE, tau.size)
+    df.loc[~loop, "angle_deg"] = df.loc[loop, "angle_deg"].iloc[-1]  # the reference: zero, unloaded from +Tmax
+    return df
+
+
+def test_a_smooth_loop_the_bilinear_model_misses_lists_no_innocent_image():
+    """The Preisach fit judges these loops (the bilinear one does not fit them): no image of a clean
+    loop is listed."""
+    for seed in (11, 12):
+        a = analyze_session(_masing_table(seed), **FAST)
+        assert a.fits[(0.0, 1)]["checks"]["bilinear"].rejected
+        assert a.checks["outliers"] == []
