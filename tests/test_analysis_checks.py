@@ -250,3 +250,17 @@ def test_a_smooth_loop_the_bilinear_model_misses_lists_no_innocent_image():
         a = analyze_session(_masing_table(seed), **FAST)
         assert a.fits[(0.0, 1)]["checks"]["bilinear"].rejected
         assert a.checks["outliers"] == []
+
+
+def test_a_negative_area_within_its_u95_is_flagged_never_shown_as_an_energy():
+    """A loop without hysteresis (k_l = k_u): its area is noise about zero; a negative one is flagged."""
+    negatives = 0
+    for seed in range(4):
+        df = simulate_measurements(k_u=4.4, k_l=4.4, tau_c=0.15, orientations_deg=(0,), torque_model="pieces",
+                                   angle_std_deg=NOISE, rng=np.random.default_rng(seed))
+        f = analyze_session(df, fit_preisach=False, **FAST).figures.set_index("figure")
+        if f.loc["loop_energy", "value"] < 0:
+            negatives += 1
+            assert "no dissipation is resolved" in f.loc["loop_energy", "flag"]
+            assert "no dissipation is resolved" in f.loc["loss_factor", "flag"]
+    assert negatives >= 1  # seed 0 draws a negative area
