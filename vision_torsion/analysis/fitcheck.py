@@ -46,6 +46,7 @@ __all__ = [
     "path_compliance",
     "side_compliance",
     "spike_scores",
+    "marginal_lack_of_fit",
     "local_torque_std",
     "fit_switch",
     "secant",
@@ -316,6 +317,54 @@ def _residual_eig(cov, jacobian, weights):
     srr = proj @ cov @ proj.T
     evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
     return evals, evecs, evals > evals.max() * 1e-10
+
+
+def marginal_lack_of_fit(residual_rad, *, angle_std_rad, torque_sources, jacobian, weights=None, n_params,
+                         alpha=LACK_OF_FIT_ALPHA) -> LackOfFit:
+    """Lack of fit by the marginal statistic ``χ² = Σ rᵢ²/Cᵢᵢ``, its null distribution calibrated for
+    the correlations (Satterthwaite): ``χ² ≈ a·χ²_ν``.
+
+    ``C = diag(σθ²) + L·Lᵀ`` (``torque_sources`` = ``L``, rad per unit source: the torque errors
+    already carried into angle), the residuals' covariance ``S = R·C·Rᵀ`` with the fit's projection
+    ``R`` (``jacobian``, ``weights``, as :func:`lack_of_fit`); with ``M = D^{-1/2}·S·D^{-1/2}``,
+    ``D = diag(C)``: ``E[χ²] = tr M``, ``Var[χ²] = 2·tr M²``, so ``a = tr M²/tr M`` and
+    ``ν = (tr M)²/tr M²`` (Satterthwaite 1946; Box 1954). The statistic weighs each residual by
+    its own noise only, so a correlation model that is only approximately right cannot make it
+    read a small misfit along a direction of little noise as a large one (the full ``rᵀS⁺r`` can);
+    the calibration keeps a residual pattern the correlated errors make (many neighbouring
+    residuals of one sign) from reading as lack of fit. ``reduced_chi2`` is ``χ²/E[χ²]`` and
+    ``dof`` is ``ν`` rounded (at least 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> r = np.array([0.0, 0.01, -0.01, 0.0])
+    >>> c = marginal_lack_of_fit(r, angle_std_rad=0.01, torque_sources=np.zeros((4, 1)),
+    ...                          jacobian=np.ones((4, 1)), n_params=1)
+    >>> round(c.reduced_chi2, 3), c.dof, c.rejected
+    (0.667, 3, False)
+    """
+    r = np.asarray(residual_rad, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), r.shape)
+    lsrc = np.asarray(torque_sources, float).reshape(r.size, -1)
+    cov = np.diag(sa**2) + lsrc @ lsrc.T
+    var = np.diag(cov)
+    rms = float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+    noise = float(np.sqrt(np.mean(var))) if r.size else float("nan")
+    if r.size - n_params <= 0:
+        return _not_testable(int(r.size - n_params), rms, noise,
+                             f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)")
+    if not np.all(np.isfinite(var)) or np.any(var <= 0):
+        return _not_testable(int(r.size - n_params), rms, noise,
+                             "a sample has no positive angle or torque uncertainty to test the fit against")
+    evals, evecs, keep = _residual_eig(cov, jacobian, weights)
+    s_rr = (evecs[:, keep] * evals[keep]) @ evecs[:, keep].T
+    m = s_rr / np.sqrt(np.outer(var, var))
+    tr1, tr2 = float(np.trace(m)), float(np.sum(m * m))
+    chi2 = float(np.sum(r**2 / var))
+    a, nu = tr2 / tr1, tr1 * tr1 / tr2
+    p = float(special.chdtrc(nu, chi2 / a))
+    return LackOfFit(chi2, max(int(round(nu)), 1), chi2 / tr1, p, bool(p < alpha), rms, noise)
 
 
 def spike_scores(residual_rad, *, angle_std_rad, compliance_rad_per_nm, torque_sources, jacobian, weights=None):

@@ -48,7 +48,7 @@ import numpy as np
 from scipy import optimize
 
 from ..errors import AnalysisError
-from .fitcheck import LackOfFit, lack_of_fit, path_compliance
+from .fitcheck import LackOfFit, lack_of_fit, marginal_lack_of_fit, path_compliance
 
 __all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "torque_sensitivity"]
 
@@ -276,8 +276,9 @@ def fit_preisach(
     torque_sources : array_like (n, m), optional
         Loading matrix of the image-to-image torque errors (N·m per unit source). The
         gate's noise is then each angle's marginal σ from :func:`torque_sensitivity`
-        and these sources: its own torque error and those of the loop tips its branch
-        remembers (with their correlations inside each angle's variance). Without it,
+        and these sources (its own torque error and those of the loop tips its branch
+        remembers), and the marginal χ²'s null distribution is calibrated for their
+        correlations (:func:`.fitcheck.marginal_lack_of_fit`). Without it,
         ``torque_std_nm`` through the local compliance.
 
     Returns
@@ -320,7 +321,8 @@ def fit_preisach(
     scale[scale == 0] = 1.0
     var = sa**2
     for _ in range(2):
-        sw = 1.0 / np.sqrt(var)
+        w_fit = 1.0 / var
+        sw = np.sqrt(w_fit)
         coef, _ = optimize.nnls((x / scale) * sw[:, None], th * sw, maxiter=50 * x.shape[1])
         coef = coef / scale
         model = x @ coef
@@ -328,15 +330,16 @@ def fit_preisach(
         var = sa**2 + (comp * st) ** 2
     resid = th - model
     n_pos = int(np.sum(coef[2:] > 0)) + 1
-    # the marginal (diagonal) noise, not the weight pieces' correlations: the NNLS active set is picked by
-    # the data, and the projected χ² of the correlated model then reads about 2 on exact loops (found on
-    # simulated bilinear sessions); the marginal σ is the conservative choice here. With the sources, the
-    # marginal σ of each angle holds its own torque error and those of the tips its branch remembers.
+    # the marginal (diagonal) statistic, not rᵀS⁺r of the weight pieces' correlations: the NNLS active set
+    # is picked by the data, and the projected χ² of the correlated model then reads about 2 on exact loops
+    # (found on simulated bilinear sessions). With the sources, each angle's marginal σ holds its own torque
+    # error and those of the tips its branch remembers, and the statistic's null distribution is calibrated
+    # for their correlations (marginal_lack_of_fit)
     if torque_sources is not None:
         src = np.asarray(torque_sources, float).reshape(tau.size, -1)
-        st_eff = np.sqrt(np.sum((torque_sensitivity(tau, model) @ src) ** 2, axis=1))
-        check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st_eff, compliance_rad_per_nm=1.0,
-                            n_params=n_pos)
+        active = np.concatenate([[True, False], coef[2:] > 0])
+        check = marginal_lack_of_fit(resid, angle_std_rad=sa, torque_sources=torque_sensitivity(tau, model) @ src,
+                                     jacobian=x[:, active], weights=w_fit, n_params=n_pos)
     else:
         check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
     return PreisachFit(
