@@ -293,7 +293,10 @@ def render_html(
         "<h2>Catalogue metrics and model fits per orientation</h2>",
         '<p class="muted">Mean over cycles ± standard uncertainty of that mean. The orientation test is a '
         "one-way ANOVA of the loop values grouped by orientation, against the scatter between cycles of "
-        "the same orientation; p &lt; 0.05 means the orientation effect is larger than that repeatability. "
+        "the same orientation. The figures are tested as one family: p is Holm-adjusted over the figures "
+        "tested (fit statistics are not), so the chance that any figure is called significant when no "
+        "orientation has an effect stays at 5 %; p &lt; 0.05 means the orientation effect is larger than "
+        "that repeatability. "
         "With one cycle per orientation there is no such scatter: the test is not made (—), and the spread "
         "of the orientation means is given instead (sd between loops).</p>",
         _metrics(metrics, orients),

@@ -139,7 +139,7 @@ def metrics_table(analysis) -> pd.DataFrame:
 
     Cells are ``(mean, std)`` tuples of the orientation mean (NaN when missing); the
     last columns hold the session mean, its standard uncertainty, the sd between
-    loops and the orientation test p-value; ``flags`` maps an orientation to why its
+    loops and the orientation test's Holm-adjusted p-value; ``flags`` maps an orientation to why its
     mean is flagged (:func:`vision_torsion.analysis.summary.summarise_figures`), for
     the flagged ones.
     """
@@ -163,7 +163,7 @@ def metrics_table(analysis) -> pd.DataFrame:
         row["mean"] = scale_or_nan(s["mean"])
         row["mean_std"] = scale_or_nan(s["mean_std"])
         row["sd"] = scale_or_nan(s["sd"])
-        row["p_value"] = s["orientation_test"].get("p_value")
+        row["p_value"] = s["orientation_test"].get("p_value_holm")  # the family's p (Holm), which decides
         row["flags"] = {o: flags[(float(o), fig)] for o in orients if (float(o), fig) in flags}
         rows.append(row)
     return pd.DataFrame(rows)
