@@ -105,11 +105,12 @@ def _table(kind, *, noise_deg, rng):
     )
     loop = df["phase"].isin(["positive_unloading", "negative_loading", "negative_unloading", "positive_loading"])
     tau = df.loc[loop, "torque_nm"].to_numpy(float)
-    if kind == "play":  # a stop-type play of width 0.1 N·m (1 rad/N·m while open) on a linear spring
+    if kind == "play":  # a slip element of width 0.1 N·m (1 rad/N·m while it slips) on a linear spring
+        # (the play operator's output: it lags the torque, so the loop runs anticlockwise and dissipates)
         p, z = tau[0] - 0.05, []
         for t in np.concatenate([tau, tau]):  # one cycle to reach the periodic state
             p = max(t - 0.05, min(t + 0.05, p))
-            z.append(t - p)
+            z.append(p)
         th = tau / 4.4 + np.array(z[tau.size :])
         df.loc[loop, "angle_deg"] = np.degrees(th) + rng.normal(0, noise_deg, tau.size)
     return df
@@ -124,7 +125,8 @@ def test_a_flat_topped_loop_flags_its_largest_width():
     f = a.figures.set_index("figure")
     assert "flat-topped loop" in f.loc["hysteresis", "flag"] and "upward" in f.loc["hysteresis", "flag"]
     assert f.loc["hysteresis_loss", "flag"] == ""
-    # the play is open right after each tip: a tip's own angle answers its torque along the arriving branch,
+    # the element slips up to each tip and sticks after it: a tip's own angle answers its torque along the
+    # arriving branch,
     # so the two unloading secants (mirror images) carry the same torque part; 40 draws: ±16 % each (1σ)
     ratio = f.loc["k_positive_unloading_secant", "std_torque"] / f.loc["k_negative_unloading_secant", "std_torque"]
     assert 0.6 < ratio < 1.6

@@ -165,13 +165,13 @@ def test_ok_row_with_nan_angle_becomes_failed():
     (lambda d: d.assign(status="failed"), "no usable rows"),
 ])
 def test_invalid_tables_raise(mutate, match):
-    df = simulate_measurements(**TRUTH, orientations_deg=(0,), angle_std_deg=0, mass_std_kg=0)
+    df = simulate_measurements(**TRUTH, orientations_deg=(0,), mass_std_kg=0, rng=np.random.default_rng(0))
     with pytest.raises(AnalysisError, match=match):
         analyze_session(mutate(df), **FAST)
 
 
 def test_invalid_options_raise():
-    df = simulate_measurements(**TRUTH, orientations_deg=(0,), angle_std_deg=0, mass_std_kg=0)
+    df = simulate_measurements(**TRUTH, orientations_deg=(0,), mass_std_kg=0, rng=np.random.default_rng(0))
     with pytest.raises(AnalysisError, match="n_draws must be at least 10"):
         analyze_session(df, n_draws=1)
     with pytest.raises(AnalysisError, match="secant_interval must be fractions"):

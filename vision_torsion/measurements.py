@@ -277,6 +277,36 @@ def _read_csv(path: Path, name: str) -> pd.DataFrame:
         raise MeasurementsError(f"{name}: cannot be read as CSV ({exc})", reason="unreadable") from None
 
 
+def _repeated_rows(table, needed) -> list:
+    """Row problems of measured images (``status == "ok"`` when the column is there) that no analysis can
+    take: a zero ``angle_std_deg`` when the caller needs it (the reference image defines the zero angle
+    and may have none), and a row repeating an earlier one (the same image, or the same orientation,
+    cycle, phase and step) when the caller needs those columns."""
+    ok = table["status"] == "ok" if "status" in table.columns else np.ones(len(table), bool)
+    problems = []
+    if "angle_std_deg" in needed:
+        measured = ok & (table["phase"] != "reference") if "phase" in table.columns else ok
+        zero = measured & (table["angle_std_deg"] == 0)
+        problems += [(line, "angle_std_deg is 0 for a measured image: every measured angle has a positive "
+                      "1σ (re-measure the image, or give its uncertainty)") for line in table.index[zero]]
+    keys = ("orientation_deg", "cycle", "phase", "step")
+    checks = ((["image"], "the same image"), (list(keys), "the same orientation, cycle, phase and step"))
+    seen = set()
+    for cols, what in checks:
+        if not all(c in table.columns and c in needed for c in cols):
+            continue
+        sub = table.loc[np.asarray(ok, bool), cols]
+        sub = sub[sub["image"] != ""] if cols == ["image"] else sub
+        dup = sub.duplicated(keep="first")
+        first = {tuple(r): line for line, r in zip(sub.index[~dup], sub[~dup].itertuples(index=False))}
+        for line, r in zip(sub.index[dup], sub[dup].itertuples(index=False)):
+            if line not in seen:  # one message per repeated row
+                seen.add(line)
+                problems.append((line, f"repeats line {first[tuple(r)]} ({what}): each image is measured once; "
+                                 "delete the repeated row"))
+    return problems
+
+
 def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None = None) -> pd.DataFrame:
     """Read and check a ``measurements.csv`` table: the one reader of that table.
 
@@ -309,7 +339,11 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
         a needed column is missing; or rows have problems: text that is not a number
         in a numeric column, a number that is infinite or beyond
         :data:`MAX_TABLE_MAGNITUDE` (checked here, at read time, so no analysis
-        overflows), a negative mass or uncertainty, an unknown phase. Every
+        overflows), a negative mass or uncertainty, an unknown phase; and, when
+        `columns` holds the columns concerned, a measured image (``status`` ok, not
+        the reference) with ``angle_std_deg`` 0, or a row repeating an earlier one
+        (the same image, or the same orientation, cycle, phase and step among
+        measured rows). Every
         row problem is listed (the first 20, then a count), each with its CSV line
         number and column.
 
@@ -379,6 +413,7 @@ def read_measurements(source, *, columns=MEASUREMENT_COLUMNS, name: str | None =
             (line, f"unknown phase {out['phase'][line]!r}, expected one of {', '.join(PHASES)}")
             for line in out.index[unknown]
         ]
+    problems += _repeated_rows(out, columns)
     if problems:
         problems.sort()
         listed = [f"line {line}: {what}" for line, what in problems[:_MAX_LISTED]]

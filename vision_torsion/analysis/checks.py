@@ -4,10 +4,19 @@ the torque levels, loop closure and creep, and points far off their loop's model
 Each check returns plain values (and :class:`.session.Issue` rows are made from
 them by :mod:`.session`); none of them changes the data.
 
-- **Angle sign** (:func:`angle_sign_inverted`): over every usable loop image the
+- **Angle sign** (:func:`angle_sign_inverted`, :func:`angle_sign_by_run`): the
   angle must rise with the torque. The least-squares slope of angle on torque is
   negative, beyond its own scatter, only when ``angle_sign`` is set the wrong way
-  round.
+  round. It is judged per orientation and per run (descending: positive unloading
+  and negative loading; ascending: the other two), so that one orientation whose
+  sign is inverted (a mis-set orientation, a camera flipped between orientations)
+  is named, not averaged away by the others.
+- **Loop direction** (:func:`loop_direction`): a passive gear dissipates, so its
+  loop runs anticlockwise in (τ, θ): the descending run lies above the ascending
+  one and the loop's area (energy) is positive. An area negative beyond its
+  uncertainty is a loop running the other way round (phases or torque signs
+  labelled the wrong way); an area within its uncertainty of zero resolves no
+  dissipation.
 - **Gaps** (:func:`gap_between`): a run of a loop is expected to hold every torque
   level the session uses between its ends. A figure evaluated between two measured
   neighbours with an expected level missing between them (a failed image) would be
@@ -25,9 +34,16 @@ them by :mod:`.session`); none of them changes the data.
   widths is biased upward by the noise (by about σ_w·E[max of m normals]) and its
   Monte Carlo spread does not show it; the figure is then flagged with the expected
   bias, and the width at zero (``hysteresis_loss``) is the unbiased one.
-- **Outliers** (:func:`outliers`): standardised residuals of a loop model
-  (``r/σ_eff``) beyond :data:`OUTLIER_K` list the image: a forgotten weight, an
-  extra or a missed shot.
+- **Outliers** (:func:`backward_outliers`): a point is judged by a fit that cannot
+  absorb it: its score is that of a lone spike at the point
+  (:func:`.fitcheck.spike_scores`: the generalised-least-squares estimate of an extra
+  offset at that point alone over its standard error, with the fit's projection and
+  the correlated noise), so a flexible model cannot bend to it and noise shared by
+  many points neither hides it nor makes its neighbours look like one. The worst
+  point beyond :data:`OUTLIER_K` is listed, the fit is made again without it and the
+  next worst is judged on that fit (a backward, one-at-a-time search). Only the
+  offending image is listed; a point the fit follows exactly (its own model term)
+  cannot be judged.
 """
 
 from __future__ import annotations
@@ -36,6 +52,8 @@ import math
 
 import numpy as np
 import pandas as pd
+
+from ..errors import AnalysisError
 
 __all__ = [
     "CLOSURE_K",
@@ -46,7 +64,10 @@ __all__ = [
     "gap_between",
     "closure_checks",
     "flat_top",
-    "outliers",
+    "SIGN_T",
+    "angle_sign_by_run",
+    "loop_direction",
+    "backward_outliers",
 ]
 
 #: Closure differences beyond this many σ are reported as creep.
@@ -63,26 +84,97 @@ def angle_sign_inverted(torque_nm, angle_deg) -> bool:
     """True when the angle clearly falls as the torque rises (``angle_sign`` set the wrong way).
 
     The least-squares slope of angle on torque over all given samples is compared with
-    the scatter about that line: inverted when the slope is negative and its t-value
-    below −5.
+    the scatter about that line: inverted when its t-value is below ``−SIGN_T``.
 
     Examples
     --------
     >>> angle_sign_inverted([0.0, 0.1, 0.2, 0.3], [0.0, -1.0, -2.1, -2.9])
     True
     """
-    tau = np.asarray(torque_nm, float)
-    th = np.asarray(angle_deg, float)
+    return bool(_slope_t(torque_nm, angle_deg) < -SIGN_T)
+
+
+#: |t| of the angle-on-torque slope beyond which a run's sign is decided (:func:`angle_sign_by_run`).
+SIGN_T = 5.0
+#: Phases of the descending run (torque falling) and of the ascending run.
+RUNS = {"descending": ("positive_unloading", "negative_loading"),
+        "ascending": ("negative_unloading", "positive_loading")}
+
+
+def _slope_t(tau, th) -> float:
+    """t-value of the least-squares slope of ``th`` on ``tau`` (±inf for an exact line; NaN if undefined)."""
+    tau = np.asarray(tau, float)
+    th = np.asarray(th, float)
     ok = np.isfinite(tau) & np.isfinite(th)
     tau, th = tau[ok], th[ok]
     if tau.size < 3 or np.ptp(tau) <= 0:
-        return False
+        return math.nan
     x = tau - tau.mean()
     b = float(np.sum(x * (th - th.mean())) / np.sum(x * x))
     r = th - th.mean() - b * x
     s = math.sqrt(max(float(np.sum(r * r)) / (tau.size - 2), 0.0))
     se = s / math.sqrt(float(np.sum(x * x)))
-    return b < 0 and (se == 0 or b / se < -5.0)
+    if se == 0:
+        return math.copysign(math.inf, b) if b != 0 else math.nan
+    return b / se
+
+
+def angle_sign_by_run(usable: pd.DataFrame) -> list:
+    """The angle's sign against the torque per orientation and run (see the module notes).
+
+    Parameters
+    ----------
+    usable : pandas.DataFrame
+        Usable loop rows (``orientation_deg, phase, torque_nm, angle_deg``).
+
+    Returns
+    -------
+    list of dict
+        One per orientation: ``orientation_deg``, ``t`` (``{run: t-value of the
+        slope}``), ``falls`` (the runs whose angle falls as the torque rises,
+        ``t < −SIGN_T``) and ``rises`` (``t > SIGN_T``).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> t = [0.3, 0.1, -0.1, -0.3]
+    >>> d = pd.DataFrame({"orientation_deg": 0.0, "phase": ["positive_unloading"] * 4 + ["positive_loading"] * 4,
+    ...                   "torque_nm": t + t[::-1], "angle_deg": [-3.0, -1.1, 0.9, 3.0, 3.1, 1.0, -1.0, -2.9]})
+    >>> r = angle_sign_by_run(d)[0]
+    >>> r["falls"], r["rises"]
+    (['descending', 'ascending'], [])
+    """
+    out = []
+    for orient, sub in usable.groupby("orientation_deg", sort=True):
+        t = {}
+        for run, phases in RUNS.items():
+            part = sub[sub["phase"].isin(phases)]
+            t[run] = _slope_t(part["torque_nm"], part["angle_deg"])
+        out.append({
+            "orientation_deg": float(orient),
+            "t": t,
+            "falls": [r for r, v in t.items() if v < -SIGN_T],
+            "rises": [r for r, v in t.items() if v > SIGN_T],
+        })
+    return out
+
+
+def loop_direction(energy_j: float, u95_j: float) -> str:
+    """``"anticlockwise"`` (dissipating), ``"clockwise"`` (area negative beyond u95) or
+    ``"unresolved"`` (area within its u95 of zero, or not finite).
+
+    Examples
+    --------
+    >>> loop_direction(0.07, 0.001), loop_direction(-0.07, 0.001), loop_direction(-1e-5, 1e-4)
+    ('anticlockwise', 'clockwise', 'unresolved')
+    """
+    if not (np.isfinite(energy_j) and np.isfinite(u95_j)):
+        return "unresolved"
+    if energy_j > u95_j:
+        return "anticlockwise"
+    if energy_j < -u95_j:
+        return "clockwise"
+    return "unresolved"
 
 
 def gap_between(run_levels, expected_levels, at_nm, *, resolution_nm=1e-9):
@@ -231,12 +323,49 @@ def flat_top(tau_desc, th_desc, std_desc, tau_asc, th_asc, std_asc, *, resolutio
     return {"levels": m, "sigma_rad": sigma, "bias_rad": sigma * float(special.ndtri((m - 0.375) / (m + 0.25)))}
 
 
-def outliers(images, residual_rad, sigma_rad, *, k=OUTLIER_K) -> list:
-    """``[(image, z), ...]`` of samples whose ``|r/σ|`` exceeds ``k``, largest first."""
-    r = np.asarray(residual_rad, float)
-    s = np.asarray(sigma_rad, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(s > 0, r / s, 0.0)
-    idx = np.flatnonzero(np.abs(z) > k)
-    idx = idx[np.argsort(-np.abs(z[idx]))]
-    return [(str(np.asarray(images)[i]), float(z[i])) for i in idx]
+def backward_outliers(images, scores, *, k=OUTLIER_K, max_listed=3):
+    """Outliers by a backward search on a score that already accounts for the point itself.
+
+    Parameters
+    ----------
+    images : sequence of str
+        Image names, one per sample.
+    scores : callable
+        ``scores(keep)`` with a boolean mask (n,) returns each kept sample's score
+        as a lone outlier of the fit to the kept samples (e.g.
+        :func:`.fitcheck.spike_scores`; NaN where it cannot be judged); it may raise
+        :class:`vision_torsion.errors.AnalysisError` (the search then stops).
+    k : float
+        Score beyond which a sample is an outlier.
+    max_listed : int
+        Most samples listed (a loop with more is not an outlier problem).
+
+    Returns
+    -------
+    list of (str, float)
+        ``(image, score)`` worst first; after each, the fit is made again without it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> z = np.array([0.5, 12.0, 6.0, -1.0])  # a spike at 1 whose neighbour 2 shares part of it
+    >>> def scores(keep):
+    ...     return np.where(keep, z if keep[1] else np.array([0.5, 0.0, 1.0, -1.0]), np.nan)
+    >>> backward_outliers(["a", "b", "c", "d"], scores)
+    [('b', 12.0)]
+    """
+    keep = np.ones(len(images), bool)
+    found = []
+    while len(found) < max_listed and keep.any():
+        try:
+            z = np.where(keep, np.asarray(scores(keep), float), np.nan)
+        except AnalysisError:
+            break
+        if not np.any(np.isfinite(z)):
+            break
+        i = int(np.nanargmax(np.abs(z)))
+        if abs(z[i]) <= k:
+            break
+        found.append((str(np.asarray(images)[i]), float(z[i])))
+        keep[i] = False
+    return found

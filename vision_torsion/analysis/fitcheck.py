@@ -44,6 +44,9 @@ __all__ = [
     "LackOfFit",
     "lack_of_fit",
     "path_compliance",
+    "side_compliance",
+    "spike_scores",
+    "marginal_lack_of_fit",
     "local_torque_std",
     "fit_switch",
     "secant",
@@ -142,6 +145,59 @@ def path_compliance(torque_nm, model_angle_rad) -> np.ndarray:
     return out
 
 
+def side_compliance(predict, torque_nm, *, step_nm=None) -> np.ndarray:
+    """Local compliance (rad/(N·m)) of a model at each sample, from each side of the sample.
+
+    A torque error at sample ``i`` moves its angle along the model's own branch at that
+    sample: ``c₊`` for an error upwards, ``c₋`` downwards (one-sided derivatives of the
+    model along its path, only ``τᵢ`` moved by ``±h``). The effective compliance for a
+    symmetric error is their RMS ``√((c₊² + c₋²)/2)``: the compliance of the sample's own
+    side wherever the model is smooth there, and both sides at a kink. (The secants of
+    :func:`path_compliance` average a branch's stiffness across a kink that lies between
+    two levels, and mis-state the noise of the levels beside it.)
+
+    Parameters
+    ----------
+    predict : callable
+        ``predict(torque_path)`` → model angles (rad) along a torque path (N·m).
+    torque_nm : array_like (n,)
+        The sampled torque path.
+    step_nm : float, optional
+        The perturbation ``h``; default ``1e-6`` of the largest |torque|.
+
+    Examples
+    --------
+    >>> side_compliance(lambda t: np.where(np.asarray(t) > 1.0, 3.0 * np.asarray(t) - 2.0, t), [0.0, 1.0, 2.0, 3.0])
+    array([1.        , 2.23606798, 3.        , 3.        ])
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    h = float(step_nm) if step_nm else 1e-6 * max(float(np.max(np.abs(tau))), 1e-12)
+    # the path is evaluated with its first torque once more in front: a model anchored at its first
+    # sample (θ given there) then still moves that sample when its torque moves
+    path = np.concatenate([tau[:1], tau])
+    base = np.asarray(predict(path), float)
+    # samples inside a monotone run are moved together, every other one (moving a sample inside a run
+    # leaves the branch the next ones follow); the ends of runs (reversals, where a model may remember the
+    # torque) one at a time
+    d = np.sign(np.diff(path))
+    inner = np.zeros(path.size, bool)
+    inner[1:-1] = (d[:-1] == d[1:]) & (d[1:] != 0)
+    inner[0] = False
+    groups = [np.flatnonzero(inner & (np.arange(path.size) % 2 == r)) for r in (0, 1)]
+    groups += [np.array([i]) for i in np.flatnonzero(~inner)[1:]]
+    up = np.zeros(path.size)
+    down = np.zeros(path.size)
+    for g in groups:
+        if g.size == 0:
+            continue
+        moved = path.copy()
+        moved[g] += h
+        up[g] = np.abs(np.asarray(predict(moved), float)[g] - base[g]) / h
+        moved[g] -= 2 * h
+        down[g] = np.abs(base[g] - np.asarray(predict(moved), float)[g]) / h
+    return np.sqrt(0.5 * (up[1:] ** 2 + down[1:] ** 2))
+
+
 def _not_testable(dof: int, rms: float, noise: float, reason: str) -> LackOfFit:
     """A :class:`LackOfFit` that could not be tested: no χ², not rejected, `reason` says why."""
     return LackOfFit(float("nan"), dof, float("nan"), float("nan"), False, rms, noise, False, reason)
@@ -221,17 +277,7 @@ def lack_of_fit(
         cov = np.diag(sa**2) + cl @ cl.T
         noise = float(np.sqrt(np.mean(np.diag(cov))))
         if jacobian is not None:
-            jac = np.asarray(jacobian, float).reshape(r.size, -1)
-            w = np.ones(r.size) if weights is None else np.asarray(weights, float)
-            jw = jac * w[:, None]
-            try:
-                g = np.linalg.solve(jac.T @ jw, jw.T)
-            except np.linalg.LinAlgError:
-                g = np.linalg.pinv(jac.T @ jw) @ jw.T
-            proj = np.eye(r.size) - jac @ g
-            srr = proj @ cov @ proj.T
-            evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
-            keep = evals > evals.max() * 1e-10
+            evals, evecs, keep = _residual_eig(cov, jacobian, weights)
             z = (evecs[:, keep].T @ r) / np.sqrt(evals[keep])
             chi2 = float(z @ z)
             dof = int(keep.sum())
@@ -254,6 +300,102 @@ def lack_of_fit(
             chi2 = float(z @ z)
     p = float(special.chdtrc(dof, chi2))
     return LackOfFit(chi2, dof, chi2 / dof, p, bool(p < alpha), rms, noise)
+
+
+def _residual_eig(cov, jacobian, weights):
+    """Eigen-decomposition of the residuals' covariance ``S = R·C·Rᵀ``, ``R = I − J(JᵀWJ)⁻¹JᵀW``, and the
+    mask of its non-null eigenvalues (:func:`lack_of_fit`)."""
+    n = cov.shape[0]
+    jac = np.asarray(jacobian, float).reshape(n, -1)
+    w = np.ones(n) if weights is None else np.asarray(weights, float)
+    jw = jac * w[:, None]
+    try:
+        g = np.linalg.solve(jac.T @ jw, jw.T)
+    except np.linalg.LinAlgError:
+        g = np.linalg.pinv(jac.T @ jw) @ jw.T
+    proj = np.eye(n) - jac @ g
+    srr = proj @ cov @ proj.T
+    evals, evecs = np.linalg.eigh(0.5 * (srr + srr.T))
+    return evals, evecs, evals > evals.max() * 1e-10
+
+
+def marginal_lack_of_fit(residual_rad, *, angle_std_rad, torque_sources, jacobian, weights=None, n_params,
+                         alpha=LACK_OF_FIT_ALPHA) -> LackOfFit:
+    """Lack of fit by the marginal statistic ``χ² = Σ rᵢ²/Cᵢᵢ``, its null distribution calibrated for
+    the correlations (Satterthwaite): ``χ² ≈ a·χ²_ν``.
+
+    ``C = diag(σθ²) + L·Lᵀ`` (``torque_sources`` = ``L``, rad per unit source: the torque errors
+    already carried into angle), the residuals' covariance ``S = R·C·Rᵀ`` with the fit's projection
+    ``R`` (``jacobian``, ``weights``, as :func:`lack_of_fit`); with ``M = D^{-1/2}·S·D^{-1/2}``,
+    ``D = diag(C)``: ``E[χ²] = tr M``, ``Var[χ²] = 2·tr M²``, so ``a = tr M²/tr M`` and
+    ``ν = (tr M)²/tr M²`` (Satterthwaite 1946; Box 1954). The statistic weighs each residual by
+    its own noise only, so a correlation model that is only approximately right cannot make it
+    read a small misfit along a direction of little noise as a large one (the full ``rᵀS⁺r`` can);
+    the calibration keeps a residual pattern the correlated errors make (many neighbouring
+    residuals of one sign) from reading as lack of fit. ``reduced_chi2`` is ``χ²/E[χ²]`` and
+    ``dof`` is ``ν`` rounded (at least 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> r = np.array([0.0, 0.01, -0.01, 0.0])
+    >>> c = marginal_lack_of_fit(r, angle_std_rad=0.01, torque_sources=np.zeros((4, 1)),
+    ...                          jacobian=np.ones((4, 1)), n_params=1)
+    >>> round(c.reduced_chi2, 3), c.dof, c.rejected
+    (0.667, 3, False)
+    """
+    r = np.asarray(residual_rad, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), r.shape)
+    lsrc = np.asarray(torque_sources, float).reshape(r.size, -1)
+    cov = np.diag(sa**2) + lsrc @ lsrc.T
+    var = np.diag(cov)
+    rms = float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+    noise = float(np.sqrt(np.mean(var))) if r.size else float("nan")
+    if r.size - n_params <= 0:
+        return _not_testable(int(r.size - n_params), rms, noise,
+                             f"no degree of freedom left to test the fit ({r.size} points, {n_params} parameters)")
+    if not np.all(np.isfinite(var)) or np.any(var <= 0):
+        return _not_testable(int(r.size - n_params), rms, noise,
+                             "a sample has no positive angle or torque uncertainty to test the fit against")
+    evals, evecs, keep = _residual_eig(cov, jacobian, weights)
+    s_rr = (evecs[:, keep] * evals[keep]) @ evecs[:, keep].T
+    m = s_rr / np.sqrt(np.outer(var, var))
+    tr1, tr2 = float(np.trace(m)), float(np.sum(m * m))
+    chi2 = float(np.sum(r**2 / var))
+    a, nu = tr2 / tr1, tr1 * tr1 / tr2
+    p = float(special.chdtrc(nu, chi2 / a))
+    return LackOfFit(chi2, max(int(round(nu)), 1), chi2 / tr1, p, bool(p < alpha), rms, noise)
+
+
+def spike_scores(residual_rad, *, angle_std_rad, compliance_rad_per_nm, torque_sources, jacobian, weights=None):
+    """Each sample's score as a lone outlier (a spike), against correlated noise: ``t_i = (S⁺r)_i/√(S⁺)_ii``.
+
+    ``S`` is the residuals' covariance of :func:`lack_of_fit` (angle noise, the torque sources through
+    the compliance, the fit's projection). ``t_i`` is the generalised-least-squares estimate of an
+    extra offset at sample ``i`` alone over its standard error, so noise shared by many samples (the
+    weight pieces' random walk) does not hide a spike nor make its neighbours look like one, and
+    ``t_i²`` is what removing sample ``i`` takes off the fit's χ². NaN where ``(S⁺)_ii`` is 0
+    (a sample the fit follows exactly).
+
+    Examples
+    --------
+    >>> x = np.linspace(-1.0, 1.0, 9)
+    >>> r = np.zeros(9); r[4] = 0.01
+    >>> t = spike_scores(r, angle_std_rad=np.full(9, 1e-3), compliance_rad_per_nm=1.0,
+    ...                  torque_sources=np.zeros((9, 1)), jacobian=np.column_stack([np.ones(9), x]))
+    >>> int(np.nanargmax(np.abs(t))), round(float(t[4]), 1)
+    (4, 9.4)
+    """
+    r = np.asarray(residual_rad, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), r.shape)
+    c = np.broadcast_to(np.asarray(compliance_rad_per_nm, float), r.shape)
+    cl = c[:, None] * np.asarray(torque_sources, float).reshape(r.size, -1)
+    evals, evecs, keep = _residual_eig(np.diag(sa**2) + cl @ cl.T, jacobian, weights)
+    v = evecs[:, keep]
+    pinv = (v / evals[keep]) @ v.T
+    d = np.diag(pinv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(d > 1e-12 * d.max(), (pinv @ r) / np.sqrt(d), np.nan)
 
 
 def secant(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm):

@@ -48,9 +48,9 @@ import numpy as np
 from scipy import optimize
 
 from ..errors import AnalysisError
-from .fitcheck import LackOfFit, lack_of_fit, path_compliance
+from .fitcheck import LackOfFit, lack_of_fit, marginal_lack_of_fit, path_compliance
 
-__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states"]
+__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "torque_sensitivity"]
 
 
 def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
@@ -171,6 +171,19 @@ class PreisachFit:
         return x @ coef
 
 
+    def active_design(self, torque_nm) -> np.ndarray:
+        """d(model angles)/d(the fit's free parameters) along a torque path, shape ``(n, p)``.
+
+        The columns of the parameters the fit left free (``θ₀``, ``c₀`` when positive, the
+        positive weights): for fixed thresholds the model is linear, and the non-negative
+        fit is an ordinary least-squares fit in its active set (its ``n_params``).
+        """
+        tau = np.asarray(torque_nm, float).reshape(-1)
+        x = _design(tau, self.alpha_nm, self.beta_nm, -self.beta_nm, -self.alpha_nm)
+        active = np.concatenate([[self.elastic_compliance_rad_per_nm > 0], self.weight_rad > 0])
+        return np.column_stack([x[:, 0], x[:, 2:][:, active]])
+
+
 def preisach_response(
     torque_nm, *, alpha_nm, beta_nm, weight_rad, elastic_compliance_rad_per_nm, theta0_rad=0.0
 ) -> np.ndarray:
@@ -184,6 +197,65 @@ def preisach_response(
         np.zeros(1),
     )
     return fit.predict(torque_nm)
+
+
+def _tips(tau: np.ndarray) -> list:
+    """Indices of the path's reversals, the first sample included (the path comes down from its top)."""
+    d = np.sign(np.diff(tau))
+    tips = [0]
+    last = d[0] if d.size else 0.0
+    for i in range(1, d.size):
+        if d[i] == 0:
+            continue
+        if last != 0 and d[i] != last:
+            tips.append(i)
+        last = d[i]
+    return tips
+
+
+def torque_sensitivity(torque_nm, model_angle_rad) -> np.ndarray:
+    """``A`` with ``δθ ≈ A·δτ`` (rad per N·m, (n, n)): how a model's angles answer torque errors
+    along a hysteretic path, the loop's **tips** included.
+
+    Each sample answers its own torque with the model's local compliance (the branch's
+    secant slope, :func:`.fitcheck.path_compliance`; a tip along the branch that arrived
+    there). A branch after a reversal remembers the reversal (the Masing rule, as
+    :func:`.uncertainty.tip_amplitude_response` states it): a tip torque wrong by ``δ_t``
+    moves the branch at a sample of slope ``s`` by ``S·δ_t``, ``S = clip(s_arr − s, 0, h)``
+    (``s_arr`` the slope arriving at the tip, ``h = s_arr − s_dep`` the hysteretic part
+    that switches there); a tip moved by earlier tips carries that shift to its whole
+    branch. The first sample is a tip (the path comes down from its top); its arriving
+    slope is that of the last segment arriving at the same torque from below.
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    th = np.asarray(model_angle_rad, float).reshape(-1)
+    n = tau.size
+    comp = path_compliance(tau, th)
+    dt, dth = np.diff(tau), np.diff(th)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seg = np.where(dt != 0, np.abs(dth / dt), np.nan)
+    tips = _tips(tau)
+    a = np.zeros((n, n))
+    shift = np.zeros(n)  # the current branch's translation by earlier tips' errors (a row of A)
+    for j, t in enumerate(tips):
+        if t == 0:
+            back = np.flatnonzero((np.abs(tau[1:] - tau[0]) <= 1e-12 * max(abs(tau[0]), 1.0)) & (dt > 0))
+            s_arr = float(seg[back[-1]]) if back.size else np.nan
+        else:
+            s_arr = float(seg[t - 1])
+        s_dep = float(seg[t]) if t < n - 1 else np.nan
+        end = tips[j + 1] if j + 1 < len(tips) else n - 1
+        tip_shift = shift.copy()
+        if np.isfinite(s_arr):
+            comp[t] = s_arr
+        h = s_arr - s_dep
+        for i in range(t + 1, end + 1):
+            a[i] += tip_shift
+            if np.isfinite(h) and h > 0:
+                a[i, t] += float(np.clip(s_arr - comp[i], 0.0, h))
+        shift = a[end].copy()
+    a[np.arange(n), np.arange(n)] += comp
+    return a
 
 
 def fit_preisach(
@@ -202,8 +274,12 @@ def fit_preisach(
     max_thresholds : int
         Most relay thresholds (mid-points between torque levels) used.
     torque_sources : array_like (n, m), optional
-        Accepted for symmetry with the other fits; not used by the gate (see the
-        comment in the code: the marginal ``torque_std_nm`` is used).
+        Loading matrix of the image-to-image torque errors (N·m per unit source). The
+        gate's noise is then each angle's marginal σ from :func:`torque_sensitivity`
+        and these sources (its own torque error and those of the loop tips its branch
+        remembers), and the marginal χ²'s null distribution is calibrated for their
+        correlations (:func:`.fitcheck.marginal_lack_of_fit`). Without it,
+        ``torque_std_nm`` through the local compliance.
 
     Returns
     -------
@@ -245,7 +321,8 @@ def fit_preisach(
     scale[scale == 0] = 1.0
     var = sa**2
     for _ in range(2):
-        sw = 1.0 / np.sqrt(var)
+        w_fit = 1.0 / var
+        sw = np.sqrt(w_fit)
         coef, _ = optimize.nnls((x / scale) * sw[:, None], th * sw, maxiter=50 * x.shape[1])
         coef = coef / scale
         model = x @ coef
@@ -253,10 +330,18 @@ def fit_preisach(
         var = sa**2 + (comp * st) ** 2
     resid = th - model
     n_pos = int(np.sum(coef[2:] > 0)) + 1
-    # the marginal (diagonal) noise, not the weight pieces' correlations: the NNLS active set is picked by
-    # the data, and the projected χ² of the correlated model then reads about 2 on exact loops (found on
-    # simulated bilinear sessions); the marginal σ is the conservative choice here
-    check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
+    # the marginal (diagonal) statistic, not rᵀS⁺r of the weight pieces' correlations: the NNLS active set
+    # is picked by the data, and the projected χ² of the correlated model then reads about 2 on exact loops
+    # (found on simulated bilinear sessions). With the sources, each angle's marginal σ holds its own torque
+    # error and those of the tips its branch remembers, and the statistic's null distribution is calibrated
+    # for their correlations (marginal_lack_of_fit)
+    if torque_sources is not None:
+        src = np.asarray(torque_sources, float).reshape(tau.size, -1)
+        active = np.concatenate([[True, False], coef[2:] > 0])
+        check = marginal_lack_of_fit(resid, angle_std_rad=sa, torque_sources=torque_sensitivity(tau, model) @ src,
+                                     jacobian=x[:, active], weights=w_fit, n_params=n_pos)
+    else:
+        check = lack_of_fit(resid, angle_std_rad=sa, torque_std_nm=st, compliance_rad_per_nm=comp, n_params=n_pos)
     return PreisachFit(
         alpha_nm=a,
         beta_nm=b,

@@ -34,10 +34,14 @@ becomes part of the uncertainty budget).
 Every phase range starts at the phase's **starting image** (the last image of the
 phase before: the paper's "0 to −0.36" for negative loading).
 
-Checks on the data (:mod:`.checks`): the angle sign (an inverted sign withholds
-every figure with the advice to set ``angle_sign = -1``), gaps (nothing is
-interpolated across a failed image), loop closure and creep (the ``closing`` image),
-points far off their loop's model (listed by image). Each is an :class:`Issue`.
+Checks on the data (:mod:`.checks`): the angle sign, per orientation and run (an
+inverted sign withholds every figure with the advice to set ``angle_sign = -1``; one
+orientation whose sign alone is inverted is named and its figures withheld), the
+loop's direction (a loop running clockwise, negative area beyond its u95, has its
+width and energy figures withheld), gaps (nothing is interpolated across a failed
+image), loop closure and creep (the ``closing`` image; every figure of that
+orientation is flagged), points far off their loop's model (listed by image, judged
+by a fit that does not include them). Each is an :class:`Issue`.
 
 Torque errors follow the weight pieces when the rig is known (``rig=...``,
 ``torque_correlation="pieces"``), else one shared error per torque level
@@ -72,10 +76,18 @@ from ..numerics import numeric_jacobian
 from ..validate import check_number
 from . import checks, metrics
 from .catalogue import fit_catalogue_breaks, fit_fixed_breaks
-from .fitcheck import fit_switch, lack_of_fit, path_compliance, secant
+from .fitcheck import (
+    LACK_OF_FIT_ALPHA,
+    fit_switch,
+    lack_of_fit,
+    path_compliance,
+    secant,
+    side_compliance,
+    spike_scores,
+)
 from .loops import LOOP_PHASES, Loop, build_loops, validate_measurements
 from .models import BilinearFit, BoucWenFit, fit_bilinear, fit_bouc_wen
-from .preisach import fit_preisach
+from .preisach import fit_preisach, torque_sensitivity
 from .summary import summarise_figures
 from .uncertainty import (
     COVERAGE_FACTOR,
@@ -138,6 +150,10 @@ def _coverage_factor(std: float, parts_dof) -> float:
     if not (np.isfinite(std) and std > 0 and den > 0):
         return COVERAGE_FACTOR
     return max(COVERAGE_FACTOR, float(special.stdtrit(std**4 / den, 0.975)))
+
+
+#: The flag of every figure of an orientation with a creep/closure finding.
+_CREEP_FLAG = "flagged: creep or drift in this orientation (see checks)"
 
 
 def _lm_name(fraction: float) -> str:
@@ -207,7 +223,9 @@ class SessionAnalysis:
     n_images : int
         Rows of the input table (including reference and failed images).
     checks : dict
-        ``angle_sign_inverted`` (bool), ``closure`` (list of closure/creep comparisons,
+        ``angle_sign_inverted`` (bool: the whole session), ``angle_sign_inverted_orientations``
+        (orientations whose sign alone is wrong, their figures withheld), ``angle_sign`` (per
+        orientation and run, :func:`.checks.angle_sign_by_run`), ``closure`` (list of closure/creep comparisons,
         :func:`.checks.closure_checks`), ``outliers`` (images beyond 4σ of their
         loop's model).
     """
@@ -255,7 +273,7 @@ class SessionAnalysis:
             },
             "summary": self.summary,
             "per_orientation": _records(self.per_orientation),
-            "loops": _records(self.loops),
+            "loops": _loop_records(self.loops, self.figures),
             "phases": _records(self.phases),
             "issues": [asdict(i) for i in self.issues],
             "failed_images": _records(self.failed_images),
@@ -268,6 +286,23 @@ class SessionAnalysis:
                 for m, chk in f.get("checks", {}).items()
             ],
         }
+
+
+def _loop_records(loops: pd.DataFrame, figures: pd.DataFrame) -> list:
+    """The wide loop records, each with ``flags`` (figure → why it is flagged, for the flagged ones)
+    and ``coverage_factors`` (figure → k of its u95) of its figures."""
+    out = _records(loops)
+    by_loop = {}
+    for r in figures.itertuples(index=False):
+        d = by_loop.setdefault((float(r.orientation_deg), int(r.cycle)), ({}, {}))
+        if r.flag:
+            d[0][r.figure] = r.flag
+        if np.isfinite(r.value) and np.isfinite(r.coverage_factor):
+            d[1][r.figure] = float(r.coverage_factor)
+    for rec in out:
+        flags, ks = by_loop.get((float(rec["orientation_deg"]), int(rec["cycle"])), ({}, {}))
+        rec["flags"], rec["coverage_factors"] = flags, ks
+    return out
 
 
 def _jsonable(obj):
@@ -841,7 +876,39 @@ def _model_free_figures(col: _Collector, settings: dict, seed: int, levels: np.n
                     draws=settings["n_draws"], sampling=sampling.get(name, 0.0))
         else:
             col.fail(name, unit, _mc_reason(name, tau, settings))
+    _loop_direction(col, settings)
     return tau, th, th_std, is_desc, sources, kinds
+
+
+def _loop_direction(col: _Collector, settings: dict) -> None:
+    """Withhold the loop-width figures of a loop that runs clockwise; flag an area not resolved from zero.
+
+    See :func:`.checks.loop_direction`: a passive gear's loop runs anticlockwise (positive energy).
+    """
+    row = next((r for r in col.rows if r["figure"] == "loop_energy"), None)
+    if row is None or not np.isfinite(row["value"]):
+        return
+    energy, u95 = row["value"], row["u95"]
+    direction = checks.loop_direction(energy, u95)
+    if direction == "clockwise":
+        names = {"hysteresis", "hysteresis_loss", "loop_energy", "loss_factor",
+                 *(_lm_name(f) for f in settings["lost_motion_fractions"])}
+        for r in col.rows:
+            if r["figure"] in names:
+                r.update(value=np.nan, std=np.nan, u95=np.nan, flag="")
+        col.issues.append(Issue(
+            col.loop.orientation_deg, col.loop.cycle, "loop figures",
+            f"the loop runs the other way round (clockwise: its area is {energy:+.3g} J, beyond its u95 "
+            f"{u95:.2g} J), but a gear's loop dissipates and runs anticlockwise: phases or torque signs "
+            "look mislabelled (check the phase and torque_nm columns). Hysteresis, lost motion, loop energy and "
+            "loss factor are withheld", kind="rejected"))
+    elif direction == "unresolved" and row["value"] < 0:
+        why = (f"flagged: the loop's area {energy:+.2g} J is within its u95 ({u95:.2g} J) of zero: no "
+               "dissipation is resolved, and a negative area is noise, not an energy")
+        for r in col.rows:
+            if r["figure"] in ("loop_energy", "loss_factor") and np.isfinite(r["value"]):
+                r["flag"] = "; ".join(x for x in (r["flag"], why) if x)
+                col.issues.append(Issue(col.loop.orientation_deg, col.loop.cycle, r["figure"], why, kind="flagged"))
 
 
 def _catalogue_figures(col: _Collector, settings: dict, runs):
@@ -922,14 +989,15 @@ def _bilinear_jacobian(bil: BilinearFit, tau: np.ndarray) -> np.ndarray:
     return numeric_jacobian(f, p, np.array([1e-6, p[1] * 1e-6, p[2] * 1e-6, amp * 1e-7]))
 
 
-def _model_check(loop, model: np.ndarray, torque_std_nm, *, n_params: int, **options):
+def _model_check(loop, model: np.ndarray, torque_std_nm, *, n_params: int, compliance=None, **options):
     """Lack-of-fit test of a model of `loop` (its angle, rad, along the loop's torque path):
-    the residual, the model's path compliance and the loop's own torque sources."""
+    the residual, the model's compliance (``compliance``, else its path compliance) and the loop's
+    own torque sources."""
     return lack_of_fit(
         loop.angle_rad - model,
         angle_std_rad=loop.angle_std_rad,
         torque_std_nm=torque_std_nm,
-        compliance_rad_per_nm=path_compliance(loop.torque_nm, model),
+        compliance_rad_per_nm=path_compliance(loop.torque_nm, model) if compliance is None else compliance,
         n_params=n_params,
         torque_sources=loop.local_sources(),
         **options,
@@ -958,6 +1026,7 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
             bil.predict(loop.torque_nm),
             st,
             n_params=4,
+            compliance=side_compliance(bil.predict, loop.torque_nm),
             jacobian=_bilinear_jacobian(bil, loop.torque_nm),
             weights=least_squares_weights(loop.angle_std_rad),
         )
@@ -1036,22 +1105,82 @@ def _model_fits(col: _Collector, settings: dict) -> dict:
     return out
 
 
-def _outlier_issues(col: _Collector, pre):
+def _bilinear_spikes(loop, keep, fit=None):
+    """Spike scores (:func:`.fitcheck.spike_scores`) of the bilinear fit to the kept samples of `loop`
+    (NaN at the others), with the loop's correlated torque sources; `fit`: that fit, when made."""
+    tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
+    bil = fit_bilinear(tau, th, angle_std_rad=sa) if fit is None else fit
+    out = np.full(loop.torque_nm.size, np.nan)
+    out[keep] = spike_scores(
+        th - bil.predict(tau),
+        angle_std_rad=sa,
+        compliance_rad_per_nm=side_compliance(bil.predict, tau),
+        torque_sources=loop.local_sources()[keep],
+        jacobian=_bilinear_jacobian(bil, tau),
+        weights=least_squares_weights(sa),
+    )
+    return out
+
+
+def _preisach_spikes(loop, keep, fit=None):
+    """Spike scores of the Preisach fit to the kept samples of `loop` (NaN at the others): its active set
+    as the Jacobian, each angle's marginal noise as its gate has it (:func:`.preisach.fit_preisach`);
+    `fit`: that fit, when made."""
+    tau, th, sa = loop.torque_nm[keep], loop.angle_rad[keep], loop.angle_std_rad[keep]
+    src = loop.local_sources()[keep]
+    pre = fit if fit is not None else fit_preisach(tau, th, angle_std_rad=sa, torque_std_nm=loop.local_std()[keep],
+                                                    torque_sources=src)
+    st_eff = np.sqrt(np.sum((torque_sensitivity(tau, th - pre.residual_rad) @ src) ** 2, axis=1))
+    out = np.full(loop.torque_nm.size, np.nan)
+    out[keep] = spike_scores(pre.residual_rad, angle_std_rad=sa, compliance_rad_per_nm=1.0,
+                             torque_sources=np.diag(st_eff), jacobian=pre.active_design(tau),
+                             weights=least_squares_weights(sa))
+    return out
+
+
+def _outliers_found(loop, fit_set: dict):
+    """Outliers of `loop` and the model they were judged by (see :mod:`.checks`), or ``([], "")``.
+
+    Each sample's score as a lone spike (:func:`.fitcheck.spike_scores`) in the bilinear fit, with the
+    weight pieces' correlated errors, when that model describes the loop but for its worst sample (its
+    gate passes with that sample's ``t²`` taken out of χ²); else in the flexible Preisach fit (its
+    active set; a sample it follows exactly is not judged, and a sample its symmetry ties to its mirror
+    image cannot be told from it); none when neither model describes the loop. Found one at a time
+    (:func:`.checks.backward_outliers`).
+    """
+    n = loop.torque_nm.size
+    for model, spikes, name in (("bilinear", _bilinear_spikes, "bilinear fit"),
+                                ("preisach", _preisach_spikes, "Preisach fit")):
+        chk = fit_set.get("checks", {}).get(model)
+        if fit_set.get(model) is None or chk is None or not chk.testable or chk.dof <= 1:
+            continue
+        try:
+            t = spikes(loop, np.ones(n, bool), fit_set[model])
+        except AnalysisError:
+            continue
+        if not np.any(np.isfinite(t)):
+            continue
+        if special.chdtrc(chk.dof - 1, max(chk.chi2 - float(np.nanmax(t**2)), 0.0)) < LACK_OF_FIT_ALPHA:
+            continue
+
+        def scores(keep, t=t, spikes=spikes):  # the first round is the scores just computed
+            return t if keep.all() else spikes(loop, keep)
+
+        return checks.backward_outliers(loop.images, scores), name
+    return [], ""
+
+
+def _outlier_issues(col: _Collector, fit_set: dict):
     loop = col.loop
-    if pre is None:
-        return []
-    model = loop.angle_rad - pre.residual_rad
-    comp = path_compliance(loop.torque_nm, model)
-    sig = np.sqrt(loop.angle_std_rad**2 + (comp * loop.local_std()) ** 2)
-    found = checks.outliers(loop.images, pre.residual_rad, sig)
+    found, name = _outliers_found(loop, fit_set)
     for image, z in found:
         col.issues.append(
             Issue(
                 loop.orientation_deg,
                 loop.cycle,
                 "outlier",
-                f"image {image} is {z:+.1f}σ off the loop's model (Preisach fit): a forgotten or "
-                "extra weight, or a missed or extra shot?",
+                f"image {image} is {z:+.1f}σ off the loop's model ({name}, as a lone spike): a forgotten or extra "
+                "weight, or a missed or extra shot? Check the image and its weights, re-take it or mark it failed",
             )
         )
     return found
@@ -1116,6 +1245,29 @@ def _rig_issues(usable: pd.DataFrame, rig: dict) -> list:
                 f"{model_std[i]:.3g} N·m); the uncertainties use the rig",
             )
         )
+    return out
+
+
+def _sign_issues(signs: list, issues: list) -> dict:
+    """Orientations whose angle falls as the torque rises (:func:`.checks.angle_sign_by_run`) when the
+    session as a whole has the right sign: an issue each, and ``{orientation: why its figures are withheld}``."""
+    out = {}
+    for sg in signs:
+        if not sg["falls"]:
+            continue
+        o = sg["orientation_deg"]
+        t = ", ".join(f"{run} t = {v:+.3g}" for run, v in sg["t"].items())
+        if len(sg["falls"]) == len(checks.RUNS):
+            why = (f"the angle falls as the torque rises in orientation {o:g}° ({t}), not in the others: its "
+                   "angle sign is inverted (a mis-set orientation, or the camera flipped between orientations); "
+                   "check its images and setup, or multiply this orientation's angle_deg by -1. Its figures are "
+                   "withheld")
+        else:
+            why = (f"in orientation {o:g}° the angle falls as the torque rises on the {' and '.join(sg['falls'])} "
+                   f"run but not on the other ({t}): phases or torque signs look mislabelled; check the "
+                   "table's phase and torque_nm columns. Its figures are withheld")
+        out[o] = why
+        issues.append(Issue(o, None, "angle sign", why))
     return out
 
 
@@ -1284,7 +1436,10 @@ def analyze_session(
         orient = float(r.orientation_deg) if np.isfinite(r.orientation_deg) else None
         cycle = int(r.cycle) if np.isfinite(r.cycle) else None
         issues.append(Issue(orient, cycle, "*", f"image {r.image} ({r.phase}, step {r.step}) excluded: {r.message}"))
-    inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"])
+    signs = checks.angle_sign_by_run(usable)
+    inverted = checks.angle_sign_inverted(usable["torque_nm"], usable["angle_deg"]) and all(
+        len(sg["falls"]) == len(checks.RUNS) for sg in signs)
+    wrong_sign = {} if inverted else _sign_issues(signs, issues)
     if inverted:
         issues.append(
             Issue(
@@ -1321,8 +1476,9 @@ def analyze_session(
         for lp in src_all:
             i = loops.index(lp)
             col = _Collector(lp, issues)
-            if inverted:
-                col.fail("*", "", "angle_sign looks inverted (set angle_sign = -1): figures withheld")
+            if inverted or float(orient) in wrong_sign:
+                col.fail("*", "", wrong_sign.get(float(orient),
+                                                 "angle_sign looks inverted (set angle_sign = -1): figures withheld"))
                 fits[(lp.orientation_deg, lp.cycle)] = {
                     "bilinear": None,
                     "bouc_wen": None,
@@ -1337,7 +1493,7 @@ def analyze_session(
                 fits[(lp.orientation_deg, lp.cycle)] = _model_fits(col, settings)
                 runs = _model_free_figures(col, settings, seed + i, levels)
                 _catalogue_figures(col, settings, runs)
-                for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]["preisach"]):
+                for image, z in _outlier_issues(col, fits[(lp.orientation_deg, lp.cycle)]):
                     outlier_rows.append(
                         {"orientation_deg": lp.orientation_deg, "cycle": lp.cycle, "image": image, "z": z}
                     )
@@ -1360,9 +1516,9 @@ def analyze_session(
                     "checks": {},
                 }
             if float(orient) in creep:
-                for r in col.rows:
-                    if np.isfinite(r["value"]) and not r["flag"]:
-                        r["flag"] = "flagged: creep or drift in this orientation (see checks)"
+                for r in col.rows:  # every figure of the orientation, beside any flag of its own
+                    if np.isfinite(r["value"]) and "creep or drift" not in r["flag"]:
+                        r["flag"] = "; ".join(x for x in (r["flag"], _CREEP_FLAG) if x)
             if unmodelled:
                 for r in col.rows:
                     if np.isfinite(r["value"]):
@@ -1385,7 +1541,8 @@ def analyze_session(
         loop_data=loops,
         fits=fits,
         n_images=int(len(measurements)),
-        checks={"angle_sign_inverted": bool(inverted), "closure": closure, "outliers": outlier_rows},
+        checks={"angle_sign_inverted": bool(inverted), "angle_sign_inverted_orientations": sorted(wrong_sign),
+                "angle_sign": signs, "closure": closure, "outliers": outlier_rows},
     )
 
 

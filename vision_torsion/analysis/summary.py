@@ -38,7 +38,16 @@ Notes
   out the gear's own repeatability and so calls every difference "significant").
   With one cycle per orientation there is no replicate scatter: the effect size
   (sd of the orientation values over their mean) is reported and the test is not
-  made. Significant at ``p < ALPHA``.
+  made.
+- **One test family**: the figures of a session are tested together, so the
+  family-wise error rate (the chance that any figure comes out "significant" when no
+  orientation has an effect) is held at :data:`ALPHA` by Holm's step-down procedure
+  over the tested figures (:func:`holm_adjust`; Holm 1979, valid for any dependence
+  between the tests, as these ~27 figures of the same loops are). A figure is
+  ``significant`` when its Holm-adjusted p (``p_value_holm``) is below ``ALPHA``;
+  its own ANOVA p stays in ``p_value``. Fit statistics (a model's residual RMS,
+  ``method == "fit statistic"``) describe a fit, not the gear: they are not tested
+  and not in the family.
 """
 
 from __future__ import annotations
@@ -54,10 +63,41 @@ from scipy import special
 
 from .uncertainty import COVERAGE_FACTOR, coverage_factor_t_normal
 
-__all__ = ["ALPHA", "summarise_figures", "orientation_test", "orientation_anova", "mean_uncertainty", "BUDGET_LABELS"]
+__all__ = ["ALPHA", "FAMILY_METHOD", "summarise_figures", "orientation_test", "orientation_anova", "holm_adjust",
+           "mean_uncertainty", "BUDGET_LABELS"]
 
-#: Significance level of the orientation test.
+#: Significance level of the orientation test (family-wise, over the figures of a session).
 ALPHA = 0.05
+#: How the orientation tests of a session's figures are combined (for the report text).
+FAMILY_METHOD = (
+    "one-way ANOVA per figure against the cycle-to-cycle scatter; Holm's step-down correction over the "
+    "{m} figures tested holds the family-wise error (any figure called significant when there is no "
+    "orientation effect) at {alpha:g}; fit statistics are not tested"
+)
+
+
+def holm_adjust(p_values) -> np.ndarray:
+    """Holm's step-down adjusted p-values (Holm 1979), NaN entries left out of the family.
+
+    ``p_adj(i) = max_{j ≤ i} min(1, (m − j)·p(j))`` over the ``m`` finite p-values in
+    ascending order (j from 0); rejecting ``p_adj < α`` holds the family-wise error at
+    α whatever the dependence between the tests.
+
+    Examples
+    --------
+    >>> holm_adjust([0.01, 0.04, float("nan"), 0.03]).round(3).tolist()
+    [0.03, 0.06, nan, 0.06]
+    """
+    p = np.asarray(p_values, float)
+    out = np.full(p.shape, np.nan)
+    idx = np.flatnonzero(np.isfinite(p))
+    m = idx.size
+    if m == 0:
+        return out
+    order = idx[np.argsort(p[idx], kind="stable")]
+    adj = np.minimum(1.0, (m - np.arange(m)) * p[order])
+    out[order] = np.maximum.accumulate(adj)
+    return out
 
 
 def _describe(v: np.ndarray) -> dict:
@@ -174,6 +214,8 @@ _KINDS = ("weights", "g_r", "friction", "level")
 BUDGET_LABELS = {
     "angle_noise": "angle noise (propagated)",
     "repeatability": "repeatability between loops (Type A)",
+    "between_orientations": "spread between orientations, one cycle each (Type A: orientation effect and "
+    "repeatability together)",
     "weights": "weights",
     "g_r": "g and r (scale)",
     "friction": "pulley friction",
@@ -191,6 +233,15 @@ def _finite_mean(x) -> float:
 
 def _col(sub, name) -> np.ndarray:
     return np.asarray(sub[name], dtype=float)
+
+
+def _one_cycle_each(sub) -> bool:
+    """Whether the loops of ``sub`` are one per orientation, from two or more orientations."""
+    if "orientation_deg" not in sub:
+        return False
+    o = np.asarray(sub["orientation_deg"], float)
+    _, counts = np.unique(o, return_counts=True)
+    return counts.size >= 2 and bool(np.all(counts == 1))
 
 
 def mean_uncertainty(sub) -> dict:
@@ -217,10 +268,23 @@ def mean_uncertainty(sub) -> dict:
             "dof": None,
             "budget": {"angle_noise": float("nan")},
         }
+    st = _col(sub, "std_torque")
+    if "std_lack_of_fit" in sub:
+        # a flagged fit's angle and torque parts come inflated by √χ²_red and its lack of fit is a budget
+        # line of its own (std² = std₀² + lof²): take the parts back to std₀ so the lack of fit counts once
+        lof = np.nan_to_num(_col(sub, "std_lack_of_fit"), nan=0.0)
+        tot = np.hypot(np.nan_to_num(sa, nan=0.0), np.nan_to_num(st, nan=0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            deflate = np.where((lof > 0) & (tot > lof), np.sqrt(np.clip(tot**2 - lof**2, 0.0, None)) / tot, 1.0)
+        sa, st = sa * deflate, st * deflate
     u_prop = float(np.sqrt(np.nansum(sa**2)) / n) if n else float("nan")
     sd = float(np.std(v, ddof=1)) if n >= 2 else float("nan")
     u_a = sd / math.sqrt(n) if n >= 2 else float("nan")
     budget = {"angle_noise": u_prop, "repeatability": u_a if n >= 2 else None}
+    if n >= 2 and _one_cycle_each(sub):
+        # one loop per orientation: the scatter is between orientations (an orientation effect and the
+        # repeatability together), not a repeatability observed on replicates
+        budget["between_orientations"] = budget.pop("repeatability")
     rand = max(u_prop, u_a) if n >= 2 else u_prop
     total = rand**2 if np.isfinite(rand) else 0.0
     have_parts = all(f"std_{k}" in sub for k in _KINDS)
@@ -230,7 +294,7 @@ def mean_uncertainty(sub) -> dict:
             budget[k] = u
             total += u * u
     else:
-        u = _finite_mean(_col(sub, "std_torque"))
+        u = _finite_mean(st)
         budget["torque_total"] = u
         total += u * u
     if "std_lack_of_fit" in sub:
@@ -286,6 +350,25 @@ def _mean_flag(entry: dict) -> str:
     if entry["flagged"]:
         why.append(f"{entry['flagged']} of its {entry['n']} loop values are flagged (see the issues)")
     return "flagged: " + "; ".join(why) if why else ""
+
+
+def _fit_statistic(data: dict, rows: np.ndarray) -> bool:
+    """Whether a figure's rows are a fit statistic (its ``method``), not a figure of the gear."""
+    return "method" in data and rows.size > 0 and bool(np.all(data["method"][rows] == "fit statistic"))
+
+
+def _holm(summary: dict) -> None:
+    """Holm over the orientation tests of ``summary`` (module notes): ``p_value_holm``, ``significant``, ``family``."""
+    names = [f for f, e in summary.items() if e["orientation_test"].get("p_value") is not None]
+    adj = holm_adjust([summary[f]["orientation_test"]["p_value"] for f in names])
+    family = FAMILY_METHOD.format(m=len(names), alpha=ALPHA)
+    for f, e in summary.items():
+        t = e["orientation_test"]
+        t["family"] = family
+        t["p_value_holm"] = None
+    for f, pa in zip(names, adj):
+        t = summary[f]["orientation_test"]
+        t.update(p_value_holm=float(pa), significant=bool(pa < ALPHA))
 
 
 def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
@@ -364,8 +447,12 @@ def summarise_figures(figures: pd.DataFrame) -> tuple[dict, pd.DataFrame]:
                 }
             )
             groups.append(v)
-        entry["orientation_test"] = orientation_anova(groups)
+        if _fit_statistic(data, rows_all):
+            entry["orientation_test"] = {**orientation_anova([]), "reason": "a fit statistic, not a figure: not tested"}
+        else:
+            entry["orientation_test"] = orientation_anova(groups)
         summary[fig] = entry
+    _holm(summary)
     cols = ["orientation_deg", "figure", "unit", "n_cycles", "mean", "sd", "std", "std_angle", "std_torque",
             "coverage_factor", "u95", "flag"]
     return summary, pd.DataFrame(rows, columns=cols)

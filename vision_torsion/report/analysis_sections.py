@@ -35,6 +35,7 @@ HEADLINE_FIGURES = figure_rows(
 _PARTS = [
     ("angle_noise", "angle noise"),
     ("repeatability", "repeatability (Type A)"),
+    ("between_orientations", "spread between orientations (one cycle each)"),
     ("weights", "weights"),
     ("g_r", "g and r"),
     ("friction", "friction"),
@@ -120,6 +121,13 @@ def checks_section(analysis):
             '<p class="bad">angle_sign looks inverted; set angle_sign = -1 in session.toml. Every figure '
             "is withheld until then.</p>"
         )
+    wrong = ch.get("angle_sign_inverted_orientations") or []
+    if wrong:
+        parts.append(
+            '<p class="bad">The angle falls as the torque rises in orientation(s) '
+            + ", ".join(f"{o:g}°" for o in wrong)
+            + " only (a mis-set orientation, or the camera flipped): their figures are withheld.</p>"
+        )
     clo = pd.DataFrame(
         [
             {
@@ -161,48 +169,48 @@ def checks_section(analysis):
 
 
 def preisach_section(analysis):
+    """The Preisach model as a description of the first fitted loop: its loop over the data and its
+    residuals. Its relay weights are not shown as numbers: a single major loop does not identify them
+    (another layout, or the elastic compliance traded for reversible relays, fits as well)."""
     from ..plotting import fixed_figure
     from .figures import svg_bytes
 
+    title = "Preisach model: a description of the loop"
     fits = [(k, f["preisach"]) for k, f in sorted(analysis.fits.items()) if f.get("preisach") is not None]
+    loops = {(lp.orientation_deg, lp.cycle): lp for lp in analysis.loop_data}
+    fits = [(k, pre) for k, pre in fits if k in loops]
     if not fits:
-        return (
-            "Preisach model: element distribution",
-            '<p class="muted">No loop could be fitted (reasons in the table of figures withheld).</p>',
-        )
+        return title, '<p class="muted">No loop could be fitted (reasons in the table of figures withheld).</p>'
     (o, c), pre = fits[0]
-    fig = fixed_figure(6.0, 4.6, left=0.8, bottom=0.6, top=0.4)
-    ax = fig.add_subplot()
-    w = pre.weight_rad
-    m = w > 0
-    hyst = m & pre.hysteretic
-    rev = m & ~pre.hysteretic
-    scale = 400.0 / max(float(w.max()), 1e-300)
-    for a_, b_, sel, colour, label in (
-        (pre.alpha_nm, pre.beta_nm, hyst, "tab:red", "hysteretic (α > β)"),
-        (pre.alpha_nm, pre.beta_nm, rev, "tab:blue", "reversible (α = β)"),
-    ):
-        if sel.any():
-            ax.scatter(b_[sel], a_[sel], s=w[sel] * scale, color=colour, alpha=0.6, label=label)
-            ax.scatter(-a_[sel], -b_[sel], s=w[sel] * scale, color=colour, alpha=0.25)
-    lim = float(np.max(np.abs(np.concatenate([pre.alpha_nm, pre.beta_nm])))) * 1.05
-    ax.plot([-lim, lim], [-lim, lim], color="0.6", lw=0.8)
-    ax.set_xlim(-lim, lim)
-    ax.set_ylim(-lim, lim)
-    ax.set_xlabel("switch-down torque β (N·m)")
-    ax.set_ylabel("switch-up torque α (N·m)")
-    ax.set_title(f"Preisach elements, orientation {o:g}°, cycle {c} (area ∝ weight, rad)", fontsize=10, y=1.0,
-                 pad=5.0)
+    lp = loops[(o, c)]
+    fig = fixed_figure(9.0, 4.0, left=0.8, bottom=0.6, top=0.4, wspace=0.35)
+    ax, axr = fig.subplots(1, 2)
+    model = lp.angle_rad - pre.residual_rad
+    ax.plot(lp.torque_nm, np.degrees(lp.angle_rad), "o", ms=3, color="0.3", label="measured")
+    ax.plot(lp.torque_nm, np.degrees(model), "-", lw=1.0, color="tab:red", label="Preisach model")
+    ax.set_xlabel("torque (N·m)")
+    ax.set_ylabel("angle (deg)")
     ax.legend(fontsize=8, loc="upper left")
     ax.grid(True, alpha=0.3)
+    ax.set_title(f"orientation {o:g}°, cycle {c}", fontsize=10)
+    res_arcmin = np.degrees(pre.residual_rad) * 60.0
+    axr.plot(np.arange(res_arcmin.size), res_arcmin, "o-", ms=3, lw=0.6, color="tab:red")
+    noise = 2.0 * np.degrees(pre.check.noise_rms_rad) * 60.0
+    axr.axhspan(-noise, noise, color="0.85", label="±2σ of the noise (RMS)")
+    axr.set_xlabel("image (acquisition order)")
+    axr.set_ylabel("residual (arcmin)")
+    axr.legend(fontsize=8, loc="upper left")
+    axr.grid(True, alpha=0.3)
+    axr.set_title("residuals", fontsize=10)
     verdict = "fits" if not pre.check.rejected else "REJECTED (" + pre.check.describe() + ")"
     text = (
-        f"<p>Relays that switch up at α and down at β, with weights ≥ 0 fitted by non-negative least squares "
-        f"(no starting values); each with its mirror (−β, −α). The paper's bilinear loop is a uniform square "
-        f"0 < α < τ_c, −τ_c < β < 0. This loop: {html.escape(verdict)}; "
-        f"{int(np.sum(m))} elements in use.</p>"
+        "<p>Relays that switch up at α and down at β (each with its mirror), weights ≥ 0 fitted by "
+        "non-negative least squares: a description of the loop's shape, not a measurement of parameters. "
+        "The relay layout and the elastic compliance are not identified by one loop (other layouts fit as "
+        "well), so they are not reported; the loop's identifiable figures (stiffnesses, widths, energy) are "
+        f"in the tables above. This loop: {html.escape(verdict)}.</p>"
     )
-    return "Preisach model: element distribution", text + _img(svg_bytes(fig), "Preisach element distribution")
+    return title, text + _img(svg_bytes(fig), "Preisach model loop and residuals")
 
 
 def analysis_sections(analysis) -> list:

@@ -26,7 +26,9 @@ def _conditions(conditions: dict, analysis, n_failed: int) -> str:
         ("images in table", str(analysis.n_images)),
         ("failed images", str(n_failed)),
         ("loops (orientation × cycle)", str(len(analysis.loops))),
-        ("max torque used for lost motion/secant", f"{analysis.settings['max_torque_nm']:.4g} N·m"),
+        ("lost motion at fractions of", f"{analysis.settings['lost_motion_reference_nm']:.4g} N·m "
+         f"({analysis.settings['lost_motion_reference']})"),
+        ("max torque (secant interval)", f"{analysis.settings['max_torque_nm']:.4g} N·m"),
     ]
     return _table(pd.DataFrame(rows, columns=["condition", "value"]), left=("condition", "value"))
 
@@ -305,7 +307,10 @@ def render_html(
         "<h2>Catalogue metrics and model fits per orientation</h2>",
         '<p class="muted">Mean over cycles ± standard uncertainty of that mean. The orientation test is a '
         "one-way ANOVA of the loop values grouped by orientation, against the scatter between cycles of "
-        "the same orientation; p &lt; 0.05 means the orientation effect is larger than that repeatability. "
+        "the same orientation. The figures are tested as one family: p is Holm-adjusted over the figures "
+        "tested (fit statistics are not), so the chance that any figure is called significant when no "
+        "orientation has an effect stays at 5 %; p &lt; 0.05 means the orientation effect is larger than "
+        "that repeatability. "
         "With one cycle per orientation there is no such scatter: the test is not made (—), and the spread "
         "of the orientation means is given instead (sd between loops).</p>",
         _metrics(metrics, orients, one_loop=bool(len(analysis.per_orientation))

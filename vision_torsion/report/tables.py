@@ -88,8 +88,9 @@ def _median(values) -> float:
 
 #: The report's figure vocabulary: figure -> (label, unit shown, scale from the analysis unit).
 #: The catalogue table and the uncertainty budget (report/analysis_sections.py) both take theirs from here.
+#: Every angle in arcmin (the catalogues' unit): one angle unit per table.
 FIGURE_VOCABULARY = {
-    "hysteresis": ("Hysteresis (paper: max width)", "deg", 1.0),
+    "hysteresis": ("Hysteresis (paper: max width)", "arcmin", 60.0),
     "hysteresis_loss": ("Hysteresis loss (width at 0 N·m)", "arcmin", 60.0),
     "lost_motion_3pct": ("Lost motion ±3 %", "arcmin", 60.0),
     "lost_motion_4pct": ("Lost motion ±4 %", "arcmin", 60.0),
@@ -108,9 +109,9 @@ FIGURE_VOCABULARY = {
     "bilinear_k_u": ("Bilinear k_u", "N·m/rad", 1.0),
     "bilinear_k_l": ("Bilinear k_l", "N·m/rad", 1.0),
     "bilinear_tau_c": ("Bilinear τ_c", "N·m", 1.0),
-    "bilinear_residual_rms": ("Bilinear residual RMS", "deg", 1.0),
+    "bilinear_residual_rms": ("Bilinear residual RMS", "arcmin", 60.0),
     "bouc_wen_k_e": ("Bouc–Wen k_e", "N·m/rad", 1.0),
-    "bouc_wen_z_s": ("Bouc–Wen z_s", "deg", 1.0),
+    "bouc_wen_z_s": ("Bouc–Wen z_s", "arcmin", 60.0),
     "bouc_wen_a": ("Bouc–Wen a", "1/(N·m)", 1.0),
     "bouc_wen_rho": ("Bouc–Wen ρ", "–", 1.0),
     "bouc_wen_n": ("Bouc–Wen n", "–", 1.0),
@@ -138,7 +139,7 @@ def metrics_table(analysis) -> pd.DataFrame:
 
     Cells are ``(mean, std)`` tuples of the orientation mean (NaN when missing); the
     last columns hold the session mean, its standard uncertainty, the sd between
-    loops and the orientation test p-value; ``flags`` maps an orientation to why its
+    loops and the orientation test's Holm-adjusted p-value; ``flags`` maps an orientation to why its
     mean is flagged (:func:`vision_torsion.analysis.summary.summarise_figures`), for
     the flagged ones. A mean of one loop is flagged only when that loop's value is
     (that it holds no repeatability is said once, for the whole table).
@@ -172,7 +173,7 @@ def metrics_table(analysis) -> pd.DataFrame:
         row["mean"] = scale_or_nan(s["mean"])
         row["mean_std"] = scale_or_nan(s["mean_std"])
         row["sd"] = scale_or_nan(s["sd"])
-        row["p_value"] = s["orientation_test"].get("p_value")
+        row["p_value"] = s["orientation_test"].get("p_value_holm")  # the family's p (Holm), which decides
         row["flags"] = {o: flags[(float(o), fig)] for o in orients if (float(o), fig) in flags}
         rows.append(row)
     return pd.DataFrame(rows)
