@@ -7,12 +7,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vision_torsion.analysis import analyze_session, fit_bilinear, simulate_measurements
+from vision_torsion.analysis import analyze_session, fit_bilinear
 from vision_torsion.analysis.checks import angle_sign_by_run, backward_outliers, loop_direction
 from vision_torsion.analysis.fitcheck import side_compliance, spike_scores
 from vision_torsion.analysis.preisach import torque_sensitivity
 from vision_torsion.analysis.summary import holm_adjust, mean_uncertainty, summarise_figures
 from vision_torsion.errors import MeasurementsError
+from vision_torsion.synthetic import simulate_measurements
 
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)
 RIG = dict(step_mass_kg=0.02, mass_std_kg=1e-4, gravity_m_per_s2=9.81, arm_radius_m=0.05)
