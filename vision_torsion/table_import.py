@@ -278,16 +278,19 @@ def phases_from_torque(torque) -> RecordPhases:
     record's range from its extreme. A *full* sweep runs from beyond half the
     positive maximum to beyond half the negative minimum, or back. A sweep down is
     split at zero torque into ``positive_unloading`` (τ ≥ 0) and
-    ``negative_loading`` (τ ≤ 0), a sweep up into ``negative_unloading`` and
-    ``positive_loading``; two adjacent full sweeps are one cycle. A sample at zero
-    torque before any load is the ``reference``.
+    ``negative_loading`` (τ < 0), a sweep up into ``negative_unloading`` and
+    ``positive_loading``; two adjacent full sweeps are one cycle. Each sample is in
+    one phase only, as each photograph of a planned session is: a turning point ends
+    the sweep that reaches it, and the zero-torque sample ends the unloading (the
+    analysis starts each phase at the last sample of the one before). A sample at
+    zero torque before any load is the ``reference``.
 
     Examples
     --------
     >>> r = phases_from_torque([0, 1, 2, 1, 0, -1, -2, -1, 0, 1, 2, 1])
     >>> [(i, phase) for i, phase, cycle in r.rows if i in (0, 3, 4, 7, 10)]  # doctest: +NORMALIZE_WHITESPACE
-    [(0, 'reference'), (3, 'positive_unloading'), (4, 'positive_unloading'), (4, 'negative_loading'),
-     (7, 'negative_unloading'), (10, 'positive_loading')]
+    [(0, 'reference'), (3, 'positive_unloading'), (4, 'positive_unloading'), (7, 'negative_unloading'),
+     (10, 'positive_loading')]
     >>> r.left_out, r.first  # sample 1 (the first loading) and 11 (a last, incomplete sweep)
     (2, 'positive')
     """
@@ -319,13 +322,15 @@ def phases_from_torque(torque) -> RecordPhases:
             down = tau[a] > 0
             first = first or ("positive" if down else "negative")
             names = ("positive_unloading", "negative_loading") if down else ("negative_unloading", "positive_loading")
+            at_zero = False  # the sweep's first zero-torque sample ends the unloading, a later one starts the loading
             for i in range(a, b + 1):
+                if used[i]:  # each sample once: a turning point ends its sweep, as a plan's phases do
+                    continue
                 v = tau[i] if down else -tau[i]
-                if v >= -zero:
-                    rows.append((i, names[0], cycle))
-                if v <= zero:
-                    rows.append((i, names[1], cycle))
-            used[a:b + 1] = True
+                second = v < -zero or (v <= zero and at_zero)
+                at_zero = at_zero or v <= zero
+                rows.append((i, names[1] if second else names[0], cycle))
+                used[i] = True
         k += 2
     return RecordPhases(rows=tuple(rows), left_out=int((~used).sum()), first=first)
 
