@@ -347,7 +347,9 @@ def read_image_bytes(path, *, signature: bool = True) -> bytes:
             head = fh.read(16)
             if signature and head and _kind_from_magic(head) is None:
                 raise ImageReadError(f"{name}: not a PNG, TIFF, BMP or JPEG image (unrecognised file header)")
-            return head + fh.read(MAX_IMAGE_FILE_BYTES + 1 - len(head))
+            # the rest as the size says (one more byte tells a file still growing); asking
+            # read() for the largest allowed size would allocate that much for every image
+            return head + fh.read(max(size - len(head), 0) + 1)
     except FileNotFoundError:
         raise ImageReadError(f"{name}: no such file", reason="not_found") from None
     except IsADirectoryError:

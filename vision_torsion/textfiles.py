@@ -121,7 +121,7 @@ def read_text_bytes(path, *, what: str, error: type[VisionTorsionError] = Vision
             if size > limit:
                 raise error(f"{name}: {size} bytes, more than the {limit} {what} may have",
                             reason="too_large")
-            return fh.read(limit + 1)
+            return fh.read(size + 1)  # as the size says (asking for `limit` would allocate that much)
     except FileNotFoundError:
         raise error(f"{name}: no such file; expected {what}", reason="not_found") from None
     except VisionTorsionError:

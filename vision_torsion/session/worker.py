@@ -116,6 +116,7 @@ class ReadImage:
     error: Exception | None = None
     result: tuple[str, str | None, str] | None = None
     undecodable: bool = False
+    saturated: float | None = None
 
 
 def read_task(task: tuple[str, str, str]) -> ReadImage:
@@ -151,11 +152,13 @@ def prepare_task(data: bytes, task: tuple[str, str, str]) -> ReadImage:
         image = decode_image(data, name=path, keep_integers=True)
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
         return ReadImage(key, image_hash, error=exc, undecodable=True)
+    # here, in a reading thread (numpy releases the GIL), not in the one measuring thread
+    saturated = saturated_fraction(image)
     try:
         candidates = pair_candidates(image.data, _settings_from(settings_json))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
-        return ReadImage(key, image_hash, image=image, error=exc)
-    return ReadImage(key, image_hash, image=image, candidates=candidates)
+        return ReadImage(key, image_hash, image=image, error=exc, saturated=saturated)
+    return ReadImage(key, image_hash, image=image, candidates=candidates, saturated=saturated)
 
 
 def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str | None, str]:
@@ -178,8 +181,8 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         return key, json.dumps({"status": "failed", "message": done.message}), "measured"
     entry = {"status": "ok", "pair": done.value.to_dict()} if done.ok else {"status": "failed", "message": done.message}
     entry["image_xxh3_128"] = read.image_hash
-    if read.image is not None:
-        entry["saturated_fraction"] = saturated_fraction(read.image)
+    if read.saturated is not None:
+        entry["saturated_fraction"] = read.saturated
     text = json.dumps(entry, sort_keys=True)
     if _Cache.log is not None:
         try:
