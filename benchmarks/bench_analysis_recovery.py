@@ -40,6 +40,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from common import write_result  # noqa: E402 (the script's folder is on sys.path)
+
 from vision_torsion.analysis import (
     analyze_session,
     bilinear_loop_energy,
@@ -47,7 +49,6 @@ from vision_torsion.analysis import (
     bilinear_response,
     loop_energy,
 )
-from vision_torsion.fileio import write_json  # noqa: E402
 from vision_torsion.synthetic import simulate_measurements, torque_levels
 
 #: figure in analysis summary -> (truth key, target kind, target value)
@@ -189,7 +190,7 @@ def main(argv=None):
         print(_format(name, res), flush=True)
     if not args.quick:
         out = Path(__file__).resolve().parent / "results" / "analysis_recovery.json"
-        write_json(
+        write_result(
             out,
             {
                 "command": "python benchmarks/bench_analysis_recovery.py --reps %d --seed %d" % (reps, args.seed),

@@ -35,10 +35,12 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from common import write_result  # noqa: E402 (the script's folder is on sys.path)
+
 from vision_torsion.angle import pair_angle, sequence_angles  # noqa: E402
 from vision_torsion.calibration import calibrate_plane, check_accuracy  # noqa: E402
 from vision_torsion.errors import MarkerError  # noqa: E402
-from vision_torsion.fileio import write_csv, write_json  # noqa: E402
+from vision_torsion.fileio import write_csv  # noqa: E402
 from vision_torsion.images import write_image  # noqa: E402
 from vision_torsion.markers import Marker  # noqa: E402
 from vision_torsion.pair import PairMeasurement, measure_pair  # noqa: E402
@@ -188,7 +190,7 @@ def main(argv=None) -> int:
     if st["bench_core_json_rms_deg"] is not None:
         print(f"  (benchmarks/results/core.json, all repeats: RMS {st['bench_core_json_rms_deg']:.6f}°)")
     ok = tl["passed"] and st["same"]
-    out = write_json(
+    out = write_result(
         ROOT / "benchmarks" / "results" / "calibration.json",
         {"tilted": tl, "standard": st, "passed": ok, "seconds": time.perf_counter() - t0},
     )

@@ -45,8 +45,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
+from common import write_result  # noqa: E402 (the script's folder is on sys.path)
+
 from vision_torsion.analysis.models import bilinear_response  # noqa: E402
-from vision_torsion.fileio import write_json  # noqa: E402
 from vision_torsion.session.bind import bind_session  # noqa: E402
 from vision_torsion.session.watch import Watcher  # noqa: E402
 from vision_torsion.synthetic import Scene  # noqa: E402
@@ -230,7 +231,7 @@ def main(argv=None) -> int:
         print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} (seed {r['seed']}): "
               f"watch {r['watch_detected']}, bind {r['bind_detected']}")
     kept = [{k: v for k, v in r.items() if not k.endswith("_said")} for r in rows]  # messages hold temp paths
-    write_json(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds})
+    write_result(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds})
     return 0
 
 

@@ -36,11 +36,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from common import one_core  # noqa: E402
+from common import one_core, write_result  # noqa: E402
 
 from vision_torsion.angle import pair_angle  # noqa: E402
 from vision_torsion.errors import MarkerError  # noqa: E402
-from vision_torsion.fileio import write_json  # noqa: E402
 from vision_torsion.images import as_grey_array  # noqa: E402
 from vision_torsion.pair import measure_pair  # noqa: E402
 from vision_torsion.synthetic import load_scene, render  # noqa: E402
@@ -169,7 +168,7 @@ def main(argv=None) -> int:
     print(f"|{'-' * (w + 2)}|-------|--------|")
     for name, value, target in rows:
         print(f"| {name.ljust(w)} | {value} | {target} |")
-    write_json(
+    write_result(
         ROOT / "benchmarks" / "results" / "core.json",
         {
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),

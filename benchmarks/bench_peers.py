@@ -355,7 +355,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-write", action="store_true", help="print only, do not write results/")
     args = ap.parse_args(argv)
 
-    from vision_torsion.fileio import atomic_write_text, write_json
+    from common import write_result
+
     from vision_torsion.synthetic import load_scene
 
     known = {s: (label, crb) for s, label, crb in SCENES}
@@ -423,7 +424,7 @@ def main(argv=None) -> int:
             "scenes": results,
         }
         RESULTS.mkdir(parents=True, exist_ok=True)
-        write_json(RESULTS / "peers.json", payload)
+        write_result(RESULTS / "peers.json", payload)
         m = info
         header = [
             "### Benchmark: vision-torsion against the methods a user would pick instead",
@@ -450,7 +451,7 @@ def main(argv=None) -> int:
         targets = ["", "Targets (issues 2 and 8):", ""] + [
             f"- [{'x' if c['met'] else ' '}] {c['target']}: {c['detail']}" for c in checks]
         text = "\n".join(header + methods) + "\n" + "\n\n".join(tables) + "\n" + "\n".join(targets) + "\n"
-        atomic_write_text(RESULTS / "peers.md", text)
+        write_result(RESULTS / "peers.md", text)
         print(f"wrote {RESULTS / 'peers.json'} and {RESULTS / 'peers.md'}")
     return 0
 

@@ -34,8 +34,7 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
 from bench_analysis_recovery import COVERAGE_TARGET, _format, bilinear_truth, evaluate_recovery  # noqa: E402
-
-from vision_torsion.fileio import write_json  # noqa: E402
+from common import write_result  # noqa: E402
 
 #: The demo session's rig, for the weight-piece torque error model of the analysis:
 #: 0.02 kg pieces within ±0.1 g (uniform, so 1σ = 1e-4/√3 kg), r = 0.05 m, g = 9.81.
@@ -74,7 +73,7 @@ def main(argv=None) -> int:
     name = (f"rendered sessions ({args.orientations} orientations, {len(tables[0])} images each), "
             f"render+process {render_s / args.reps:.1f} s per session")
     print(_format(name, res))
-    write_json(
+    write_result(
         HERE / "results" / "session_recovery.json",
         {
             "command": f"python benchmarks/bench_session_recovery.py --reps {args.reps} "

@@ -267,7 +267,8 @@ def main() -> None:
     n, quarter = args.n, max(1, args.n // 4)
     work = Path(args.workdir or tempfile.mkdtemp(prefix="bench_session_"))
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    from vision_torsion.fileio import write_json
+    from common import write_result
+
     from vision_torsion.session.process import _code_fingerprint
 
     code_at_start = _code_fingerprint()
@@ -329,7 +330,7 @@ def main() -> None:
         "target_ratio": 1.3,
         "measuring_code_changed_during_run": _code_fingerprint() != code_at_start,
     }
-    write_json(RESULTS, report)  # NaN (no separate worker with --jobs 1) becomes null
+    write_result(RESULTS, report)  # NaN (no separate worker with --jobs 1) becomes null
 
     print(f"\nsession of {n} images (1400x1000 8-bit PNG), {cores} cores, "
           f"load average {os.getloadavg()[0]:.1f}")

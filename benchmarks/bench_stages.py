@@ -242,7 +242,7 @@ def main(argv=None) -> int:
     n = args.n or (40 if args.quick else 200)
     write = not (args.quick or args.no_write)
 
-    from vision_torsion.fileio import write_json
+    from common import write_result
 
     info = machine_info()
     print(f"bench_stages: {n} images of the standard scene; load average {info['load_average_1_5_15min']}", flush=True)
@@ -287,7 +287,7 @@ def main(argv=None) -> int:
     print(f"load average at the end {load_end}")
     if write:
         RESULTS.mkdir(parents=True, exist_ok=True)
-        write_json(
+        write_result(
             RESULTS / "stages.json",
             {
                 "benchmark": "stages",

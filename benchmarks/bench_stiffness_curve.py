@@ -36,7 +36,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from vision_torsion.fileio import write_json  # noqa: E402
+from common import write_result  # noqa: E402 (the script's folder is on sys.path)
+
 from vision_torsion.stiffness import analyze_stiffness_curve
 from vision_torsion.synthetic import realistic_encoder_record, synthetic_encoder_record
 
@@ -166,7 +167,7 @@ def main() -> int:
           f"{real_worst['max_abs_virgin_error_pct']:.2f} % (limit 3), branches {real_worst['branches']} "
           f"(target [14]), notes {real_worst['notes'] or 'none'}: {'MET' if met else 'NOT MET'}")
     out = Path(__file__).resolve().parent / "results" / "stiffness_curve.json"
-    write_json(out, {
+    write_result(out, {
         "benchmark": "stiffness_curve", "issue": [7, 14],
         "limits": {"max_stiffness_error_pct": 3.0, "backlash_width_error_pct": 5.0, "max_pairs_error": 1.0,
                    "virgin_error_pct": 3.0, "branches": 14},

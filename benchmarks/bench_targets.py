@@ -45,10 +45,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from common import git_commit, machine_info, one_core  # noqa: E402
+from common import git_commit, machine_info, one_core, write_result  # noqa: E402
 
 from vision_torsion.angle import rotation_angle  # noqa: E402
-from vision_torsion.fileio import write_json  # noqa: E402
 from vision_torsion.markers import find_markers  # noqa: E402
 from vision_torsion.rigid import target_angle  # noqa: E402
 from vision_torsion.synthetic import load_scene, render, target_scene  # noqa: E402
@@ -132,7 +131,7 @@ def main(argv=None) -> int:
           f"largest |angle| {bump['largest_abs_angle_deg']:.6f} deg")
     print(f"({time.time() - t0:.0f} s)")
     out = ROOT / "benchmarks" / "results" / "targets.json"
-    write_json(out, {"machine": machine_info(), "commit": git_commit(), "targets": rows,
+    write_result(out, {"machine": machine_info(), "commit": git_commit(), "targets": rows,
                      "gain_ring16_over_two_marker": gain, "bump_1px": bump})
     print(f"wrote {out.relative_to(ROOT)}")
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import os
 import platform
@@ -96,3 +97,30 @@ def git_commit() -> str | None:
     except (OSError, subprocess.CalledProcessError):
         return None
     return out.stdout.strip() or None
+
+
+def write_result(path, content) -> Path:
+    """Write a benchmark's own result file atomically: a dict or list as JSON (as
+    :func:`vision_torsion.fileio.json_text` writes it), a string as it is.
+
+    These are the repository's files, replaced at every run, so they are written
+    here and not through the package's writers, whose folder contract refuses to
+    replace a file the tool cannot prove it wrote (the rule for a user's folders).
+    """
+    import tempfile
+
+    from vision_torsion.fileio import json_text
+
+    path = Path(path)
+    text = content if isinstance(content, str) else json_text(content)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return path

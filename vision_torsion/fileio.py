@@ -44,6 +44,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "write_json",
+    "json_text",
     "write_csv",
     "output_set",
     "check_output_dir",
@@ -500,10 +501,15 @@ def atomic_write_text(path, text: str, *, durable: bool = True, force: bool | No
     return atomic_write_bytes(path, text.encode("utf-8", "backslashreplace"), durable=durable, force=force)
 
 
+def json_text(obj) -> str:
+    """`obj` as indented JSON text, as :func:`write_json` writes it: NaN and inf
+    become null, floats 15 significant digits, numpy values and paths as plain ones."""
+    return json.dumps(_finite(obj), indent=2, default=_json_default, allow_nan=False) + "\n"
+
+
 def write_json(path, obj) -> Path:
-    """Write `obj` as indented JSON atomically; NaN and inf become null."""
-    text = json.dumps(_finite(obj), indent=2, default=_json_default, allow_nan=False)
-    return atomic_write_text(path, text + "\n")
+    """Write `obj` as indented JSON atomically (:func:`json_text`); NaN and inf become null."""
+    return atomic_write_text(path, json_text(obj))
 
 
 def write_csv(path, frame) -> Path:
