@@ -29,3 +29,17 @@ SCENE_DIR = __import__("pathlib").Path(__file__).resolve().parents[1] / "vision_
 def scene_file():
     """Path of a ready scene in the repository's synthetic/ folder, by name."""
     return lambda name: SCENE_DIR / f"{name}.toml"
+
+
+@pytest.fixture
+def cli_logging():
+    """The command line configures the package's logger; give it back as it was for later tests."""
+    import logging
+
+    own = logging.getLogger("vision_torsion")
+    level, handlers = own.level, list(own.handlers)
+    yield
+    own.setLevel(level)
+    for h in list(own.handlers):
+        if h not in handlers:
+            own.removeHandler(h)

@@ -200,20 +200,6 @@ def test_gear_and_test_tables_are_read_and_checked():
         config_from_dict({**base, "test": {"lost_motion_fractions": [3, 4]}})
 
 
-@pytest.fixture
-def cli_logging():
-    """The command line configures the package's logger; give it back as it was for later tests."""
-    import logging
-
-    own = logging.getLogger("vision_torsion")
-    level, handlers = own.level, list(own.handlers)
-    yield
-    own.setLevel(level)
-    for h in list(own.handlers):
-        if h not in handlers:
-            own.removeHandler(h)
-
-
 def test_analyze_command(tmp_path, capsys, cli_logging):
     from vision_torsion.cli import main
 

@@ -33,20 +33,6 @@ _SESSION_TOML = ('[rig]\narm_radius_m = 0.05\nmass_std_kg = 0.0001\n[protocol]\n
                  'max_torque_nm = 0.35316\nstep_mass_kg = 0.02\n')
 
 
-@pytest.fixture
-def cli_logging():
-    """The command line configures the package's logger; give it back as it was for later tests."""
-    import logging
-
-    own = logging.getLogger("vision_torsion")
-    level, handlers = own.level, list(own.handlers)
-    yield
-    own.setLevel(level)
-    for h in list(own.handlers):
-        if h not in handlers:
-            own.removeHandler(h)
-
-
 def _table(seed, **kw):
     opts = dict(orientations_deg=(0,), angle_std_deg=0.001, max_torque_nm=T_MAX, torque_model="pieces",
                 mass_distribution="uniform", mass_std_kg=MASS_STD)

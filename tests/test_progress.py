@@ -2,7 +2,8 @@
 
 import io
 
-from tests.helpers import make_session
+from helpers import make_session
+
 from vision_torsion import progress
 from vision_torsion.cli import main
 from vision_torsion.progress import LineProgress, progress_bar, track
