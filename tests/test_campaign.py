@@ -415,3 +415,16 @@ def test_analyze_adds_its_report_to_a_campaign(tmp_path, capsys):
     assert f"campaign {db}: added as version 1 (record 1)" in capsys.readouterr().out
     assert _cli("analyze", tmp_path / "m.csv", "-o", tmp_path / "out", "--campaign", db) == 0
     assert f"campaign {db}: already there (record 1)" in capsys.readouterr().out
+
+
+def test_a_table_not_as_the_schema_has_it_is_a_clear_error(tmp_path, folders, capsys):
+    db = tmp_path / "c.db"
+    add_reports(db, folders[:1])
+    conn = sqlite3.connect(db)
+    conn.execute("DROP TRIGGER figures_kept")
+    conn.execute("ALTER TABLE figures DROP COLUMN limit_kind")
+    conn.commit()
+    conn.close()
+    assert _cli("campaign", "report", db, "-o", tmp_path / "out") == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {db}: ") and "limit_kind" in err and "internal error" not in err

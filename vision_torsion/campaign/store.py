@@ -322,9 +322,17 @@ class CampaignDB:
         return AddResult(record.source, "added", report_id, version)
 
     # -- reading ---------------------------------------------------------------
+    def _query(self, sql: str, params=()) -> list:
+        """The rows of a query; an SQLite error (a damaged file, a table not as this
+        schema has it) is a CampaignError naming the file, never an internal error."""
+        try:
+            return self._conn.execute(sql, params).fetchall()
+        except sqlite3.Error as exc:
+            raise self._error(exc) from None
+
     def count(self) -> int:
         """Number of records (every version counted)."""
-        return self._conn.execute("SELECT count(*) FROM reports").fetchone()[0]
+        return self._query("SELECT count(*) FROM reports")[0][0]
 
     def reports(self, *, serial=None, model=None, since=None, latest_only: bool = False):
         """Records as a DataFrame (one row each, oldest test first), filtered by
@@ -349,7 +357,7 @@ class CampaignDB:
         if where:
             sql += " WHERE " + " AND ".join(where)
         sql += " ORDER BY test_date, id"
-        return pd.DataFrame(self._conn.execute(sql, params).fetchall(), columns=list(_REPORT_COLUMNS))
+        return pd.DataFrame(self._query(sql, params), columns=list(_REPORT_COLUMNS))
 
     def figures(self, report_ids=None, *, figure=None):
         """Figures as a long DataFrame (``report_id, figure, unit, n, value, std, u95,
@@ -371,18 +379,19 @@ class CampaignDB:
         sql = f"SELECT report_id, {', '.join(columns)} FROM figures"
         if where:
             sql += " WHERE " + " AND ".join(where)
-        frame = pd.DataFrame(self._conn.execute(sql, params).fetchall(), columns=["report_id", *columns])
+        frame = pd.DataFrame(self._query(sql, params), columns=["report_id", *columns])
         frame["flagged"] = frame["flagged"].astype(bool)
         frame["withheld"] = frame["withheld"].astype(bool)
         return frame
 
     def summary_of(self, report_id: int) -> dict:
         """The stored summary.json of a record, as it was added."""
-        row = self._conn.execute("SELECT summary_zlib FROM reports WHERE id = ?", (int(report_id),)).fetchone()
+        rows = self._query("SELECT summary_zlib FROM reports WHERE id = ?", (int(report_id),))
+        row = rows[0] if rows else None
         if row is None:
             raise CampaignError(f"{self.path}: no record {report_id}", reason="not_found")
         return json.loads(zlib.decompress(row[0]).decode("utf-8-sig"))
 
     def integrity(self) -> str:
         """SQLite's own check of the file: ``"ok"`` or what is wrong."""
-        return "; ".join(r[0] for r in self._conn.execute("PRAGMA integrity_check").fetchall())
+        return "; ".join(r[0] for r in self._query("PRAGMA integrity_check"))
