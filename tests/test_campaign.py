@@ -211,9 +211,8 @@ def test_four_processes_adding_at_once_lose_nothing(tmp_path, base):
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
     procs = [subprocess.Popen([sys.executable, "-c", _ADDER, str(db), *map(str, folders[i::4])], env=env,
                               stderr=subprocess.PIPE, text=True) for i in range(4)]
-    for p in procs:
-        _, err = p.communicate(timeout=180)
-        assert p.returncode == 0, err
+    errors = [p.communicate(timeout=180)[1] for p in procs]  # every process waited for before judging
+    assert [p.returncode for p in procs] == [0, 0, 0, 0], errors
     with CampaignDB(db) as c:
         assert c.count() == 40
         assert c.integrity() == "ok"

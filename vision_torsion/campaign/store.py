@@ -23,6 +23,7 @@ import json
 import logging
 import os
 import sqlite3
+import time
 import zlib
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -217,9 +218,11 @@ class CampaignDB:
 
     def _prepare(self) -> None:
         conn = self._conn
-        app_id = conn.execute("PRAGMA application_id").fetchone()[0]
-        version = conn.execute("PRAGMA user_version").fetchone()[0]
-        tables = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+        # one statement, one snapshot: another process may be creating the schema meanwhile
+        # (fetchall: the statement finished, no read lock kept into the journal-mode switch)
+        ((app_id, version, tables),) = conn.execute(
+            "SELECT (SELECT application_id FROM pragma_application_id), (SELECT user_version FROM pragma_user_version),"
+            " (SELECT count(*) FROM sqlite_master)").fetchall()
         if app_id != APPLICATION_ID and (app_id != 0 or tables):
             raise CampaignError(f"{self.path}: not a campaign database (an SQLite file of another application)",
                                 reason="not_a_campaign")
@@ -231,7 +234,7 @@ class CampaignDB:
             # WAL: readers never wait for an adder, and a commit costs no fsync of its own
             # (synchronous NORMAL: a killed process loses nothing committed; a power cut
             # may lose the last commits but never leaves the file inconsistent)
-            conn.execute("PRAGMA journal_mode = WAL")
+            self._use_wal()
             conn.execute("PRAGMA synchronous = NORMAL")
         if version == SCHEMA_VERSION:
             return
@@ -242,6 +245,22 @@ class CampaignDB:
                                 f"writing (campaign add) to migrate it to version {SCHEMA_VERSION}",
                                 reason="schema_version")
         self._migrate(version)
+
+    def _use_wal(self) -> None:
+        """Switch the file to WAL once. The switch needs the file to itself and SQLite
+        answers it "busy" at once, without waiting, while another process holds it
+        (several adders creating one database together): waited for here instead."""
+        deadline = time.monotonic() + _BUSY_TIMEOUT_MS / 1000
+        while True:
+            ((mode,),) = self._conn.execute("PRAGMA journal_mode").fetchall()
+            if str(mode).lower() == "wal":
+                return
+            try:
+                self._conn.execute("PRAGMA journal_mode = WAL").fetchall()
+            except sqlite3.OperationalError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.02)
 
     def _migrate(self, version: int) -> None:
         conn = self._conn
