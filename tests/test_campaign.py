@@ -278,6 +278,9 @@ def test_trend_of_a_life_test_recovers_its_drift(tmp_path, base):
     k1 = base["summary"]["k1"]["mean"]
     # truth: k1 * (1 - 0.05 h / 1000); the slope within 3 of its std
     assert abs(trend.slope - (-0.05 * k1 / 1000)) < 3 * trend.slope_std
+    line, half = trend.band(points["x"].to_numpy(float))
+    assert np.allclose(points["trend"], line) and np.allclose(points["trend_band95"], half)
+    assert (points["trend_band95"] > 0).all()
     with pytest.raises(CampaignError, match="expected 'time' or 'test-hours'"):
         figure_trend(db, "k1", by="weeks")
 

@@ -165,7 +165,9 @@ def figure_trend(db_path, figure, *, by="time", serial=None, model=None):
     Returns
     -------
     (DataFrame, Trend)
-        The points (``test_date, x, value, std, u95, serial``) and the trend of
+        The points (``test_date, x, value, std, u95, serial``) with the fitted line
+        at each (``trend``) and the half-width of its 95 % band (``trend_band95``;
+        NaN where the trend is withheld), and the trend of
         :func:`~vision_torsion.campaign.stats.fit_trend` (per day, or per hour).
     """
     import pandas as pd
@@ -188,7 +190,9 @@ def figure_trend(db_path, figure, *, by="time", serial=None, model=None):
         points["x"] = pd.to_numeric(points["test_hours"], errors="coerce")
     points = points.sort_values("x", kind="stable")
     trend = fit_trend(points["x"], points["value"], points["std"])
-    return points[["test_date", "test_hours", "x", "value", "std", "u95", "serial", "version"]], trend
+    points["trend"], points["trend_band95"] = trend.band(points["x"].to_numpy(float))
+    return points[["test_date", "test_hours", "x", "value", "std", "u95", "trend", "trend_band95", "serial",
+                   "version"]], trend
 
 
 def export_campaign(db_path, out_path, *, fmt="csv"):
