@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..analysis.conformity import DECISION_RULE, DECISIONS
 from ..errors import CampaignError
+from ..htmlpage import fmt_value, image_tag, page_html, table_html, unit_words
 from .stats import capability, control_limits
 from .store import CampaignDB
 from .views import HEADLINE_FIGURES
@@ -18,9 +19,6 @@ __all__ = ["CampaignReport", "write_campaign_report", "catalogue_limits", "REPOR
 REPORT_NAME = "campaign_report.html"
 # the figures of the batch table (all of them are charted)
 _BATCH_COLUMNS = ("k1", "k2", "lost_motion_4pct", "hysteresis_loss")
-# direction of each headline figure's catalogue limit: stiffness a minimum, the rest a maximum
-_LIMIT_SIDE = {"k1": "lower", "k2": "lower", "k3": "lower", "lost_motion_3pct": "upper",
-               "lost_motion_4pct": "upper", "hysteresis_loss": "upper", "loop_energy": "upper"}
 
 
 @dataclass(frozen=True)
@@ -66,8 +64,6 @@ def catalogue_limits(path, *, figures=HEADLINE_FIGURES):
 
 def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
     """A figure's control chart with its caption (or why there is none)."""
-    from ..htmlpage import image_tag
-
     if usable.empty:
         return f'<p class="muted">{html.escape(name)}: withheld in every report, nothing to chart.</p>'
     limits = control_limits(usable["value"].tolist())
@@ -82,8 +78,6 @@ def _chart_html(usable, *, name: str, unit: str, spec_limits) -> str:
 
 def _capability_row(usable, *, name: str, unit: str, lower, upper) -> dict:
     """A figure's row of the capability table."""
-    from ..htmlpage import unit_words
-
     cap = capability(usable["value"].tolist(), lower=lower, upper=upper)
     return {
         "figure": name, "unit": unit_words(unit), "n": cap.n,
@@ -101,7 +95,6 @@ def _limit_text(lower, upper) -> str:
 
 
 def _chart(points, limits, spec_limits, *, name: str, unit: str) -> bytes:
-    from ..htmlpage import unit_words
     from ..plotting import fixed_figure, png_bytes
 
     fig = fixed_figure(5.0, 2.4, left=0.8, bottom=0.45, top=0.15)
@@ -154,7 +147,6 @@ def write_campaign_report(db_path, out_dir, *, model=None, limits=None, figures=
     import pandas as pd
 
     from ..fileio import atomic_write_text, check_output_dir
-    from ..htmlpage import fmt_value, page_html, table_html, unit_words
 
     out_dir = check_output_dir(out_dir)
     with CampaignDB(db_path) as db:
