@@ -986,21 +986,26 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
     One candidate fitted alone gives every other fit its starting edge width and
     the reach of its neighbours' masks (:func:`neighbour_reach`), as one marker
     passes its width on to the next in the one-by-one loop of
-    :func:`find_marker_list` (the optics are the same for all). That candidate is
-    the one of median radius, not the largest: the largest of a photograph is the
-    likeliest odd one out (an out-of-focus blob beside a dot grid, fitted ``ok``
-    with an edge width of 32 px, made every dot's background ring vanish under its
-    neighbours' masks). Every fit then finds its own width.
+    :func:`find_marker_list` (the optics are the same for all): the largest, unless
+    it is an odd one out (not ``ok``, or an edge width over half the median
+    candidate's radius: an out-of-focus blob beside a dot grid, fitted ``ok`` with
+    an edge width of 32 px, made every dot's background ring vanish under its
+    neighbours' masks); then the one of median radius. Every fit then finds its own
+    width.
     """
     markers: list[Marker | None] = [_judge(b, img.shape, *radius_range, "pixels") for b in blobs]
     width = 1.2
     todo = [i for i, m in enumerate(markers) if m is None]
+    circles = _maskable(circles, [m is not None and not is_coarse_disc(b) for b, m in zip(blobs, markers)])
     if todo:
         # blobs come largest first: the middle one of those to fit has the median radius
-        i = todo.pop(len(todo) // 2)
-        markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
-        if markers[i].ok:
-            width = markers[i].edge_width_px
+        middle = todo[len(todo) // 2]
+        for i in dict.fromkeys((todo[0], middle)):
+            todo.remove(i)
+            markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
+            if markers[i].ok and markers[i].edge_width_px <= 0.5 * blobs[middle].radius:
+                width = markers[i].edge_width_px
+                break
     patches, starts, fitted = [], [], []
     for i, prepared in zip(todo, _prepared_all(img, [blobs[i] for i in todo], circles, todo, width)):
         if isinstance(prepared, FitError):
@@ -1015,6 +1020,25 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
                       else _whole(_pixels_marker(fit, patch=patch), img.shape))
     _refit_crowded(img, blobs, circles, markers, width)
     return markers
+
+
+def _maskable(circles: np.ndarray, no_disc) -> np.ndarray:
+    """`circles` (rows of x, y, r in px) with those of the candidates flagged in
+    `no_disc` (rejected before any fit, and of no disc's coarse shape:
+    :func:`~vision_torsion.detect.is_coarse_disc`) placed nowhere (NaN centres):
+    never a neighbour whose pixels are left out of a marker's fit. The coarse circle
+    of such a region (a vignetted border's dark band cut by the frame, axis ratio
+    0.1, r 446 px on a 2560x2160 photo) runs through the grid far from its pixels:
+    the dots on that circle lost half their ring to it and came out 0.2-0.3 px off.
+    The discs found inside such a region are candidates of their own; a region as
+    dark as a marker that reaches into its ring is cut by the fit itself
+    (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`)."""
+    flags = np.asarray(no_disc, bool)
+    if not flags.any():
+        return circles
+    out = circles.copy()
+    out[flags, :2] = np.nan
+    return out
 
 
 def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float) -> None:
