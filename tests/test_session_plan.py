@@ -78,7 +78,7 @@ def test_capture_sheet(tmp_path):
     sheet = (tmp_path / "capture_sheet.md").read_text()
     assert "requested 0.36 N·m is not a whole number of steps; snapped down" in sheet
     step = couple_torque(0.1, "negative_loading", load_session(
-        tmp_path, check_files=False).config.rig, step_mass_kg=0.02).torque_nm
+        tmp_path, check_files=False).config.rig).torque_nm
     assert f"{step:+.5f}" == "-0.09810"
     assert ("| negative_loading | 5 | empty | 100 g (5 × 20 g) | -0.09810 | "
             "`images/o000_c1_03_negative_loading_s05.png` |") in sheet

@@ -225,7 +225,7 @@ class SessionPlan:
         """One sentence naming T_R and the levels as planned ("" without a rated torque)."""
         if self.rated_torque_nm is None:
             return ""
-        step = self.config.protocol.step_mass_kg
+        step = self.config.rig.step_mass_kg
         parts = [f"{lv.label} → {lv.pieces} × {_num(step * 1000)} g per pan = ±{lv.torque_nm:.5f} N·m "
                  f"({100 * lv.achieved_fraction:.3g} % of T_R)" for lv in self.lost_motion_levels]
         return (f"Rated torque T_R = {self.rated_torque_nm:g} N·m (session.toml: [gear] rated_torque_nm). "
@@ -293,7 +293,7 @@ def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".pn
                 "cycle": str(cycle),
                 "phase": phase,
                 "step": str(step),
-                "mass_kg": _num(pieces * proto.step_mass_kg),
+                "mass_kg": _num(pieces * config.rig.step_mass_kg),
             }
         )
 
@@ -317,9 +317,8 @@ def _pan_text(pieces: int, step_mass_kg: float) -> str:
 
 def _capture_sheet(plan: SessionPlan) -> str:
     cfg, n = plan.config, plan.steps_per_phase
-    step = cfg.protocol.step_mass_kg
     rig = cfg.rig
-    per_step = couple_torque(step, "positive_loading", rig, step_mass_kg=step).torque_nm
+    step, per_step = rig.step_mass_kg, rig.step_torque_nm
     lines = [
         "# Capture sheet",
         "",
@@ -370,7 +369,7 @@ def _capture_sheet(plan: SessionPlan) -> str:
                 "|---|---|---|---|---|---|---|---|---|",
             ]
         pieces = round(float(row["mass_kg"]) / step)
-        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig, step_mass_kg=step).torque_nm
+        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig).torque_nm
         plus = _pan_text(pieces if row["phase"].startswith("positive") else 0, step)
         minus = _pan_text(pieces if row["phase"].startswith("negative") else 0, step)
         number += 1
@@ -443,7 +442,7 @@ def plan_session(
         Cycles of the four phases per orientation.
     gravity_m_per_s2, mass_tolerance_kg, friction_torque_std_nm, arm_radius_std_m,
     gravity_std_m_per_s2 :
-        Rig constants written to ``[rig]`` (see :class:`RigConfig`);
+        Rig constants written to ``[rig]`` (see :class:`~vision_torsion.measurements.TorqueRig`);
         `mass_tolerance_kg` is the ± bound of one weight piece (the paper's ±0.1 g
         by default).
     polarity, radius_range :
@@ -585,7 +584,7 @@ def plan_session(
             f"plan_session: image_suffix {image_suffix!r} is not an image "
             f"type; expected one of {', '.join(IMAGE_SUFFIXES)}"
         )
-    per_step = config.torque_rig.step_torque_nm
+    per_step = config.rig.step_torque_nm
     n = math.floor(max_torque_nm / per_step + 1e-9)
     planned_max = float(f"{n * per_step:.12g}")  # no 0.35316000000000003 in the file
     if n < 1:
