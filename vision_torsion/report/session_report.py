@@ -123,8 +123,9 @@ def _stiffness_section(measurements: pd.DataFrame):
     from ..errors import VisionTorsionError
     from ..htmlpage import image_tag as _img
     from ..htmlpage import table_html as _table
-    from ..stiffness.report import stiffness_section
+    from ..stiffness.section import stiffness_section
     from .figures import svg_bytes
+    from .stiffness_figures import section_figures
 
     try:
         section = stiffness_section(measurements)
@@ -140,7 +141,7 @@ def _stiffness_section(measurements: pd.DataFrame):
         "<code>stiffness_steps.csv</code>.</p>",
         _table(_step_table(section.summary), left=("step",)),
     ]
-    for name, fig in section.figures.items():
+    for name, fig in section_figures(section).items():
         parts.append(f"<figure>{_img(svg_bytes(fig), name.replace('_', ' '))}</figure>")
     return _STIFFNESS_TITLE, "\n".join(parts), section.steps
 
