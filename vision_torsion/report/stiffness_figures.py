@@ -41,6 +41,7 @@ def plot_torque_angle(result) -> Figure:
     Parameters
     ----------
     result : StiffnessResult
+        A record's analysis (:func:`~vision_torsion.stiffness.analyze_stiffness_curve`).
 
     Returns
     -------
@@ -74,6 +75,7 @@ def plot_stiffness(result) -> Figure:
     Parameters
     ----------
     result : StiffnessResult
+        With at least one fitted branch (``result.curves``).
 
     Returns
     -------
