@@ -136,6 +136,8 @@ def test_session_toml_rig_reads_into_the_torque_rig_which_is_checked_once():
     assert written["protocol"]["step_mass_kg"] == 0.02 and "step_mass_kg" not in written["rig"]
     with pytest.raises(RigError, match=r"rig: mass_std_kg 0.0001 is not mass_tolerance_kg / sqrt\(3\) = 5.7735e-05"):
         TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, mass_tolerance_kg=1e-4, arm_radius_m=0.05)
+    with pytest.raises(RigError, match=r"rig: mass_tolerance_kg must be a finite number >= 0, got -0.0001"):
+        TorqueRig.from_tolerance(mass_tolerance_kg=-1e-4, step_mass_kg=0.02, arm_radius_m=0.05)
     with pytest.raises(RigError, match="rig: arm_radius_m must be a finite number > 0, got 0.0"):
         TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.0)
     with pytest.raises(RigError, match=r"rig: missing key\(s\) \['mass_std_kg'\], unknown key\(s\) \['mass'\]"):
