@@ -172,7 +172,7 @@ def test_invalid_tables_raise(mutate, match):
 
 def test_invalid_options_raise():
     df = simulate_measurements(**TRUTH, orientations_deg=(0,), mass_std_kg=0, rng=np.random.default_rng(0))
-    with pytest.raises(AnalysisError, match="n_draws must be at least 10"):
+    with pytest.raises(AnalysisError, match=r"n_draws must be a whole number >= 10, got 1"):
         analyze_session(df, n_draws=1)
     with pytest.raises(AnalysisError, match="secant_interval must be fractions"):
         analyze_session(df, secant_interval=(0.8, 0.2))
