@@ -60,6 +60,7 @@ import pandas as pd
 
 from .catalogue_figures import CATALOGUE_UNITS, catalogue_figures
 from .data_checks import SessionChecks, outlier_issues, session_checks
+from .fitcheck import local_torque_std
 from .loop_figures import loop_figure_units, loop_figures
 from .loops import Loop, build_loops, validate_measurements
 from .model_figures import BILINEAR_UNITS, model_figures, no_fits
@@ -302,12 +303,16 @@ def analyze_session(measurements, *, options: AnalysisOptions | None = None, **k
                                            return_kinds=True)
     issues, rows, phase_rows, fits, outliers = list(found.issues), [], [], {}, []
     orientation_all = usable["orientation_deg"].to_numpy(float)
+    # each row's image-to-image torque 1σ, as the loops have it (a later cycle's loop also holds the image it
+    # borrows from the cycle before, so the loops' arrays laid end to end are not the rows)
+    common = usable["torque_common_std_nm"].to_numpy(float) if "torque_common_std_nm" in usable else None
+    local_all = local_torque_std(usable["torque_std_nm"].to_numpy(float), common)
     for orient, seq in usable.groupby("orientation_deg", sort=True):
         in_orientation = [lp for lp in loops if lp.orientation_deg == float(orient)]
         context = {
             "seq": seq.reset_index(drop=True),
-            "local_std": np.concatenate([lp.local_std() for lp in in_orientation]) if in_orientation else np.zeros(0),
-            "sources": all_sources[np.flatnonzero(orientation_all == orient)],
+            "local_std": local_all[orientation_all == orient],
+            "sources": all_sources[orientation_all == orient],
             "kinds": kinds,
             "levels": levels,
         }
