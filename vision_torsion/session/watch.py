@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text, check_output_dir
+from ..fileio import atomic_write_text, check_output_dir, check_replaceable
 from ..images import IMAGE_SUFFIXES, MAX_IMAGE_FILE_BYTES
 from ..measure import natural_key
 from ..measurements import output_folder
@@ -160,7 +160,9 @@ class Watcher:
         `events` is not one of "auto", "poll".
     OutputError
         The output folder, or with a camera folder the session folder (where
-        ``binding.json`` goes), cannot be written: said before any photograph.
+        ``binding.json`` goes), cannot be written, or the output folder holds a
+        ``live.html`` or ``live-stamp.js`` this tool did not write: said before any
+        photograph.
 
     Use as a context manager (or call :meth:`close`): closing merges the cache.
     """
@@ -186,6 +188,8 @@ class Watcher:
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
         # before the first photograph: a watch must not announce itself and then die
         check_output_dir(self.out)  # live.html and the cache
+        if page:  # another program's page or stamp is refused before anything is written
+            check_replaceable([self.out / LIVE_PAGE_NAME, self.out / LIVE_STAMP_NAME])
         if self.camera_mode:
             check_output_dir(folder)  # binding.json
         self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
@@ -308,11 +312,8 @@ class Watcher:
                 st = e.stat()
             except OSError:  # vanished meanwhile: the next tick says so
                 continue
-            if st.st_size > MAX_IMAGE_FILE_BYTES and name not in self.done:  # the image reader's rule
-                self.set_aside[name] = "too large"
-                events.append(self._notice("ignored", name, f"{name}: {st.st_size} bytes, larger than an "
-                                           f"image file may be ({MAX_IMAGE_FILE_BYTES} bytes); not read, "
-                                           "not bound"))
+            if (big := self._too_large(name, st.st_size)) is not None:
+                events.append(big)
                 continue
             info = self.seen.get(name)
             if info is None or (info.size, info.mtime_ns) != (st.st_size, st.st_mtime_ns):
@@ -359,6 +360,15 @@ class Watcher:
     def _notice(self, kind, name, message, line=None) -> WatchEvent:
         self.notices.append(message)
         return WatchEvent(kind, name, message, line)
+
+    def _too_large(self, name: str, size: int) -> WatchEvent | None:
+        """A file not bound yet and larger than the image reader accepts: set aside
+        without being read (its notice), else None."""
+        if size <= MAX_IMAGE_FILE_BYTES or name in self.done:
+            return None
+        self.set_aside[name] = "too large"
+        return self._notice("ignored", name, f"{name}: {size} bytes, larger than an image file may be "
+                            f"({MAX_IMAGE_FILE_BYTES} bytes); not read, not bound")
 
     def _position(self, name: str) -> int | None:
         return next((p for p, b in self.bound.items() if b.file == name), None)
