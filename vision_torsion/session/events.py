@@ -179,9 +179,17 @@ class FolderEvents:
             st = os.stat(self.folder)
         except OSError:
             return False
-        if self._watch is not None and self._identity == (st.st_dev, st.st_ino):
+        if self._watch is not None and self._identity == (st.st_dev, st.st_ino) and self._alive():
             return True
         return self.rearm()
+
+    def _alive(self) -> bool:
+        """The notifications of the folder still come (they stop with the folder,
+        which a new one may replace under the same inode number)."""
+        emitters = getattr(self._observer, "emitters", None)
+        if emitters is None:  # an observer without the listing: trusted
+            return True
+        return any(e.watch == self._watch and e.is_alive() for e in emitters)
 
     def rearm(self) -> bool:
         """Set the notifications up (again); True when they are on. Does nothing

@@ -35,7 +35,8 @@ A tick:
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
    blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
    one (> 0.5 % of the pixels at full scale), are returned at once as events.
-5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically, and
+5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
+   its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
    seconds and at the end.
 
