@@ -507,13 +507,14 @@ def fit_marker(
         (k, 3) coarse circles (x, y, radius in px) of other candidates close enough
         to reach into this marker's ring: their pixels are left out of the
         default fit (``fit="pixels"``; dense dot grids). The edge-point fits use
-        a narrower band and ignore it.
+        a narrower band and ignore it. A default fit that fails among them is made
+        once more with the gaps to them split (:func:`crowded_patch`).
 
     Returns
     -------
     Marker
         Status ``ok`` with the centre and its covariance, or ``fit_failed`` /
-        ``low_contrast`` with the reason.
+        ``low_contrast`` / ``not_round`` / ``occluded`` with the reason.
     """
     if fit == "pixels":
         marker = _fit_pixels(image, blob, edge_width, neighbours)
