@@ -1,6 +1,6 @@
 """Large real-camera images: a 20-MP JPEG session, grey and colour (issue 31, item 3).
 
-Run (renders ~37 images per session at run time, then times whole commands; about
+Run (renders 38 images per session at run time, then times whole commands; about
 5-10 minutes on 2 cores)::
 
     python benchmarks/bench_jpeg20.py
@@ -190,7 +190,7 @@ def _cut_after_row(raw: bytes, row: int, height: int) -> bytes | None:
         return None
     scan_start = start + 2 + int.from_bytes(raw[start + 2:start + 4], "big")
     scan_end = raw.rfind(b"\xff\xd9")
-    frac = min(1.0, (row + 16) / height)  # the MCU row holding `row` (16 px for 4:2:0)
+    frac = min(1.0, (row + 16) / height)  # to the end of the MCU row holding `row` (8 px grey, 16 for 4:2:0)
     cut = scan_start + int((scan_end - scan_start) * frac)
     return raw[:cut] + b"\xff\xd9"
 
