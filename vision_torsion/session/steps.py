@@ -231,6 +231,8 @@ def _scan(points, step_torque_nm, open_end, prior=None):
             out.append(warn)
             state.after_warning = True
             state.flagged.add(s.index)
+            if not warn.decided:  # the last step: the gear, maybe; the second look decides it
+                state.seen.setdefault(state.place(s.span), {})[s.index] = s.compliance
     return out, state.seen
 
 
