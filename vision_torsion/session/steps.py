@@ -231,7 +231,8 @@ def _scan(points, step_torque_nm, open_end, prior=None):
             out.append(warn)
             state.after_warning = True
             state.flagged.add(s.index)
-            if not warn.decided:  # the last step: the gear, maybe; the second look decides it
+            state.shifted = state.shifted or (warn.decided and warn.kind in ("no_movement", "large_step"))
+            if not warn.decided and not state.shifted:  # the last step: the gear, maybe; the second look decides it
                 state.seen.setdefault(state.place(s.span), {})[s.index] = s.compliance
     return out, state.seen
 
@@ -275,6 +276,7 @@ class _State:
         self.seen: dict = {}  # place in the loop -> {step's image index: compliance} of steps that fitted
         self.prior = prior or {}  # the same, from a first look at a closed sequence
         self.flagged: set = set()  # image indices of the steps warned about
+        self.shifted = False  # an extra or missed shot decided: the later files are bound a row off
         self.after_warning = False  # the step after a mistake makes up for it: no reference
 
     def single(self, d_tau) -> bool:
@@ -326,7 +328,8 @@ class _State:
     def accept(self, s) -> None:
         if not self.after_warning:
             self.local = s.compliance
-            self.seen.setdefault(self.place(s.span), {})[s.index] = s.compliance
+            if not self.shifted:  # (check_steps looks at the rest again, bound with the fix)
+                self.seen.setdefault(self.place(s.span), {})[s.index] = s.compliance
         self.after_warning = False
 
 
