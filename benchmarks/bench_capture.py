@@ -1,31 +1,32 @@
 """Capture mistakes caught at the rig: detections and false alarms of ``watch`` and
-``bind`` over simulated sessions of different gears (issue 28).
+``bind`` over simulated sessions of different gears and both target types (issue 28).
 
-    python benchmarks/bench_capture.py [--seeds N] [--steps K]
+    python benchmarks/bench_capture.py [--seeds N] [--steps K] [--targets ...] [--target-seeds M]
 
 Every session is one orientation of a gear photographed by the scripted camera
-(:func:`vision_torsion.synthetic.camera.capture_script`, the 320×240 two-marker
-scene of the rig tests, 4 weight steps per phase by default: 18 photographs), with
-one capture mistake at a row drawn from the seed, or none. Gears: the paper's
-bilinear model at three switching torques, a three-segment spring (stiffening
-twice) with a friction offset between the loading directions, and a Masing gear
-(a softening skeleton curve, every branch the skeleton doubled from its reversal).
-Mistakes: a missed shot, an extra shot, a weight piece forgotten, two shots
-swapped, a camera bump of 1 px, one of 3 px and 0.05°, a blurred photograph, a
-wrong angle_sign; and clean sessions.
+(:func:`vision_torsion.synthetic.camera.capture_script`, a 320×240 scene, 4 weight
+steps per phase by default: 18 photographs), with one capture mistake at a row drawn
+from the seed, or none. Gears: the paper's bilinear model at three switching torques,
+a three-segment spring behind friction and a Masing gear
+(:mod:`vision_torsion.synthetic.gears`). Mistakes: a missed shot, an extra shot, a
+weight piece forgotten, two shots swapped, a camera bump of 1 px, one of 3 px and
+0.05°, a blurred photograph, a wrong angle_sign; and clean sessions. Targets: two
+markers, and the N-marker ring16 (session.toml ``[target]``) drawn in the same frame.
 
 Each session is watched as its photographs arrive (``Watcher``, one tick per
 photograph) and then bound (``bind_session``). Counted:
 
-- watch detected: a warning names the mistake's photograph or the one after it,
-  with the right diagnosis (a pattern of its message), by the time the
-  photograph after it is in;
-- bind detected: its fix or diagnosis names it (the same patterns);
-- false alarms: warnings of watch on photographs other than the mistake's and
-  the one after it, and warnings withdrawn (an undecided step at the end of a
-  branch is withdrawn when the same step elsewhere in the loop shows the gear's
-  own kink); "standing": those photographs still warned about at the end; on
-  clean sessions, anything bind says at all.
+- watch found: a warning on the mistake's photograph or the one after it, said by
+  the time the photograph after it is in, with the right diagnosis and its fix
+  naming the right file and line (``--skip FILE``, ``--missing LINE``, ``--swap A B``,
+  ``--skip FILE --missing LINE`` for a forgotten piece; shoot again for a bump or a
+  blur; ``set angle_sign``);
+- bind found: its fix or diagnosis says the same (the same patterns);
+- watch false: warnings on other photographs, plus warnings withdrawn; "standing":
+  the photographs still warned about at the end; bind false: on clean sessions,
+  anything bind says at all;
+- photographs measured by watch and by bind, and whether ``process`` refuses the
+  session (an N-marker target: ``target_not_processed``).
 
 Results go to benchmarks/results/capture.json.
 """

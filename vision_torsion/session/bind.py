@@ -412,7 +412,7 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
             sw = cur_swap + [(file.name, other[1].name)] if kind == "swap" else cur_swap
             nb, _, nw = evaluate(sk, mi, sw)
             still = any(nb[p][1] is file for p, _ in nw)
-            score = (len(nw), misfit(nb))
+            score = len(nw) + misfit(nb) / math.log(2)  # a step off by 2× weighs as a misfit
             if len(nw) < len(w) and not still and (best is None or score < best[10]):
                 best = (kind, file, r, nw, nb, sk, mi, sw, other, warning, score)
         if best is None:

@@ -82,6 +82,7 @@ WARNING_KINDS = ("no_movement", "wrong_direction", "small_step", "large_step")
 _STILL_SIGMAS = 5.0
 _SMALL = 0.87
 _ALONE = 0.6
+_TREND = 2.0
 _LARGE = (1.6, 2.6)
 _RECOVERY = 1.8
 _GOES_ON = 0.7
@@ -272,6 +273,7 @@ class _State:
     def __init__(self, step_torque_nm, prior=None):
         self.step = step_torque_nm
         self.local = None  # compliance (deg/N·m) of the last step of this branch that fitted
+        self.before = None  # and of the one that fitted before it (the branch's trend)
         self.direction = None
         self.seen: dict = {}  # place in the loop -> {step's image index: compliance} of steps that fitted
         self.prior = prior or {}  # the same, from a first look at a closed sequence
@@ -283,7 +285,7 @@ class _State:
         return 0.5 < abs(d_tau) / self.step < 2.5
 
     def new_branch(self, direction) -> None:
-        self.local, self.direction, self.after_warning = None, direction, False
+        self.local, self.before, self.direction, self.after_warning = None, None, direction, False
 
     def place(self, span):
         a, b = (round(abs(t) / self.step, 3) for t in span)
@@ -316,7 +318,13 @@ class _State:
         e = self.same_step(s)
         if e is not None:
             return e, True
-        return (self.local * s.d_tau, False) if self.local is not None else (None, False)
+        if self.local is None:
+            return None, False
+        # the branch's trend goes on (a gear stiffening or softening along it by less than 2× a
+        # step); after a kink (a jump beyond that) the new compliance holds
+        trend = 1.0 if self.before is None else self.local / self.before
+        trend = trend if 1 / _TREND <= trend <= _TREND else 1.0
+        return self.local * trend * s.d_tau, False
 
     def out_of_line(self, s) -> bool:
         e, same = self.expected(s)
@@ -326,8 +334,10 @@ class _State:
         return abs(math.log(r)) > math.log(_SAME_FIT) if same else (r < _SMALL or _LARGE[0] < r < _LARGE[1])
 
     def accept(self, s) -> None:
-        if not self.after_warning:
-            self.local = s.compliance
+        if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:
+            self.before = self.local = None  # across a gap (a row without a photograph): no reference
+        elif not self.after_warning:
+            self.before, self.local = self.local, s.compliance
             if not self.shifted:  # (check_steps looks at the rest again, bound with the fix)
                 self.seen.setdefault(self.place(s.span), {})[s.index] = s.compliance
         self.after_warning = False
