@@ -21,8 +21,10 @@ on. Two photographs taken the other way round are found the same way (exchanging
 them, ``swap``, makes their steps fit). A photograph of a wrong load (a weight
 piece forgotten on a pan: its step half as large as expected, the next making up
 for it) is left out with its row marked as not photographed (``drop``: both at
-once, so that no other file moves). Misfits no re-binding explains are listed
-with the file and the row.
+once, so that no other file moves). Of the fixes that leave as few misfits, the
+one whose steps are the loop's own elsewhere (:func:`~.steps.step_misfit`; a step
+off by 2× weighs as one misfit) is proposed. Misfits no re-binding explains are
+listed with the file and the row.
 
 Besides the steps, what the photographs themselves show is diagnosed, one line
 each: an ``angle_sign`` inverted (the first loaded image of most orientations

@@ -15,7 +15,9 @@ torque step Δτ the plan says was made between them:
   magnitudes, moving away from zero or back towards it alike: the other side of
   the loop, an earlier cycle) when that one fitted: out of line beyond 8 % of it.
   Before the loop has shown it (the first half-loop), the previous step of the
-  branch is the reference (e = its compliance × Δτ): out of line below 0.87 e or
+  branch is the reference, carried on by the branch's trend (e = its compliance ×
+  the ratio of the last two steps' when that is within 2×, else 1, × Δτ; a step
+  over a row without a photograph is no reference): out of line below 0.87 e or
   between 1.6 e and 2.6 e (for the last step of a closed sequence, which no next
   step decides, below 0.6 e: a gear drifts along a branch by less).
 
