@@ -4,7 +4,7 @@
     python benchmarks/bench_capture.py [--seeds N] [--steps K]
 
 Every session is one orientation of a gear photographed by the scripted camera
-(:func:`vision_torsion.synthetic.camera.capture_script`, the 320×240 two-marker
+(:func:`vision_torsion.synthetic.scripted_camera.capture_script`, the 320×240 two-marker
 scene of the rig tests, 4 weight steps per phase by default: 18 photographs), with
 one capture mistake at a row drawn from the seed, or none. Gears: the paper's
 bilinear model at three switching torques, a three-segment spring (stiffening
@@ -51,8 +51,8 @@ from vision_torsion.analysis.models import bilinear_response  # noqa: E402
 from vision_torsion.session.bind import bind_session  # noqa: E402
 from vision_torsion.session.watch import Watcher  # noqa: E402
 from vision_torsion.synthetic import Scene  # noqa: E402
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script  # noqa: E402
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec  # noqa: E402
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script  # noqa: E402
 from vision_torsion.synthetic.session import SessionSpec  # noqa: E402
 
 SCENE = Scene(image=ImageSpec(320, 240),
