@@ -4,7 +4,7 @@
     python benchmarks/bench_capture.py [--seeds N] [--steps K] [--targets ...] [--target-seeds M]
 
 Every session is one orientation of a gear photographed by the scripted camera
-(:func:`vision_torsion.synthetic.camera.capture_script`, a 320×240 scene, 4 weight
+(:func:`vision_torsion.synthetic.scripted_camera.capture_script`, a 320×240 scene, 4 weight
 steps per phase by default: 18 photographs), with one capture mistake at a row drawn
 from the seed, or none. Gears: the paper's bilinear model at three switching torques,
 a three-segment spring behind friction and a Masing gear
@@ -54,11 +54,11 @@ from vision_torsion.session.plan import plan_session  # noqa: E402
 from vision_torsion.session.process import process_session  # noqa: E402
 from vision_torsion.session.watch import Watcher  # noqa: E402
 from vision_torsion.synthetic import Scene  # noqa: E402
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script  # noqa: E402
 from vision_torsion.synthetic.gears import masing_response, three_segment_response  # noqa: E402
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec  # noqa: E402
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script  # noqa: E402
 from vision_torsion.synthetic.session import SessionSpec  # noqa: E402
-from vision_torsion.synthetic.targets import target_scene  # noqa: E402
+from vision_torsion.synthetic.target_scenes import target_scene  # noqa: E402
 
 SCENE = Scene(image=ImageSpec(320, 240),
               disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),

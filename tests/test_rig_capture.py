@@ -2,7 +2,7 @@
 weight; ``bind`` finds them and proposes the fix; after binding, measurements.csv is
 the same as the same photographs' under the planned names.
 
-The session: the synthetic renderer (:mod:`vision_torsion.synthetic.camera`) on a
+The session: the synthetic renderer (:mod:`vision_torsion.synthetic.scripted_camera`) on a
 small 320×240 scene, two orientations of four steps per phase (36 rows), the
 paper's bilinear model (k_u = 4.4, k_l = 0.3 N·m/rad, τ_c = 0.15 N·m): steps of
 0.255° on the stiff branch and 3.75° on the soft one, angle noise ~0.001°.
@@ -16,8 +16,8 @@ from vision_torsion.cli import main
 from vision_torsion.session import process_session
 from vision_torsion.session.bind import bind_session
 from vision_torsion.synthetic import Scene
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.session import SessionSpec
 
 SCENE = Scene(image=ImageSpec(320, 240),

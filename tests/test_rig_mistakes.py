@@ -19,9 +19,9 @@ from vision_torsion.session.bind import bind_session
 from vision_torsion.session.steps import StepPoint, check_steps
 from vision_torsion.session.watch import Watcher
 from vision_torsion.synthetic import Scene
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.gears import masing_response, three_segment_response
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.session import SessionSpec
 
 SCENE = Scene(image=ImageSpec(320, 240),
