@@ -142,17 +142,17 @@ class ShotMeasurer:
 
     def __init__(self, session: Session, out_dir, *, measure=None):
         from ..pair import measure_pair
-        from .process import _settings_key, _valid_entry  # process's cache key and check
+        from .process import _measuring  # process's measuring function, cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
-        self.key = _settings_key(self.settings, measure_pair if measure is None else measure)
+        measure, self.key, self._check = _measuring(session, measure_pair if measure is None else measure)
+        self.target = session.config.target
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
-        self._check = _valid_entry
-        self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
+        self.cached, self._logs = read_cache(self.cache_dir, check=self._check)
         self._run = CacheLog.new_run()
         self._stack = ExitStack()
-        self._measure = measure
+        self._measure = None if measure is measure_pair else measure
 
     def __enter__(self):
         from .worker import in_process
@@ -215,5 +215,11 @@ class ShotMeasurer:
             message = entry.get("message", "").replace(str(path), path.name)
             return Shot(path, None, message, image, cached, timings, image_hash=image_hash,
                         saturated_fraction=saturated)
-        return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings,
-                    image_hash=image_hash, saturated_fraction=saturated)
+        if self.target is None:
+            pair, message = PairMeasurement.from_dict(entry["pair"]), ""
+        else:  # an N-marker target: two of its dots, named from the whole layout
+            from .targetrows import FoundMarkers, target_pair
+
+            pair, message = target_pair(FoundMarkers.from_dict(entry["pair"]), self.target, name=path.name)
+        return Shot(path, pair, message, image, cached, timings, image_hash=image_hash,
+                    saturated_fraction=saturated)
