@@ -184,9 +184,22 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
     return frame, {"cycles": params, "spec": dataclasses.asdict(spec)}
 
 
+def _target_scene(scene: Scene, target):
+    """`scene` with the dots of `target` for markers (the farthest at the scene's
+    marker distance), and the target read."""
+    from ..targets import Target, load_target
+    from .targets import target_scene
+
+    target = target if isinstance(target, Target) else load_target(target)
+    reach_mm = float(np.max(np.hypot(target.centres_mm[:, 0], target.centres_mm[:, 1])))
+    if not reach_mm > 0:
+        raise SceneError(f"target {target.name!r}: every dot is on the shaft axis; nothing turns")
+    return target_scene(target, px_per_mm=scene.markers.distance_px / reach_mm, base=scene), target
+
+
 def write_session_folder(
     scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False, overwrite: bool = False,
-    header: dict | None = None, catalogue=None,
+    header: dict | None = None, catalogue=None, target=None,
 ) -> Path:
     """Plan and render a complete synthetic test session.
 
@@ -208,6 +221,13 @@ def write_session_folder(
         The test's identity and the gear type's catalogue file, as
         :func:`~vision_torsion.session.plan.plan_session` takes them (into
         session.toml's ``[gear]``, ``[test]`` and ``[spec]``).
+    target : Target, str or os.PathLike, optional
+        An N-marker target (a ready target's name such as ``"ring16"``, a target
+        file): its dots replace the scene's two markers
+        (:func:`~vision_torsion.synthetic.target_scene`), scaled so the dot farthest
+        from the shaft sits at the scene's marker distance, with the scene's
+        polarity, optics and noise; session.toml gets its ``[target]``, and
+        truth.csv every dot's true centre (``marker1_x_px`` is dot 0).
 
     Returns
     -------
@@ -219,7 +239,9 @@ def write_session_folder(
     ------
     SceneError
         A rotation of the session would take a marker out of the frame (checked
-        before any image is written).
+        before any image is written), or the scaled target does not fit it.
+    TargetError
+        `target` cannot be read.
     SessionError
         Invalid rig or protocol, or the folder already holds a session.
     """
@@ -227,6 +249,8 @@ def write_session_folder(
     from ..session.plan import plan_rows, plan_session
 
     out = Path(out_dir)
+    if target is not None:
+        scene, target = _target_scene(scene, target)
     suffix = ".jpg" if scene.noise.jpeg_quality else ".png"
     # the rows the plan will hold, so the rotations are checked against the frame
     # before anything is written
@@ -267,6 +291,7 @@ def write_session_folder(
         angle_sign=spec.angle_sign,
         header=header,
         catalogue=catalogue,
+        **({} if target is None else {"target": target}),
     )
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
