@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 from helpers import run_cli
 
+from vision_torsion.correction import PlaneCorrection
 from vision_torsion.images import load_image, write_image
 from vision_torsion.measurements import RESULT_COLUMNS, TARGET_RESULT_COLUMNS, read_measurements
 from vision_torsion.session.bind import bind_session
@@ -215,3 +216,22 @@ def test_synth_refuses_an_unknown_target(tmp_path, capsys, cli_logging):
     code, _, err = run_cli(capsys, "synth", "session", tmp_path / "s", "--scene", "paper_session",
                            "--target", "ring99", "-q")
     assert code == 2 and "ring99: no such file" in err and not (tmp_path / "s" / "session.toml").exists()
+
+
+def test_a_plane_correction_is_applied_to_every_centre(ring_session, tmp_path):
+    # a similarity (scale 2, turned 30°) changes no relative turn: the angles stay, the shifts
+    # turn and double; the radii scale with the centres, so the dots are still recognised
+    folder = _copy(ring_session, tmp_path / "s")
+    a = math.radians(30.0)
+    PlaneCorrection(2.0 * np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0],
+                                    [0.0, 0.0, 0.5]])).save(folder / "plane.toml")
+    toml = folder / "session.toml"
+    toml.write_text(toml.read_text(encoding="utf-8").replace('pair = "largest"\n',
+                                                             'pair = "largest"\ncorrection = "plane.toml"\n'),
+                    encoding="utf-8")
+    _, plain, _ = _measure(ring_session)
+    res, table, _ = _measure(folder)
+    assert res.n_ok == 10 and res.n_measured == 10
+    assert np.allclose(table["angle_deg"], plain["angle_deg"], atol=1e-9, rtol=0)
+    assert np.allclose(table["angle_std_deg"], plain["angle_std_deg"], rtol=1e-6)
+    assert np.allclose(table["centre_shift_x_std_px"], 2 * plain["centre_shift_x_std_px"], rtol=0.2)

@@ -45,7 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import TargetError
+from ..errors import MarkerError, TargetError
+from ..images import as_grey_array
 from ..markers import find_candidates, find_marker_list
 from ..measurements import TARGET_RESULT_COLUMNS
 from ..quality import SUSPECT
@@ -118,11 +119,6 @@ class FoundMarkers:
         return frame
 
 
-def _all_candidates(img, settings: MeasureSettings):
-    """Every candidate of the image (an N-marker target needs all, not the two largest)."""
-    return find_candidates(img, settings)
-
-
 def measure_target_markers(image, *, settings: MeasureSettings | None = None, name: str | None = None,
                            candidates=None) -> FoundMarkers:
     """Find and fit every marker of one image of an N-marker target session.
@@ -153,9 +149,6 @@ def measure_target_markers(image, *, settings: MeasureSettings | None = None, na
     MarkerError
         No marker is found (reason ``no_markers``).
     """
-    from ..errors import MarkerError
-    from ..images import as_grey_array
-
     settings = settings or MeasureSettings()
     img = as_grey_array(image, keep_integers=True)
     found = find_marker_list(img, settings, candidates=candidates)
@@ -166,7 +159,9 @@ def measure_target_markers(image, *, settings: MeasureSettings | None = None, na
     return FoundMarkers({k: tuple(float(getattr(m, k)) for m in ok) for k in TARGET_MARKER_FIELDS}, len(found))
 
 
-measure_target_markers.find_candidates = _all_candidates
+#: What the session's reading threads find ahead of it (:func:`~.worker.prepare_task`):
+#: every candidate, where :func:`~vision_torsion.pair.measure_pair` needs only the largest.
+measure_target_markers.find_candidates = find_candidates
 
 
 def valid_target_entry(entry: dict) -> bool:
