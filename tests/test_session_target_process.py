@@ -110,6 +110,16 @@ def test_bump_missing_dropped_and_hidden_index_are_reported(ring_session, tmp_pa
     assert "the index mark (dot 0) of the target 'ring16' is not seen" in table["message"][3]
     assert math.isnan(table["angle_deg"][3])
     assert res.n_failed == 3 and {img for img, _ in res.failures} == set(truth["image"][[3, 5, 7]])
+    assert res.failure_statuses == ("ambiguous", "suspect", "marker_missing")
+
+
+def test_process_command_names_each_row_by_its_status(ring_session, tmp_path, capsys, cli_logging):
+    folder = _copy(ring_session, tmp_path / "s")
+    truth = pd.read_csv(folder / "truth.csv")
+    _hide(folder, truth, 2, 11)
+    code, _, err = run_cli(capsys, "process", folder, "-j", "1", "-q")
+    assert code == 1
+    assert err.strip() == f"marker_missing: {truth['image'][2]}: no marker at dot(s) 11 of the target 'ring16'"
 
 
 def test_a_symmetric_target_is_ambiguous_never_a_wrong_identity(tmp_path, small_scene):

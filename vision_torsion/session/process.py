@@ -99,6 +99,8 @@ class ProcessResult:
         Image files in the session (or bound camera) folder that no row names.
     suspect : tuple of str
         The images among `failures` whose status is ``suspect`` (the others failed).
+    failure_statuses : tuple of str
+        The status of each of `failures`, in the same order.
     """
 
     measurements_path: Path
@@ -111,6 +113,7 @@ class ProcessResult:
     pending: tuple[tuple[str, str], ...] = ()
     unlisted: tuple[str, ...] = ()
     suspect: tuple[str, ...] = ()
+    failure_statuses: tuple[str, ...] = ()
 
     @property
     def n_pending(self) -> int:
@@ -527,4 +530,5 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
                          failures=failures,
                          pending=tuple((r["image"], r["message"]) for r in waiting),
                          unlisted=unlisted,
-                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT))
+                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT),
+                         failure_statuses=tuple(r["status"] for r in failed))
