@@ -245,3 +245,14 @@ def test_a_plane_correction_is_applied_to_every_centre(ring_session, tmp_path):
     assert np.allclose(table["angle_deg"], plain["angle_deg"], atol=1e-9, rtol=0)
     assert np.allclose(table["angle_std_deg"], plain["angle_std_deg"], rtol=1e-6)
     assert np.allclose(table["centre_shift_x_std_px"], 2 * plain["centre_shift_x_std_px"], rtol=0.2)
+
+
+def test_a_blurred_image_is_suspect(ring_session, tmp_path, small_scene):
+    folder = _copy(ring_session, tmp_path / "s")
+    truth = pd.read_csv(folder / "truth.csv")
+    shaken = target_scene("ring16", px_per_mm=2.5, base=small_scene.replace(optics={"blur_sigma_px": 2.5}))
+    write_image(folder / truth["image"][6], render(shaken, truth["disk_rotation_deg"][6], seed=97).image)
+    _, table, _ = _measure(folder)
+    assert table["status"].tolist() == ["ok"] * 6 + ["suspect"] + ["ok"] * 3
+    assert table["message"][6].startswith("blurred: marker edges ") and table["bump"][6] == 0
+    assert abs(table["angle_deg"][6] - truth["true_angle_deg"][6]) < 5 * table["angle_std_deg"][6]

@@ -150,6 +150,7 @@ def _hypotheses(P, rd, target, radius_tolerance) -> dict:
     len_l = np.hypot(vl[:, 0], vl[:, 1])
     ang_l = np.arctan2(vl[:, 1], vl[:, 0])
     best = {}  # assignment (a marker index or -1 per dot) -> (score, the dots that agree)
+    reach = POSITION_TOLERANCE * target.min_spacing_mm  # a property that compares every pair of dots: once
     for a in seeds:
         for b in np.argsort(dpp[a])[: min(_PARTNERS, len(P) - 1)]:
             vp = P[b] - P[a]
@@ -167,7 +168,7 @@ def _hypotheses(P, rd, target, radius_tolerance) -> dict:
             dist = np.hypot(*(mapped[:, :, None, :] - P[None, None, :, :]).transpose(3, 0, 1, 2))
             near = dist.argmin(axis=2)
             near_d = np.take_along_axis(dist, near[..., None], axis=2)[..., 0]
-            matched = near_d <= POSITION_TOLERANCE * target.min_spacing_mm * sk[:, None]
+            matched = near_d <= reach * sk[:, None]
             agrees = matched & (np.abs(rd[near] - sk[:, None] * rl) <= radius_tolerance * sk[:, None] * rl)
             score = agrees.sum(axis=1)
             for h in np.flatnonzero(score == score.max()):
@@ -518,13 +519,15 @@ def _table(obj, settings, name):
 
 
 def _centres(table, ident):
-    xy = np.full((len(ident.rows), 2), np.nan)
-    cov = np.full((len(ident.rows), 2, 2), np.nan)
-    for k, row in enumerate(ident.rows):
-        if row >= 0:
-            m = table.loc[row]
-            xy[k] = (m["x_px"], m["y_px"])
-            cov[k] = [[m["x_std_px"] ** 2, m["xy_cov_px2"]], [m["xy_cov_px2"], m["y_std_px"] ** 2]]
+    """(n, 2) centres and (n, 2, 2) covariances (px, px²) of the target's dots, NaN for a dot with no marker."""
+    rows = np.asarray(ident.rows, dtype=np.int64)
+    have = rows >= 0
+    m = table.loc[rows[have], ["x_px", "y_px", "x_std_px", "y_std_px", "xy_cov_px2"]].to_numpy(dtype=np.float64)
+    xy = np.full((len(rows), 2), np.nan)
+    cov = np.full((len(rows), 2, 2), np.nan)
+    xy[have] = m[:, :2]
+    cov[have, 0, 0], cov[have, 1, 1] = m[:, 2] ** 2, m[:, 3] ** 2
+    cov[have, 0, 1] = cov[have, 1, 0] = m[:, 4]
     return xy, cov
 
 

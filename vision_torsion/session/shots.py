@@ -21,8 +21,8 @@ from ..images import GreyImage
 from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
-__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "polarity_note", "SATURATED_FRACTION",
-           "BLUR_RATIO"]
+__all__ = ["Shot", "ShotMeasurer", "image_warnings", "blur_warning", "edge_width", "polarity_note",
+           "SATURATED_FRACTION", "BLUR_RATIO"]
 
 
 @dataclass(frozen=True)
@@ -101,11 +101,19 @@ def image_warnings(pair, reference, saturated: float) -> list[str]:
     if math.isfinite(saturated) and saturated > SATURATED_FRACTION:
         out.append(f"saturated: {100 * saturated:.1f} % of the pixels at full scale "
                    "(shorten the exposure or dim the light)")
-    width, ref = edge_width(pair), edge_width(reference)
-    if reference is not None and math.isfinite(width) and math.isfinite(ref) and width > BLUR_RATIO * ref:
-        out.append(f"blurred: marker edges {width:.1f} px wide against {ref:.1f} px in the "
-                   "reference (camera shake, or focus?); shoot it again")
+    if reference is not None and (blur := blur_warning(edge_width(pair), edge_width(reference))):
+        out.append(blur)
     return out
+
+
+def blur_warning(width_px: float, reference_px: float) -> str:
+    """"blurred: ..." when the marker edges (mean fitted edge width, px) are more than
+    :data:`BLUR_RATIO` times as wide as the reference image's; "" otherwise or when
+    either is unknown (NaN). The rule of :func:`image_warnings`, for any markers."""
+    if math.isfinite(width_px) and math.isfinite(reference_px) and width_px > BLUR_RATIO * reference_px:
+        return (f"blurred: marker edges {width_px:.1f} px wide against {reference_px:.1f} px in the "
+                "reference (camera shake, or focus?); shoot it again")
+    return ""
 
 
 def polarity_note(pair, polarity: str) -> str:

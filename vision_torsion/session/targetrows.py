@@ -28,7 +28,9 @@ Per-image status (``status`` column) and its reason (``message``):
   not seen; ``layout_mismatch``: too few dots agree with the layout. The angle is
   withheld: never a wrong identity.
 - ``suspect``: the axis jumped in this image with no rotation (``bump`` = 1), or the
-  image is saturated; the angle is given but not used by the analysis.
+  image is saturated or blurred (the rules of :func:`.shots.image_warnings`, the
+  blur from the mean edge width of all its markers); the angle is given but not
+  used by the analysis.
 - ``failed`` (no markers, unreadable image, its reference failed) and ``pending``
   as for two markers.
 
@@ -249,7 +251,7 @@ def _jump_note(name, jump, sigma, kind) -> str:
 def _orientation_rows(session, idx, entries, correction, settings) -> dict:
     """Rows of one orientation: {row index: TargetRow}."""
     from ..rigid import axis_motion, target_angles
-    from .shots import image_warnings
+    from .shots import blur_warning, image_warnings
 
     rows = session.manifest.rows
     ref = next((i for i in idx if rows[i].phase == "reference"), idx[0])
@@ -280,6 +282,8 @@ def _orientation_rows(session, idx, entries, correction, settings) -> dict:
         out.update({i: TargetRow.blank(why, exc.reason) for i in measured})
         return out
     motion = axis_motion(results)
+    widths = {i: float(np.nanmean(t["edge_width_px"])) if t["edge_width_px"].notna().any() else math.nan
+              for i, t in tables.items()}
     jumps = dict(motion.jumps)
     sign = session.config.angle_sign
     for j, (i, res) in enumerate(zip(measured, results)):
@@ -289,6 +293,8 @@ def _orientation_rows(session, idx, entries, correction, settings) -> dict:
         notes = [res.message] if res.message else []
         status = res.status
         flags = image_warnings(None, None, entries[i].get("saturated_fraction", math.nan))
+        if i != ref and (blur := blur_warning(widths[i], widths[ref])):
+            flags.append(blur)
         bump = j in jumps
         if bump:
             notes.append(_jump_note(rows[i].image, motion.jump_px[j], motion.jump_sigma[j], jumps[j]))
