@@ -95,22 +95,25 @@ def test_bump_missing_dropped_and_hidden_index_are_reported(ring_session, tmp_pa
     _hide(folder, truth, 7, 5)  # dot 5 gone
     _hide(folder, truth, 8, 7, fraction=0.12)  # dot 7 cut at its edge: biased, dropped by the rigid fit
     _hide(folder, truth, 3, 0)  # the index mark gone
+    _hide(folder, truth, 9, 3, fraction=0.35)  # dot 3 a third hidden: not round, not fitted
     res, table, truth = _measure(folder)
     status = dict(enumerate(table["status"]))
     assert status == {0: "ok", 1: "ok", 2: "ok", 3: "ambiguous", 4: "ok", 5: "suspect", 6: "ok",
-                      7: "marker_missing", 8: "ok", 9: "ok"}
+                      7: "marker_missing", 8: "ok", 9: "marker_missing"}
     assert table["bump"].fillna(-1).tolist() == [0, 0, 0, -1, 0, 1, 0, 0, 0, 0]  # blank: no angle, no axis
     assert "the shaft axis jumped by (1.0" in table["message"][5] and "moved back" in table["message"][5]
     assert abs(table["centre_shift_x_px"][5] - 1.0) < 0.02
     assert abs(table["angle_deg"][5] - truth["true_angle_deg"][5]) < 5 * table["angle_std_deg"][5]
-    assert "no marker at dot(s) 5 of the target 'ring16'" in table["message"][7]
+    assert table["message"][7].endswith("no marker at dot(s) 5 of the target 'ring16'")  # nothing there at all
+    assert ("no marker at dot(s) 3 of the target 'ring16' (dot 3: a candidate there was not fitted (not_round: "
+            "edge is not circular") in table["message"][9]
     assert table["markers_used"][7] == 15
     assert abs(table["angle_deg"][7] - truth["true_angle_deg"][7]) < 5 * table["angle_std_deg"][7]
     assert "dot 7 dropped: disagrees with the other 15 markers" in table["message"][8]
     assert "the index mark (dot 0) of the target 'ring16' is not seen" in table["message"][3]
     assert math.isnan(table["angle_deg"][3])
-    assert res.n_failed == 3 and {img for img, _ in res.failures} == set(truth["image"][[3, 5, 7]])
-    assert res.failure_statuses == ("ambiguous", "suspect", "marker_missing")
+    assert res.n_failed == 4 and {img for img, _ in res.failures} == set(truth["image"][[3, 5, 7, 9]])
+    assert res.failure_statuses == ("ambiguous", "suspect", "marker_missing", "marker_missing")
 
 
 def test_process_command_names_each_row_by_its_status(ring_session, tmp_path, capsys, cli_logging):

@@ -260,9 +260,33 @@ def identify_markers(markers, target, *, name: str = "image",
         if mismatched:
             parts.append(f"a marker of the wrong size at dot(s) {', '.join(map(str, mismatched))}")
         message = f"{name}: {'; '.join(parts)} of the target {target.name!r}"
+        why = _unfitted_at(markers, L[list(missing)], missing, scale, turn, shift,
+                           POSITION_TOLERANCE * target.min_spacing_mm)
+        message += f" ({'; '.join(why)})" if why else ""
     return Identification(status=status, message=message, rows=rows, scale_px_per_mm=scale,
                           turn_deg=-math.degrees(turn), axis_x_px=float(axis[0]), axis_y_px=float(axis[1]),
                           missing=tuple(sorted(set(missing) | set(mismatched))), mismatched=mismatched)
+
+
+def _unfitted_at(markers, dots_mm, dots, scale, phi, shift, reach_mm) -> list:
+    """Why a candidate that was not fitted sits where each of `dots` should be: "dot k:
+    a candidate there was not fitted (STATUS: MESSAGE)", for the dots that have one
+    (the layout mapped by the similarity (`scale`, `phi`, `shift`) of the others)."""
+    bad = markers[markers["status"] != "ok"]
+    if not len(bad) or not len(dots):
+        return []
+    c, s = math.cos(phi), math.sin(phi)
+    at = scale * np.column_stack([c * dots_mm[:, 0] - s * dots_mm[:, 1], s * dots_mm[:, 0] + c * dots_mm[:, 1]]) + shift
+    xy = bad[["x_px", "y_px"]].to_numpy(dtype=np.float64)
+    out = []
+    for k, (x, y) in zip(dots, at):
+        d = np.hypot(xy[:, 0] - x, xy[:, 1] - y)
+        j = int(np.argmin(d))
+        if d[j] <= reach_mm * scale:
+            m = bad.iloc[j]
+            detail = f"{m['status']}: {m['message']}" if "message" in bad.columns and m["message"] else m["status"]
+            out.append(f"dot {k}: a candidate there was not fitted ({detail})")
+    return out
 
 
 def _similarity(src, dst):

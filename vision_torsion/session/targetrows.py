@@ -57,9 +57,11 @@ from ..settings import MeasureSettings
 __all__ = ["FoundMarkers", "measure_target_markers", "valid_target_entry", "target_settings_key", "target_rows",
            "target_pair", "pair_dots", "TargetRow", "TARGET_MARKER_FIELDS"]
 
-#: What is kept of each marker found (its ``ok`` markers: only those can be a dot).
+#: What is kept of each ``ok`` marker found (only those can be a dot).
 TARGET_MARKER_FIELDS = ("x_px", "y_px", "radius_px", "x_std_px", "y_std_px", "xy_cov_px2", "edge_width_px",
                         "contrast_dn", "residual_rms_px")
+#: What is kept of each candidate not fitted: enough to say why a dot has no marker.
+_REJECTED_FIELDS = ("x_px", "y_px", "status", "message")
 
 
 @dataclass(frozen=True)
@@ -74,15 +76,20 @@ class FoundMarkers:
         gives them (largest first).
     n_candidates : int
         Candidates looked at, ``ok`` or not.
+    rejected : tuple of tuple
+        (x_px, y_px, status, message) of every candidate not fitted (``border``,
+        ``not_round``, ...): where a dot has no marker, the reason it was not fitted.
     """
 
     columns: dict
     n_candidates: int = 0
+    rejected: tuple = ()
 
     def to_dict(self) -> dict:
         """JSON-safe dict (NaN written as None)."""
         clean = {k: [None if not math.isfinite(v) else v for v in vals] for k, vals in self.columns.items()}
-        return {"markers": clean, "n_candidates": self.n_candidates}
+        rejected = [[None if isinstance(v, float) and not math.isfinite(v) else v for v in r] for r in self.rejected]
+        return {"markers": clean, "n_candidates": self.n_candidates, "rejected": rejected}
 
     @classmethod
     def from_dict(cls, d: dict) -> "FoundMarkers":
@@ -96,17 +103,23 @@ class FoundMarkers:
         cols = {k: tuple(math.nan if v is None else float(v) for v in d["markers"][k]) for k in TARGET_MARKER_FIELDS}
         if len({len(v) for v in cols.values()}) != 1:
             raise ValueError("marker columns of unequal length")
-        return cls(cols, int(d.get("n_candidates", 0)))
+        rejected = tuple((math.nan if x is None else float(x), math.nan if y is None else float(y), str(st), str(msg))
+                         for x, y, st, msg in d.get("rejected", ()))
+        return cls(cols, int(d.get("n_candidates", 0)), rejected)
 
     def table(self, correction=None):
         """The markers as a :func:`~vision_torsion.markers.find_markers`-like table
-        (every row ``ok``), with the plane correction applied when given: centres
-        and their covariances on the disk plane, radii scaled by the local scale
-        √|det J| so the dots' sizes still compare with the layout's."""
+        (the ``ok`` rows, then the candidates not fitted with their status and
+        message), with the plane correction applied when given: centres and their
+        covariances on the disk plane, radii scaled by the local scale √|det J| so
+        the dots' sizes still compare with the layout's."""
         import pandas as pd
 
         frame = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in self.columns.items()})
-        frame["status"] = "ok"
+        frame["status"], frame["message"] = "ok", ""
+        if self.rejected:
+            frame = pd.concat([frame, pd.DataFrame(list(self.rejected), columns=list(_REJECTED_FIELDS))],
+                              ignore_index=True)
         if correction is not None and len(frame):
             cov = np.zeros((len(frame), 2, 2))
             cov[:, 0, 0] = frame["x_std_px"] ** 2
@@ -158,7 +171,9 @@ def measure_target_markers(image, *, settings: MeasureSettings | None = None, na
     if not ok:
         raise MarkerError(f"{name or 'image'}: no marker found ({len(found)} candidate(s), none fitted)",
                           reason="no_markers")
-    return FoundMarkers({k: tuple(float(getattr(m, k)) for m in ok) for k in TARGET_MARKER_FIELDS}, len(found))
+    rejected = tuple((float(m.x_px), float(m.y_px), m.status, m.message) for m in found if m.status != "ok")
+    return FoundMarkers({k: tuple(float(getattr(m, k)) for m in ok) for k in TARGET_MARKER_FIELDS}, len(found),
+                        rejected)
 
 
 #: What the session's reading threads find ahead of it (:func:`~.worker.prepare_task`):
