@@ -50,7 +50,8 @@ from scipy import optimize
 from ..errors import AnalysisError
 from .fitcheck import LackOfFit, lack_of_fit, marginal_lack_of_fit, path_compliance
 
-__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "torque_sensitivity"]
+__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "relay_thresholds", "relay_pairs",
+           "torque_sensitivity"]
 
 
 def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
@@ -77,7 +78,10 @@ def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
     return out
 
 
-def _thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
+def relay_thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
+    """The relay thresholds of a torque path `tau` (N·m): the mid-points between its
+    torque levels (rounded to 1e-12 N·m), thinned evenly to at most `max_thresholds`,
+    and the two extreme levels; ascending (N·m)."""
     levels = np.unique(np.round(tau, 12))
     mids = 0.5 * (levels[1:] + levels[:-1])
     if mids.size > max_thresholds:
@@ -88,8 +92,9 @@ def _thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
     return np.concatenate([[levels[0]], mids, [levels[-1]]])
 
 
-def _relays(h: np.ndarray):
-    """Symmetric relay pairs from thresholds ``h``: arrays of (α, β) and their mirrors.
+def relay_pairs(h: np.ndarray):
+    """Symmetric relay pairs from thresholds ``h`` (N·m): arrays α, β and their mirrors
+    −β, −α (N·m).
 
     Every ``(α, β) = (h[i], h[j])`` with ``j ≤ i`` (``j = i``: a reversible element,
     nonlinear elasticity), in that order, except a pair whose mirror ``(−β, −α)`` came
@@ -314,8 +319,8 @@ def fit_preisach(
         raise AnalysisError("Preisach fit needs torque of both signs (the torque never reverses)")
     if not np.all(sa > 0):
         raise AnalysisError("Preisach fit needs a positive angle uncertainty for every sample")
-    h = _thresholds(tau, max_thresholds)
-    a, b, am, bm = _relays(h)
+    h = relay_thresholds(tau, max_thresholds)
+    a, b, am, bm = relay_pairs(h)
     x = _design(tau, a, b, am, bm)
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0

@@ -194,7 +194,7 @@ class Watcher:
         self.folder_gone = False
         self.timings: list[dict] = []
         cfg = self.session.config
-        self.step_torque = cfg.torque_rig.step_torque_nm
+        self.step_torque = cfg.rig.step_torque_nm
         self.torques = [self.session.torque(row).torque_nm for row in rows]
         self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
         self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)
@@ -603,7 +603,7 @@ class Watcher:
         if nxt is None:
             return None, None
         pos, row = nxt
-        step_mass = self.session.config.protocol.step_mass_kg
+        step_mass = self.session.config.rig.step_mass_kg
         pieces = 0 if row.mass_kg is None else round(row.mass_kg / step_mass)
         pans = "no weights" if pieces == 0 else (
             f"{'+' if row.phase.startswith('positive') else '−'} pans {1000 * row.mass_kg:g} g each "
