@@ -346,6 +346,7 @@ class _Collector:
         flag="",
         draws=None,
         sampling=0.0,
+        interval=np.nan,
     ):
         """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u.
 
@@ -356,6 +357,10 @@ class _Collector:
         rectangular) is in ``std``, and ``u95`` is at least ``k·std_rest + half`` (a
         bias known only to lie within the bound is added linearly to the rest's
         interval: on a kinked loop the truth sits at the bound's edge).
+        ``interval``: half-width of the figure's 95 % interval read from the draws of
+        its own distribution (a bootstrap's, :func:`.catalogue.break_bootstrap`):
+        ``u95`` is at least it (times any inflation), where that distribution has
+        heavier tails than the normal one ``k·std`` assumes.
         """
         infl, red = 1.0, np.nan
         if check is not None and check.testable:
@@ -396,6 +401,8 @@ class _Collector:
         if sampling > 0 and np.isfinite(std) and std > 0:
             u95 = max(row["u95"], row["coverage_factor"] * std_rest + sampling)
             row.update(u95=u95, coverage_factor=u95 / std)
+        if np.isfinite(interval) and interval * infl > row["u95"] and np.isfinite(std) and std > 0:
+            row.update(u95=interval * infl, coverage_factor=interval * infl / std)
         for k in SOURCE_KINDS:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
         self.rows.append(row)
@@ -941,7 +948,8 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
     draws = res.get("draws")
     for j, (n, u) in enumerate(names):
         if j < len(res["k"]):
-            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk, draws=draws)
+            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk, draws=draws,
+                    interval=res["u95"][j] if "u95" in res else np.nan)
         else:
             col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}",
                      kind="not_applicable")
@@ -949,7 +957,7 @@ def _catalogue_figures(col: _Collector, settings: dict, runs):
         for j, n in enumerate(("t1", "t2")):
             if j < len(res["breaks_nm"]):
                 col.add(n, "nm", res["breaks_nm"][j], res["breaks_std_angle"][j], res["breaks_std_torque"][j],
-                        method, check=chk, draws=draws)
+                        method, check=chk, draws=draws, interval=res["breaks_u95"][j])
             else:
                 col.fail(n, "nm", "one break describes the loading branches (two segments)", kind="not_applicable")
 
