@@ -155,6 +155,16 @@ def test_fitted_break_interval_is_read_from_the_draws():
     assert np.isfinite(few["std_angle"][0])
 
 
+def test_fitted_breaks_without_an_uncertainty_are_an_error():
+    # a straight line: the break is anywhere, and most bootstrap refits push it off the levels
+    x = np.arange(7) * 0.05
+    tau = np.concatenate([x, -x])
+    th = tau / 2.0 + np.random.default_rng(4).normal(0.0, 1e-3, tau.size)
+    with pytest.raises(AnalysisError, match=r"are not identified: only \d+ % of the bootstrap's refits"):
+        fit_catalogue_breaks(tau, th, branch=np.repeat([1, -1], x.size), angle_std_rad=1e-3, torque_std_nm=0.0,
+                             n_draws=50, seed=4)
+
+
 def test_k1_is_consistent_with_the_bilinear_k_l(repeated):
     """K1 (breaks fitted) and bilinear k_l describe the same slope of the same data: their σ agree within
     a factor 2, and so do their values within their u95."""

@@ -498,7 +498,9 @@ def fit_catalogue_breaks(
     Raises
     ------
     AnalysisError
-        Fewer than 4 distinct torque magnitudes, or no placement of a break works.
+        Fewer than 4 distinct torque magnitudes, no placement of a break works, or
+        (with ``n_draws > 0``) fewer than half of the bootstrap's refits are valid, so
+        the breaks are not identified and no uncertainty can be given.
     """
     tau = np.asarray(torque_nm, float).reshape(-1)
     th = np.asarray(angle_rad, float).reshape(-1)
@@ -564,6 +566,15 @@ def fit_catalogue_breaks(
         boot = break_bootstrap(
             tau, branch=sign, fit=out, angle_std_rad=sa, torque_sources=src, n_draws=n_draws, seed=seed
         )
+        if not np.all(np.isfinite([*boot["std_angle"], *boot["std_torque"], *boot["breaks_std_angle"],
+                                   *boot["breaks_std_torque"]])):
+            # a figure without its uncertainty is withheld, never shown with a NaN ±
+            raise AnalysisError(
+                f"the fitted break torques {', '.join(f'{b:.4g}' for b in out['breaks_nm'])} N·m are not "
+                f"identified: only {100 * boot['valid']:.0f} % of the bootstrap's refits (at least half needed) "
+                "kept ordered breaks with two measured levels per segment and positive compliances, so the "
+                "uncertainty of K and T cannot be given; give the catalogue T1/T2"
+            )
         out.update(
             std_angle=boot["std_angle"],
             std_torque=boot["std_torque"],

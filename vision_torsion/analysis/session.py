@@ -51,7 +51,10 @@ Torque errors follow the weight pieces when the rig is known (``rig=...``,
 Expanded uncertainties are ``u95 = k·std`` with ``k = 2``, or Student's ``t_0.975``
 at the Welch–Satterthwaite degrees of freedom when a Monte Carlo part rests on few
 draws (ν = draws − 1), or at the lack-of-fit test's dof when the uncertainty was
-inflated by ``√χ²_red`` (the figures' ``coverage_factor`` column). The Monte Carlo of
+inflated by ``√χ²_red`` (the figures' ``coverage_factor`` column); K1–K3 and T1/T2
+with fitted breaks take the bootstrap draws' own 95 % half-width where it is wider
+(:func:`.catalogue.break_bootstrap`), and their ``coverage_factor`` is then
+``u95/std``. The Monte Carlo of
 the loop figures carries each torque error as the data would show it: the torque
 axis of the image and, at the loop's tips, the loop's amplitude
 (:func:`.uncertainty.tip_amplitude_response`); the phase secants take their torque
