@@ -1,6 +1,6 @@
 """Does every shown figure's u95 cover the PHYSICAL truth? (issue 27)
 
-    python benchmarks/bench_coverage.py [--sessions 100] [--jobs 2] [--cases ...] [--draws 100]
+    python benchmarks/bench_coverage.py [--sessions 100] [--jobs 2] [--cases ...] [--draws 100] [--keep-errors]
 
 (from the repository root; ``PYTHONPATH=.`` when the installed ``vision_torsion`` is another checkout)
 
@@ -28,7 +28,11 @@ interval counted over loops, and over sessions — a session's two loops share i
 pieces, so the session count is the conservative one), withheld, flagged. The target
 (issue 27): every figure shown unflagged within its u95 in ≥ 93 % of loops, Clopper–Pearson
 lower bound ≥ 90 %. The Preisach fit (the outlier check, not scored here) is off to keep
-the run short. Prints the table and writes ``benchmarks/results/coverage.json`` and ``.md``.
+the run short. Per figure also how wide its u95 are: the median of u95/|error| and the
+factor all its u95 would need to cover exactly 95 % of the loops (the 95th percentile of
+|error|/u95: 1 honest, below 1 wide, above 1 narrow). Prints the table and writes
+``benchmarks/results/coverage.json`` and ``.md`` (``--keep-errors``: each loop's
+``(|error|, u95, std)`` too).
 """
 
 from __future__ import annotations
@@ -146,7 +150,7 @@ def _table(agg, sessions, draws, wall):
                              cp_low=lo, cp_high=hi, sessions=sess_n, sessions_all_covered=sess_ok,
                              cp_low_sessions=s_lo, withheld=withheld, flagged=flagged, verdict=verdict,
                              median_u95_over_error=ratio, u95_scale_for_95pct=scale,
-                             errors=[[float(v) for v in p] for p in pairs]))
+                             errors=[[float(f"{v:.4g}") for v in p] for p in pairs]))
     return "\n".join(lines), rows, when
 
 
@@ -157,6 +161,8 @@ def main(argv=None):
     p.add_argument("--draws", type=int, default=100, help="Monte Carlo / bootstrap draws per loop (default 100)")
     p.add_argument("--cases", nargs="*", default=list(CASES), choices=list(CASES))
     p.add_argument("--out", type=Path, default=RESULTS)
+    p.add_argument("--keep-errors", action="store_true",
+                   help="keep each loop's (|error|, u95, std) in the JSON (about 1 MB at 150 sessions)")
     args = p.parse_args(argv)
     t0 = time.time()
     tasks = [(c, n, r, args.draws) for c in args.cases for n in NOISES for r in range(args.sessions)]
@@ -184,6 +190,9 @@ def main(argv=None):
                 acc[5] += c[5]
                 acc[6] += 1
     text, rows, when = _table(agg, args.sessions, args.draws, time.time() - t0)
+    if not args.keep_errors:
+        for r in rows:
+            r.pop("errors")
     print(text)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".md").write_text(text + "\n")

@@ -95,13 +95,19 @@ class ThreeSegment:
         return np.sign(tau) * h
 
     def path(self, tau):
+        """Angles along a torque path: the elastic curve less ``c_h·(τ − p)``, ``p`` the play operator's output.
+
+        ``τ − p`` is +W/2 once a loading has closed the play and −W/2 after an unloading,
+        so the angle lags the torque: at a given torque the descending branch lies above
+        the ascending one, and the loop runs anticlockwise with ``∮τ dθ > 0`` (a passive
+        gear's dissipation), as the analysis' loop-direction check expects."""
         half = self.width / 2
         p = tau[0] - half  # arrived at the start from below (a loading to +Tmax)
         z = []
         for t in tau:
             p = max(t - half, min(t + half, p))
             z.append(t - p)
-        return self.elastic(np.asarray(tau)) + self.c_h * np.array(z)
+        return self.elastic(np.asarray(tau)) - self.c_h * np.array(z)
 
 
 class Masing:
