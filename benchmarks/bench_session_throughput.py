@@ -82,12 +82,12 @@ def _render_group(args):
 def make_session(folder: Path, n: int, jobs: int) -> dict[str, float]:
     """Plan a 6-orientation session, keep its first `n` rows, render them."""
     from vision_torsion.session.manifest import REQUIRED_COLUMNS, manifest_text
-    from vision_torsion.session.plan import plan_session
+    from vision_torsion.session.plan import plan_config, plan_session
 
     per_cycle = 6 * 4 * 18
     cycles = max(1, -(-n // per_cycle))
-    plan = plan_session(folder, max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
-                        cycles=cycles, radius_range=(20, 60), overwrite=True)
+    plan = plan_session(plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, cycles=cycles,
+                                    radius_range=(20, 60)), folder, overwrite=True)
     rows = plan.rows[:n]
     (folder / "manifest.csv").write_text(manifest_text(REQUIRED_COLUMNS, rows))
     groups: dict[float, list] = {}

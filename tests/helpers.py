@@ -28,7 +28,7 @@ from vision_torsion.errors import MarkerError
 from vision_torsion.images import load_image, write_image
 from vision_torsion.markers import Marker
 from vision_torsion.pair import PairMeasurement
-from vision_torsion.session.plan import plan_session
+from vision_torsion.session.plan import plan_config, plan_session
 
 # Image geometry: non-square, target centre off the pixel grid.
 WIDTH, HEIGHT = 200, 150
@@ -70,9 +70,8 @@ def make_session(folder, *, orientations=(0, 60), cycles=1, steps=2, draw=None,
     """
     draw = draw or (lambda angle, index: draw_target(angle))
     step_mass = 0.02
-    plan = plan_session(folder, max_torque_nm=steps * 2 * step_mass * 9.81 * 0.05,
-                        step_mass_kg=step_mass, arm_radius_m=0.05,
-                        orientations_deg=orientations, cycles=cycles, **plan_kw)
+    plan = plan_session(plan_config(max_torque_nm=steps * 2 * step_mass * 9.81 * 0.05, step_mass_kg=step_mass,
+                                    arm_radius_m=0.05, orientations_deg=orientations, cycles=cycles, **plan_kw), folder)
     truth = {}
     for index, row in enumerate(plan.rows):
         sign = {"pos": 1, "neg": -1, "ref": 0}[row["phase"][:3]]

@@ -20,7 +20,7 @@ from vision_torsion.analysis.uncertainty import (
     torque_sources,
 )
 from vision_torsion.errors import AnalysisError
-from vision_torsion.session.config import RigConfig
+from vision_torsion.measurements import TorqueRig
 from vision_torsion.session.torque import couple_torque
 from vision_torsion.synthetic import simulate_measurements
 
@@ -54,11 +54,11 @@ def test_sources_are_a_random_walk_shared_by_the_phases_of_a_sign():
 
 def test_marginal_std_is_the_sessions_torque_std():
     """couple_torque (sessions module) writes the marginal 1σ of this model."""
-    rig_cfg = RigConfig(arm_radius_m=0.05, mass_std_kg=MASS_STD, friction_torque_std_nm=2e-5,
+    rig_cfg = TorqueRig(step_mass_kg=0.02, arm_radius_m=0.05, mass_std_kg=MASS_STD, friction_torque_std_nm=2e-5,
                         arm_radius_std_m=1e-4, gravity_std_m_per_s2=0.01)
     # 0.05 kg is 2.5 pieces: both count it as 3 (the conservative choice)
     rows = [(m, ph) for m in (0.0, 0.02, 0.05, 0.1, 0.36) for ph in ("positive_unloading", "negative_loading")]
-    tv = [couple_torque(m, ph, rig_cfg, step_mass_kg=0.02) for m, ph in rows]
+    tv = [couple_torque(m, ph, rig_cfg) for m, ph in rows]
     frame = pd.DataFrame({"mass_kg": [m for m, _ in rows], "phase": [ph for _, ph in rows],
                           "torque_nm": [t.torque_nm for t in tv], "torque_std_nm": [t.torque_std_nm for t in tv]})
     rig = dict(RIG, friction_torque_std_nm=2e-5, arm_radius_std_m=1e-4, gravity_std_m_per_s2=0.01)

@@ -172,7 +172,7 @@ def test_invalid_tables_raise(mutate, match):
 
 def test_invalid_options_raise():
     df = simulate_measurements(**TRUTH, orientations_deg=(0,), mass_std_kg=0, rng=np.random.default_rng(0))
-    with pytest.raises(AnalysisError, match="n_draws must be at least 10"):
+    with pytest.raises(AnalysisError, match=r"n_draws must be a whole number >= 10, got 1"):
         analyze_session(df, n_draws=1)
     with pytest.raises(AnalysisError, match="secant_interval must be fractions"):
         analyze_session(df, secant_interval=(0.8, 0.2))
@@ -186,3 +186,19 @@ def test_lost_motion_formula_on_a_parallelogram():
     # two parallel branches 2 rad apart: mid-points differ by the slope times 2x
     tau = np.linspace(-1, 1, 5)
     assert lost_motion(tau, tau + 1, tau, tau - 1, torque_nm=0.5) == pytest.approx(1.0)
+
+
+def test_a_later_cycle_that_borrows_its_start_image_has_its_own_rows_torque_errors():
+    # cycle 2 made a copy of cycle 1 (angles and torques) whose +Tmax start image is the last image of cycle 1,
+    # as when the protocol does not photograph it twice; each level's torque 1σ differs (1 % of the torque)
+    df = simulate_measurements(**TRUTH, orientations_deg=(0,), n_cycles=2, mass_std_kg=0.0,
+                               rng=np.random.default_rng(4))
+    c1, c2 = df[df.cycle == 1], df[df.cycle == 2]
+    df.loc[c1.index[-1], "angle_deg"] = df.loc[c1.index[0], "angle_deg"]
+    same = c2[["phase", "step"]].merge(df.loc[c1.index, ["phase", "step", "angle_deg"]], on=["phase", "step"])
+    df.loc[c2.index, "angle_deg"] = same["angle_deg"].to_numpy()
+    df = df.drop(index=c2.index[0]).reset_index(drop=True)
+    df["torque_std_nm"] = 1e-5 + 0.01 * df["torque_nm"].abs()
+    ph = analyze_session(df, **FAST).phases.set_index(["cycle", "phase"])
+    for column in ("stiffness_std_nm_per_rad", "reduced_chi2", "residual_rms_deg"):
+        np.testing.assert_allclose(ph.loc[2, column].to_numpy(), ph.loc[1, column].to_numpy(), rtol=1e-9)

@@ -24,8 +24,8 @@ def test_bilinear_profile_in_one_pass_equals_one_lstsq_per_candidate(seed):
     tau, th, sa = _loop(seed)
     w = 1.0 / sa**2
     grid = np.linspace(0.0, np.max(np.abs(tau)), 401)[1:-1]
-    ref = np.array([models._bilinear_linear_solve(*models._bilinear_increments(tau, tc), th, w)[1] for tc in grid])
-    fast = models._bilinear_profile_sse(tau, th, w, grid)
+    ref = np.array([models.bilinear_linear_solve(*models.bilinear_increments(tau, tc), th, w)[1] for tc in grid])
+    fast = models.bilinear_profile_sse(tau, th, w, grid)
     np.testing.assert_allclose(fast, ref, rtol=1e-9)
     assert np.argmin(fast) == np.argmin(ref)
 
@@ -104,13 +104,13 @@ def _hinge(x):
 
 @pytest.mark.parametrize("seed", range(8))
 def test_switch_grid_picks_what_the_plain_loop_picks(seed):
-    from vision_torsion.analysis.fitcheck import _least_midpoint
+    from vision_torsion.analysis.fitcheck import least_midpoint
     from vision_torsion.numerics import weighted_lstsq
 
     x, y, w = _phase(seed)
     cands = (0.5 * (x[1:] + x[:-1]))[1:-1]
     sse = [weighted_lstsq(_hinge(x)(c), y, w)[1] for c in cands]
-    assert _least_midpoint(x, y, w, cands, _hinge(x)) == int(np.argmin(sse))
+    assert least_midpoint(x, y, w, cands, _hinge(x)) == int(np.argmin(sse))
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -119,7 +119,7 @@ def test_switch_between_two_levels_is_the_least_squares_optimum(seed):
     # switch torques across the bracket, and the Nelder-Mead refinement the closed form
     # replaced (numerics.fit_breakpoints to 1e-9 of the torque range). Every bracket of
     # the phase is tried, so both an interior crossing and an optimum at an end occur.
-    from vision_torsion.analysis.fitcheck import _switch_in_bracket
+    from vision_torsion.analysis.fitcheck import switch_in_bracket
     from vision_torsion.numerics import fit_breakpoints, weighted_lstsq
 
     x, y, w = _phase(seed)
@@ -127,7 +127,7 @@ def test_switch_between_two_levels_is_the_least_squares_optimum(seed):
     levels = np.unique(x)
     kinds = set()
     for lo, hi in zip(levels[1:-2], levels[2:-1]):
-        ts = _switch_in_bracket(x, y, w, lo, hi, design)
+        ts = switch_in_bracket(x, y, w, lo, hi, design)
         assert lo <= ts <= hi
         kinds.add("end" if ts in (lo, hi) else "interior")
         got = weighted_lstsq(design(ts), y, w)[1]
@@ -168,9 +168,9 @@ def test_preisach_relay_pairs_are_the_loops(seed):
     step = 2 * 0.02 * 9.81 * 0.05 * rng.uniform(0.5, 2.0)
     levels = np.arange(-18, 19) * step                      # symmetric levels, as a loop's are
     tau = np.concatenate([levels, levels[::-1] + rng.normal(0, 1e-15, levels.size)])  # mirror images within rounding
-    for h in (preisach._thresholds(tau, 64), preisach._thresholds(tau, 10), preisach._thresholds(tau[:30], 64),
-              np.array([-0.0, 0.0, 0.1, -0.1])):
-        for got, want in zip(preisach._relays(h), _relays_loop(h)):
+    thresholds = preisach.relay_thresholds
+    for h in (thresholds(tau, 64), thresholds(tau, 10), thresholds(tau[:30], 64), np.array([-0.0, 0.0, 0.1, -0.1])):
+        for got, want in zip(preisach.relay_pairs(h), _relays_loop(h)):
             np.testing.assert_array_equal(got, want)
 
 

@@ -29,7 +29,8 @@ def test_undistort_inverts_the_renderer_distortion():
     corr = PlaneCorrection(np.eye(3), k1=-0.05, centre=tuple(cam.c), focal_length_px=1500.0)
     rng = np.random.default_rng(3)
     u = rng.uniform(50, 1300, (40, 2))
-    xd, yd = cam._distort(u[:, 0], u[:, 1])
+    assert not cam.tilted  # the disk plane faces the camera: to_image is the radial distortion alone
+    xd, yd = cam.to_image(u[:, 0], u[:, 1])
     ux, uy = corr.undistort(xd, yd)
     # fixed-point iteration converges geometrically; 1e-9 px is far below any centre error
     np.testing.assert_allclose(np.stack([ux, uy], -1), u, atol=1e-9)

@@ -5,7 +5,7 @@ import hashlib
 import pandas as pd
 import pytest
 
-from vision_torsion.cli import _COMMAND_MODULES, build_parser, main
+from vision_torsion.cli import COMMAND_MODULES, build_parser, main
 
 
 def _tree_digest(folder):
@@ -24,7 +24,7 @@ def _subcommands():
 
 
 def test_every_module_registers_a_command():
-    assert len(_subcommands()) >= len(_COMMAND_MODULES)
+    assert len(_subcommands()) >= len(COMMAND_MODULES)
 
 
 @pytest.mark.parametrize("command", _subcommands())

@@ -11,7 +11,7 @@ from vision_torsion.errors import AnalysisError, SessionError
 from vision_torsion.report import export_name
 from vision_torsion.report.analyze import analyze_table, spec_limits
 from vision_torsion.session.config import config_from_dict, config_to_dict, load_config
-from vision_torsion.session.plan import plan_session
+from vision_torsion.session.plan import plan_config, plan_session
 from vision_torsion.synthetic import simulate_measurements
 
 BASE = {
@@ -108,15 +108,15 @@ def test_export_name_is_a_safe_file_name():
 
 def test_plan_unknown_header_key(tmp_path):
     with pytest.raises(SessionError, match=r"header key\(s\) 'colour' unknown"):
-        plan_session(tmp_path, max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
-                     header={"colour": "red"}, pdf=False)
+        plan_session(plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
+                                 header={"colour": "red"}), tmp_path, pdf=False)
 
 
 def test_identity_from_plan_to_session_toml_summary_and_file_name(tmp_path):
     ident = {"gear": "HFUC-20-100", "serial": "SN 7", "operator": "J. Doe", "date": "2026-11-27",
              "notes": "after run-in"}
-    plan_session(tmp_path / "s", max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
-                 orientations_deg=(0, 60), header=ident, pdf=False, rated_torque_nm=5.0)
+    plan_session(plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                             header=ident, rated_torque_nm=5.0), tmp_path / "s", pdf=False)
     cfg = load_config(tmp_path / "s" / "session.toml")
     assert (cfg.gear.name, cfg.gear.serial, cfg.test.operator, cfg.test.date, cfg.test.notes) == tuple(ident.values())
     # a [spec] added to the planned session gives the verdict table
@@ -200,14 +200,14 @@ def test_catalogue_file_for_a_table_without_session(tmp_path):
 def test_plan_copies_the_catalogue_into_session_toml(tmp_path):
     cat = tmp_path / "csf17.toml"
     cat.write_text(CATALOGUE)
-    plan_session(tmp_path / "s", max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,),
-                 catalogue=cat, header={"serial": "A-1"}, pdf=False)
+    plan_session(plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,),
+                             catalogue=cat, header={"serial": "A-1"}), tmp_path / "s", pdf=False)
     cfg = load_config(tmp_path / "s" / "session.toml")
     assert (cfg.gear.name, cfg.gear.serial, cfg.gear.rated_torque_nm, cfg.gear.t2_nm) == ("CSF-17-100", "A-1", 5.0, 0.2)
     assert cfg.spec.lost_motion_max_arcmin == 1.0 and cfg.spec.k3_min_nm_per_rad == 4.0
     with pytest.raises(SessionError, match=r"rated_torque_nm 6 differs from the catalogue file's 5"):
-        plan_session(tmp_path / "t", max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05,
-                     catalogue=cat, rated_torque_nm=6.0, pdf=False)
+        plan_session(plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05, catalogue=cat,
+                                 rated_torque_nm=6.0), tmp_path / "t", pdf=False)
 
 
 def test_catalogue_conflicting_with_session_toml(tmp_path):

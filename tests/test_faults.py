@@ -268,12 +268,12 @@ def test_a_failed_write_of_process_keeps_the_measured_results(capsys, tmp_path):
 def test_results_follow_the_umask(capsys, folder, tmp_path):
     old = os.umask(0o022)
     try:
-        fileio._file_mode.cache_clear()
+        fileio.file_mode.cache_clear()
         code, _, _ = measure(capsys, folder)
         mode = stat.S_IMODE((tmp_path / "out" / "angles.csv").stat().st_mode)
     finally:
         os.umask(old)
-        fileio._file_mode.cache_clear()
+        fileio.file_mode.cache_clear()
     assert code == 0 and mode == 0o644
 
 

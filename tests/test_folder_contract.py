@@ -89,6 +89,7 @@ IN_THE_WAY = [
     ("calibrate", "plane_correction.toml"),
     ("plan", "capture_sheet.html"),
     ("watch", "live.html"),
+    ("watch", "live-stamp.js"),
     ("check-accuracy", "accuracy.json"),
     # found only when written: replaced as a set with the rest, so nothing is
     ("report", "figures/loops_overlay.svg"),

@@ -11,9 +11,6 @@ LIMIT = 80
 
 #: module path (relative to the package) :: function -> why it may be longer.
 EXCEPTIONS = {
-    "analysis/session.py::analyze_session": "the analysis of a session, step by step",
-    "analysis/session.py::_model_fits": "the model fits of one orientation",
-    "analysis/session.py::_phase_figures": "the figures of one phase",
     "calibration/selfcal.py::calibrate_plane": "the self-calibration, step by step",
     "calibration/accuracy.py::check_accuracy": "the accuracy check, step by step",
     "session/sheet.py::capture_sheet_html": "one HTML page",

@@ -18,7 +18,7 @@ from vision_torsion.errors import MarkerError, VisionTorsionError
 from vision_torsion.markers import Marker
 from vision_torsion.measure import measure_folder
 from vision_torsion.pair import measure_pair, select_pair
-from vision_torsion.session.plan import plan_session
+from vision_torsion.session.plan import plan_config, plan_session
 from vision_torsion.settings import MeasureSettings
 from vision_torsion.synthetic import Scene, render
 from vision_torsion.synthetic.folders import write_accuracy_folder
@@ -163,13 +163,13 @@ def test_measure_command_order_independent(shuffled_folder, tmp_path, capsys):
 
 
 def test_plan_target_distinct_writes_the_pair_and_says_why(tmp_path):
-    plan = plan_session(tmp_path / "s", max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05,
-                        orientations_deg=[0], target="distinct")
+    plan = plan_session(plan_config(max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=[0],
+                                    target="distinct"), tmp_path / "s")
     assert plan.config.markers.pair == "distinct"
     assert 'pair = "distinct"' in (tmp_path / "s" / "session.toml").read_text()
     assert "two markers of clearly different radii" in (tmp_path / "s" / "capture_sheet.md").read_text()
-    equal = plan_session(tmp_path / "e", max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05,
-                         orientations_deg=[0])
+    equal = plan_session(plan_config(max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05,
+                                     orientations_deg=[0]), tmp_path / "e")
     assert equal.config.markers.pair == "largest"
     assert "keep the turn between consecutive photographs small" in (tmp_path / "e" / "capture_sheet.md").read_text()
 
@@ -178,4 +178,4 @@ def test_plan_rejects_an_unknown_target(tmp_path):
     from vision_torsion.session.config import SessionError
 
     with pytest.raises(SessionError, match="target must be 'equal', 'distinct' or a target description"):
-        plan_session(tmp_path / "s", max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05, target="x")
+        plan_session(plan_config(max_torque_nm=0.1, step_mass_kg=0.02, arm_radius_m=0.05, target="x"), tmp_path / "s")

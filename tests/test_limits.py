@@ -26,7 +26,7 @@ from vision_torsion.errors import ImageReadError, ManifestError, RecordError, Ri
 from vision_torsion.images import MAX_IMAGE_FILE_BYTES, image_size, load_image, read_image_bytes, write_image
 from vision_torsion.session.load import load_session
 from vision_torsion.session.manifest import load_manifest
-from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_session
+from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_config, plan_session
 from vision_torsion.session.plausibility import MAX_STEPS_PER_PHASE
 from vision_torsion.stiffness.records import read_record
 from vision_torsion.stiffness.rig import RigConstants, load_rig
@@ -118,7 +118,7 @@ def test_plan_refuses_what_process_would_refuse(capsys, tmp_path, argv, message)
 def test_plan_refuses_an_arm_radius_in_millimetres(tmp_path):
     with pytest.raises(SessionError, match=r"plan_session: 1 implausible value\(s\)\n  rig\.arm_radius_m = 50 m "
                                            r"is outside 0\.001\.\.2 m: millimetres\?"):
-        plan_session(tmp_path, max_torque_nm=1.0, step_mass_kg=0.02, arm_radius_m=50)
+        plan_session(plan_config(max_torque_nm=1.0, step_mass_kg=0.02, arm_radius_m=50), tmp_path)
     assert not any(tmp_path.iterdir())
 
 
@@ -126,13 +126,14 @@ def test_plan_size_is_checked_before_writing(tmp_path):
     orientations = tuple(range(0, 360, 1))  # 360 orientations x (2 + 4 x 100 steps x 1 cycle)
     with pytest.raises(SessionError, match=rf"plan_session: 144720 images \(360 orientation\(s\) × \(2 \+ 4 phases × "
                                            rf"100 steps × 1 cycle\(s\)\)\), more than the {MAX_PLAN_IMAGES} a plan"):
-        plan_session(tmp_path, steps=100, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=orientations)
+        plan_session(plan_config(steps=100, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=orientations),
+                                 tmp_path)
     assert not any(tmp_path.iterdir())
 
 
 def test_plan_steps_must_be_whole(tmp_path):
-    with pytest.raises(SessionError, match=r"plan_session: steps must be a whole number >= 1, got 2\.5"):
-        plan_session(tmp_path, steps=2.5, step_mass_kg=0.02, arm_radius_m=0.05)
+    with pytest.raises(SessionError, match=r"plan_config: steps must be a whole number >= 1, got 2\.5"):
+        plan_session(plan_config(steps=2.5, step_mass_kg=0.02, arm_radius_m=0.05), tmp_path)
 
 
 # -- manifest ----------------------------------------------------------------------------

@@ -84,3 +84,27 @@ def test_report_link_once_finished():
     done = live_page(title="t", points=pts, planned_torques=[0.0, 0.1], next_step=None, finished=True)
     assert 'href="report.html"' not in running and 'http-equiv="refresh"' in running
     assert 'The report: <a href="report.html">' in done and 'http-equiv="refresh"' not in done
+
+
+def test_the_page_reloads_when_its_stamp_changes():
+    from vision_torsion.session.live import LIVE_STAMP_NAME, stamp_script
+
+    pts = protocol_points()
+    running = live_page(title="t", points=pts, planned_torques=[0.0, 0.1], next_step="x", version="18a-b_c")
+    # the stamp file is looked at with a script; a browser without scripts reloads every second
+    assert 'var mine = "18a-b_c"' in running and f'e.src = "{LIVE_STAMP_NAME}?" + Date.now();' in running
+    assert '<noscript><meta http-equiv="refresh" content="1"></noscript>' in running
+    assert "updates as each photograph comes in" in running
+    assert stamp_script("18a-b_c") == 'liveStamp("18a-b_c");\n'
+    done = live_page(title="t", points=pts, planned_torques=[0.0, 0.1], next_step=None, finished=True,
+                     version="18a")
+    assert "<script" not in done and "refresh" not in done
+
+
+def test_a_stamp_is_letters_digits_and_dashes():
+    from vision_torsion.session.live import stamp_script
+
+    with pytest.raises(ValueError, match=r"""version must be letters, digits, '-' or '_', got '1"\);alert\(1'"""):
+        stamp_script('1");alert(1')
+    with pytest.raises(ValueError, match="version must be letters"):
+        live_page(title="t", points=[], planned_torques=[0.0], next_step="x", version="")

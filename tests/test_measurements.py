@@ -17,7 +17,7 @@ from vision_torsion.measurements import (
     pieces_per_pan,
     read_measurements,
 )
-from vision_torsion.session.config import ProtocolConfig, RigConfig, SessionConfig
+from vision_torsion.session.config import config_from_dict, config_to_dict
 from vision_torsion.stiffness.records import read_record
 from vision_torsion.synthetic import simulate_measurements
 
@@ -120,11 +120,24 @@ def test_pieces_per_pan_scalar_and_array_agree():
     assert [pieces_per_pan(m, 0.02) for m in masses] == arr.tolist()
 
 
-def test_torque_rig_from_session_config_is_checked_once():
-    config = SessionConfig(rig=RigConfig(arm_radius_m=0.05, mass_std_kg=1e-4, friction_torque_std_nm=0.002),
-                           protocol=ProtocolConfig(orientations_deg=(0.0,), max_torque_nm=0.3, step_mass_kg=0.02))
-    rig = config.torque_rig
+def test_session_toml_rig_reads_into_the_torque_rig_which_is_checked_once():
+    doc = {"rig": {"arm_radius_m": 0.05, "mass_std_kg": 1e-4, "friction_torque_std_nm": 0.002},
+           "protocol": {"orientations_deg": [0.0], "max_torque_nm": 0.3, "step_mass_kg": 0.02}}
+    rig = config_from_dict(doc).rig  # [protocol] step_mass_kg is the rig's step mass in memory
     assert rig == TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.05, friction_torque_std_nm=0.002)
+    assert rig.step_torque_nm == pytest.approx(2 * 0.02 * 9.81 * 0.05, rel=1e-15)
+    tolerance = {**doc, "rig": {"arm_radius_m": 0.05, "mass_tolerance_kg": 1e-4}}
+    rig = config_from_dict(tolerance).rig
+    assert rig.mass_tolerance_kg == 1e-4 and rig.mass_std_kg == pytest.approx(1e-4 / np.sqrt(3), rel=1e-15)
+    assert "mass_tolerance_kg" not in rig.to_dict()
+    assert TorqueRig.from_mapping(rig.to_dict()).mass_std_kg == rig.mass_std_kg
+    written = config_to_dict(config_from_dict(tolerance))  # written back as given: the ± bound, in its tables
+    assert written["rig"]["mass_tolerance_kg"] == 1e-4 and "mass_std_kg" not in written["rig"]
+    assert written["protocol"]["step_mass_kg"] == 0.02 and "step_mass_kg" not in written["rig"]
+    with pytest.raises(RigError, match=r"rig: mass_std_kg 0.0001 is not mass_tolerance_kg / sqrt\(3\) = 5.7735e-05"):
+        TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, mass_tolerance_kg=1e-4, arm_radius_m=0.05)
+    with pytest.raises(RigError, match=r"rig: mass_tolerance_kg must be a finite number >= 0, got -0.0001"):
+        TorqueRig.from_tolerance(mass_tolerance_kg=-1e-4, step_mass_kg=0.02, arm_radius_m=0.05)
     with pytest.raises(RigError, match="rig: arm_radius_m must be a finite number > 0, got 0.0"):
         TorqueRig(step_mass_kg=0.02, mass_std_kg=1e-4, arm_radius_m=0.0)
     with pytest.raises(RigError, match=r"rig: missing key\(s\) \['mass_std_kg'\], unknown key\(s\) \['mass'\]"):

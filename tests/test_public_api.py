@@ -47,7 +47,7 @@ def test_a_subpackage_face_is_its_modules_public_names(face):
 
 def test_importing_a_face_imports_none_of_its_modules():
     code = ("import sys, vision_torsion.stiffness, vision_torsion.analysis; "
-            "print(*(m in sys.modules for m in ('matplotlib', 'scipy', 'vision_torsion.stiffness.plots')))")
+            "print(*(m in sys.modules for m in ('matplotlib', 'scipy', 'vision_torsion.stiffness.section')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", "False", "False"]
 

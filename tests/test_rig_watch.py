@@ -359,3 +359,218 @@ def test_control_characters_in_file_names_are_printed_escaped(rig, capsys):
     assert "\x1b" not in out + err and "\x07" not in out + err
     assert "IMG\\x1b]0;owned\\x07.png → line 2" in out
     assert "IMG\\x1b[2J.THM: not an image file" in err
+
+
+# -- filesystem events, the polling fallback, the size limit ---------------------------
+
+
+def write_closed(path, data, *, chunk=4096):
+    """Written in chunks as a camera does, then closed: a new file (its time is now)."""
+    with open(path, "wb") as fh:
+        for at in range(0, len(data), chunk):
+            fh.write(data[at:at + chunk])
+            fh.flush()
+
+
+def test_a_closed_file_is_taken_in_at_once_through_the_filesystem_events(rig):
+    folder, cam, plan, photos = rig
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock) as w:
+        assert w.events.active and w.events.why_polling == ""
+        assert w.tick() == []
+        write_closed(cam / "IMG_0001.png", photos[plan.rows[0]["image"]])
+        assert w.wait(10.0)  # woken by the close, not by the timeout
+        # the clock has not moved: no settling time has passed, the close says it is complete
+        assert [e.file for e in w.tick() if e.kind == "shot"] == ["IMG_0001.png"]
+
+
+def test_a_file_still_open_is_not_taken_in_before_it_is_closed(rig):
+    folder, cam, plan, photos = rig
+    data = photos[plan.rows[0]["image"]]
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock) as w, open(cam / "IMG_0001.png", "wb") as fh:
+        fh.write(data)
+        fh.flush()  # all there, but the camera has not closed it: the settling rule applies
+        w.wait(0.2)
+        assert w.tick() == [] and not w.bound
+        fh.close()
+        assert w.wait(10.0)
+        assert [e.file for e in w.tick() if e.kind == "shot"] == ["IMG_0001.png"]
+
+
+def test_polling_only_waits_for_the_size_to_settle(rig):
+    folder, cam, plan, photos = rig
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock, events="poll", settle_s=1.0) as w:
+        assert not w.events.active and w.events.why_polling == "polling was asked for"
+        write_closed(cam / "IMG_0001.png", photos[plan.rows[0]["image"]])
+        assert not w.wait(0.05)  # no notifications: the timeout
+        assert w.tick() == []  # first seen now: not settled yet
+        clock.t += 1.0
+        assert [e.file for e in w.tick() if e.kind == "shot"] == ["IMG_0001.png"]
+
+
+def test_the_events_come_back_with_the_camera_folder(rig):
+    folder, cam, plan, photos = rig
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock) as w:
+        cam.rename(cam.with_name("away"))
+        assert [e.kind for e in w.tick()] == ["folder_gone"]
+        cam.mkdir()  # a new folder of the same name: the old one's notifications are gone
+        assert [e.kind for e in w.tick()] == ["folder_back"]
+        write_closed(cam / "IMG_0001.png", photos[plan.rows[0]["image"]])
+        assert w.wait(10.0)
+        assert [e.file for e in w.tick() if e.kind == "shot"] == ["IMG_0001.png"]
+
+
+def test_events_must_be_auto_or_poll(rig):
+    folder, cam, plan, photos = rig
+    with pytest.raises(SessionError, match=r"events = 'inotify': expected one of auto, poll"):
+        Watcher(folder, camera_dir=cam, events="inotify")
+
+
+def test_the_start_line_says_how_the_folder_is_followed(rig):
+    import threading
+
+    from vision_torsion.session.watch import watch_session
+
+    folder, cam, plan, photos = rig
+    for events, how in (("auto", "filesystem events"), ("poll", "polling every 0.05 s: polling was asked for")):
+        seen = []
+        stop = threading.Event()
+        stop.set()  # one look, then stop
+        watch_session(folder, camera_dir=cam, poll_s=0.05, stop=stop, events=events, echo=seen.append)
+        assert seen[0].message.startswith(f"watching {cam} ({how}) for 10 planned images; live page: ")
+
+
+class RefusingObserver:
+    """A watchdog observer whose notifications cannot be set up (the inotify limit)."""
+
+    def start(self):
+        pass
+
+    def schedule(self, *args, **kwargs):
+        import errno
+
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def stop(self):
+        pass
+
+    def join(self, timeout=None):
+        pass
+
+
+def test_the_notification_limit_reached_falls_back_to_polling(tmp_path):
+    from vision_torsion.session.events import FolderEvents
+
+    with FolderEvents(tmp_path, observer=RefusingObserver) as ev:
+        assert not ev.active
+        assert ev.why_polling == ("the file notifications could not be set up (No space left on device; on "
+                                  "Linux, fs.inotify.max_user_watches or max_user_instances)")
+        assert not ev.ensure()  # decided for good: no new attempt at every look
+
+
+def test_without_watchdog_the_folder_is_polled(tmp_path):
+    from vision_torsion.session.events import FolderEvents
+
+    def missing():
+        raise ImportError("No module named 'watchdog'")
+
+    with FolderEvents(tmp_path, observer=missing) as ev:
+        assert not ev.active and ev.why_polling == "the watchdog package is not installed"
+
+
+def test_a_folder_on_a_network_share_is_polled(tmp_path):
+    from vision_torsion.session.events import FolderEvents, network_filesystem
+
+    share = tmp_path / "my share"
+    share.mkdir()
+    table = tmp_path / "mountinfo"
+    escaped = str(share).replace(" ", "\\040")
+    table.write_text(f"22 1 8:1 / / rw,relatime shared:1 - ext4 /dev/sda1 rw\n"
+                     f"40 22 0:50 / {escaped} rw,relatime shared:9 - nfs4 server:/photos rw,vers=4.2\n")
+    assert network_filesystem(tmp_path, mount_table=table) is None  # ext4: local
+    assert network_filesystem(share / "sub", mount_table=table) == "nfs4"
+    with FolderEvents(share, mount_table=table) as ev:
+        assert ev.why_polling == (f"{share} is on a network file system (nfs4), whose notifications miss "
+                                  "what another computer writes")
+
+
+def sparse(path, size):
+    with open(path, "wb") as fh:
+        fh.truncate(size)  # no disk used; reading it whole would take `size` bytes of memory
+
+
+def test_watch_sets_aside_a_file_over_the_size_limit_without_reading_it(rig):
+    from vision_torsion.images import MAX_IMAGE_FILE_BYTES
+
+    folder, cam, plan, photos = rig
+    sparse(cam / "IMG_0001.png", 3 * 1024**3)
+    put(cam, "IMG_0002.png", photos[plan.rows[0]["image"]])
+    os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock, events="poll") as w:
+        events = run(w, clock)
+        assert messages(events, "ignored") == [
+            f"IMG_0001.png: {3 * 1024**3} bytes, larger than an image file may be ({MAX_IMAGE_FILE_BYTES} "
+            "bytes); not read, not bound"]
+        # it holds nothing back, and takes no row
+        assert {b.file: b.row.line for b in w.bound.values()} == {"IMG_0002.png": 2}
+
+
+def test_bind_sets_aside_a_file_over_the_size_limit_without_reading_it(rig):
+    from vision_torsion.images import MAX_IMAGE_FILE_BYTES
+    from vision_torsion.session.bind import bind_session
+
+    folder, cam, plan, photos = rig
+    for k, row in enumerate(plan.rows[:2]):
+        put(cam, f"IMG_{2 * k + 1:04d}.png", photos[row["image"]])
+    sparse(cam / "IMG_0002.png", MAX_IMAGE_FILE_BYTES + 1)
+    res = bind_session(folder, cam, write=False)
+    assert res.ignored == (("IMG_0002.png", f"{MAX_IMAGE_FILE_BYTES + 1} bytes, larger than an image file may "
+                                            f"be ({MAX_IMAGE_FILE_BYTES} bytes); not bound"),)
+    assert res.binding.images == {plan.rows[0]["image"]: "IMG_0001.png", plan.rows[1]["image"]: "IMG_0003.png"}
+
+
+def test_ctrl_c_ends_a_watch_on_filesystem_events_cleanly(rig):
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    folder, cam, plan, photos = rig
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root), "PYTHONWARNINGS": "error"}
+    cmd = [sys.executable, "-m", "vision_torsion", "watch", str(folder), "--camera-dir", str(cam), "--no-report"]
+    with subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            assert "(filesystem events)" in proc.stdout.readline()
+            write_closed(cam / "IMG_0001.png", photos[plan.rows[0]["image"]])
+            assert "IMG_0001.png → line 2" in proc.stdout.readline()
+            proc.send_signal(signal.SIGINT)
+            out, err = proc.communicate(timeout=60)
+        finally:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    assert out.startswith("stopped; run the same command again to resume\n1 of 10 planned images bound")
+
+
+def test_the_live_page_and_its_stamp_change_with_each_photograph(rig):
+    folder, cam, plan, photos = rig
+    page, stamp = folder / "results" / "live.html", folder / "results" / "live-stamp.js"
+    clock = Clock()
+
+    def versions():
+        mine = re.search(r'var mine = "(\w+)"', page.read_text()).group(1)
+        return mine, re.fullmatch(r'liveStamp\("(\w+)"\);\n', stamp.read_text()).group(1)
+
+    with Watcher(folder, camera_dir=cam, clock=clock) as w:
+        w.write_page()
+        first, in_stamp = versions()
+        assert first == in_stamp
+        put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+        run(w, clock, 1)
+        second, in_stamp = versions()
+        assert second == in_stamp != first and "IMG_0001.png" in page.read_text()

@@ -7,14 +7,18 @@ import pytest
 
 from vision_torsion.cli import plan as plan_cli
 from vision_torsion.errors import SessionError
-from vision_torsion.session import load_session, plan_session
+from vision_torsion.session import load_session, plan_config, plan_session
 from vision_torsion.session.torque import couple_torque
+
+#: plan_session's own options; the other keywords are plan_config's
+PLAN_OPTIONS = ("image_suffix", "overwrite", "preconditioning_cycles", "closing", "pdf")
 
 
 def plan(folder, **kw):
     args = dict(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05)
     args.update(kw)
-    return plan_session(folder, **args)
+    options = {k: args.pop(k) for k in PLAN_OPTIONS if k in args}
+    return plan_session(plan_config(**args), folder, **options)
 
 
 def test_protocol_order_and_counts(tmp_path):
@@ -78,7 +82,7 @@ def test_capture_sheet(tmp_path):
     sheet = (tmp_path / "capture_sheet.md").read_text()
     assert "requested 0.36 N·m is not a whole number of steps; snapped down" in sheet
     step = couple_torque(0.1, "negative_loading", load_session(
-        tmp_path, check_files=False).config.rig, step_mass_kg=0.02).torque_nm
+        tmp_path, check_files=False).config.rig).torque_nm
     assert f"{step:+.5f}" == "-0.09810"
     assert ("| negative_loading | 5 | empty | 100 g (5 × 20 g) | -0.09810 | "
             "`images/o000_c1_03_negative_loading_s05.png` |") in sheet
@@ -134,7 +138,7 @@ def test_cli_plan_help(capsys):
 
 
 def test_steps_instead_of_max_torque(tmp_path):
-    p = plan_session(tmp_path, steps=5, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,))
+    p = plan_session(plan_config(steps=5, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,)), tmp_path)
     assert p.steps_per_phase == 5 and p.exact
     assert p.max_torque_nm == pytest.approx(5 * 0.01962, rel=1e-12)
 
@@ -147,7 +151,7 @@ def test_steps_instead_of_max_torque(tmp_path):
 ])
 def test_plan_size_messages(tmp_path, kw, message):
     with pytest.raises(SessionError, match=message):
-        plan_session(tmp_path, step_mass_kg=0.02, arm_radius_m=0.05, **kw)
+        plan(tmp_path, max_torque_nm=kw.pop("max_torque_nm", None), **kw)
 
 
 def test_nearest_achievable_maxima(tmp_path, capsys):
@@ -162,8 +166,8 @@ def test_nearest_achievable_maxima(tmp_path, capsys):
 
 
 def test_closing_image_per_orientation(tmp_path):
-    p = plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05,
-                     orientations_deg=(0, 60), cycles=2, closing=True)
+    p = plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                                 cycles=2), tmp_path, closing=True)
     closing = [r for r in p.rows if r["phase"] == "closing"]
     assert [(r["orientation_deg"], r["cycle"], r["mass_kg"]) for r in closing] == [("0", "2", "0"), ("60", "2", "0")]
     per = len(p.rows) // 2
@@ -173,9 +177,9 @@ def test_closing_image_per_orientation(tmp_path):
 
 
 def test_html_capture_sheet(tmp_path):
-    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
-                 preconditioning_cycles=2, closing=True, angle_sign=-1,
-                 header={"gear": "CSF-20-100", "operator": "A. Tester"})
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                             angle_sign=-1, header={"gear": "CSF-20-100", "operator": "A. Tester"}),
+                 tmp_path, preconditioning_cycles=2, closing=True)
     page = (tmp_path / "capture_sheet.html").read_text()
     assert "<td>CSF-20-100</td>" in page and "<td>A. Tester</td>" in page
     assert "<th>Serial number</th><td></td>" in page  # a blank line to fill in
@@ -191,7 +195,7 @@ def test_pdf_capture_sheet_where_chromium_is(tmp_path):
 
     if find_chromium() is None:
         pytest.skip("no Chromium on this machine")
-    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), pdf=True)
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,)), tmp_path, pdf=True)
     assert (tmp_path / "capture_sheet.pdf").read_bytes().startswith(b"%PDF")
 
 
@@ -200,8 +204,8 @@ def test_pdf_capture_sheet_where_chromium_is(tmp_path):
 
 def test_rated_torque_levels_are_steps_of_every_phase(tmp_path):
     # 20 g at r = 0.05 m: 0.01962 N·m per piece; T_R = 6 N·m: 3 % = 0.18 -> 9 pieces, 4 % = 0.24 -> 12
-    p = plan_session(tmp_path, steps=20, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
-                     cycles=2, rated_torque_nm=6.0)
+    p = plan_session(plan_config(steps=20, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                                 cycles=2, rated_torque_nm=6.0), tmp_path)
     assert [(lv.fraction, lv.pieces) for lv in p.lost_motion_levels] == [(0.03, 9), (0.04, 12)]
     assert [lv.torque_nm for lv in p.lost_motion_levels] == [pytest.approx(0.17658), pytest.approx(0.23544)]
     assert p.lost_motion_levels[0].achieved_fraction == pytest.approx(0.02943)
@@ -242,15 +246,15 @@ def test_no_rated_torque_no_levels(tmp_path):
      None),
     (dict(rated_torque_nm=1.2),  # 3 % = 1.83 -> 2, 4 % = 2.45 -> 2 (18 % off): the same pieces
      r"level ±4 % .* is realised by the same 2 piece\(s\) of 0\.02 kg per pan as the level ±3 %"),
-    (dict(rated_torque_nm=-1), r"rated_torque_nm must be a finite number > 0 \(N·m\), got -1"),
+    (dict(rated_torque_nm=-1), r"gear\.rated_torque_nm: must be a finite number > 0 \(N·m\), got -1"),
 ])
 def test_rated_torque_messages(tmp_path, kw, message):
     args = dict(steps=10, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), **kw)
     if message is None:
-        assert len(plan_session(tmp_path, **args).lost_motion_levels) == 2
+        assert len(plan_session(plan_config(**args), tmp_path).lost_motion_levels) == 2
         return
     with pytest.raises(SessionError, match=message):
-        plan_session(tmp_path, **args)
+        plan_session(plan_config(**args), tmp_path)
     assert not (tmp_path / "session.toml").exists()
 
 
@@ -267,8 +271,9 @@ def test_cli_rated_torque(tmp_path, capsys):
 def test_capture_sheet_pages_carry_their_head_and_a_camera_file_column(tmp_path):
     import re
 
-    plan_session(tmp_path, steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
-                 preconditioning_cycles=1, closing=True, header={"gear": "CSF-20-100", "serial": "S/N 9"}, pdf=False)
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0, 60),
+                             header={"gear": "CSF-20-100", "serial": "S/N 9"}),
+                 tmp_path, preconditioning_cycles=1, closing=True, pdf=False)
     page = (tmp_path / "capture_sheet.html").read_text()
     heads = re.findall(r"<thead>(.*?)</thead>", page, flags=re.S)
     assert len(heads) == 2 and "Orientation 0° — CSF-20-100, S/N 9" in heads[0] and "Orientation 60°" in heads[1]
@@ -289,8 +294,8 @@ def test_printed_capture_sheet_repeats_the_head_and_numbers_every_page(tmp_path)
 
     if find_chromium() is None or shutil.which("pdftotext") is None:
         pytest.skip("no Chromium or pdftotext on this machine")
-    plan_session(tmp_path, steps=18, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,), pdf=True,
-                 header={"gear": "CSF-20-100"})
+    plan_session(plan_config(steps=18, step_mass_kg=0.02, arm_radius_m=0.05, orientations_deg=(0,),
+                             header={"gear": "CSF-20-100"}), tmp_path, pdf=True)
     text = subprocess.run(["pdftotext", "-layout", str(tmp_path / "capture_sheet.pdf"), "-"], capture_output=True,
                           text=True, check=True).stdout
     pages = [p for p in text.split("\f") if p.strip()]
@@ -308,3 +313,86 @@ def test_a_refused_plan_leaves_no_folder_behind(tmp_path, capsys):
     assert main(["plan", str(out), "--max-torque", "1", "--step-mass", "1e-9", "--arm-radius", "0.05"]) == 2
     assert "error:" in capsys.readouterr().err
     assert not out.exists()
+
+
+# -- issue 26: plan_session(config, out_dir); session.toml's format unchanged --------
+
+
+#: A session.toml as `vision-torsion demo` wrote it before the rig became a TorqueRig
+#: (main at ae3a2cc): sessions planned then must load, and be written back unchanged.
+EARLIER_SESSION_TOML = """\
+format_version = 1
+angle_sign = -1
+
+[rig]
+arm_radius_m = 0.05
+gravity_m_per_s2 = 9.81
+mass_tolerance_kg = 0.0001
+friction_torque_std_nm = 0.0
+arm_radius_std_m = 0.0
+gravity_std_m_per_s2 = 0.0
+
+[markers]
+polarity = "dark"
+fit = "pixels"
+pair = "largest"
+
+[protocol]
+orientations_deg = [
+    0.0,
+    60.0,
+    120.0,
+    180.0,
+    240.0,
+    300.0,
+]
+max_torque_nm = 0.35316
+step_mass_kg = 0.02
+cycles = 1
+
+[gear]
+name = "paper-demo-gear (synthetic)"
+serial = "DEMO-0"
+t1_nm = 0.15
+t2_nm = 0.3
+
+[test]
+operator = "vision-torsion demo"
+date = "2026-11-27"
+
+[spec]
+k1_min_nm_per_rad = 0.28
+k2_min_nm_per_rad = 4.0
+hysteresis_loss_max_arcmin = 1800.0
+"""
+
+
+def test_an_earlier_session_toml_loads_and_plans_the_same_session(tmp_path):
+    from vision_torsion.session.config import load_config, write_config
+
+    (tmp_path / "old.toml").write_text(EARLIER_SESSION_TOML)
+    config = load_config(tmp_path / "old.toml")
+    assert config.rig.step_mass_kg == 0.02 and config.rig.mass_tolerance_kg == 1e-4
+    assert config.rig.step_torque_nm == pytest.approx(0.01962, rel=1e-12)
+    write_config(tmp_path / "again.toml", config)
+    assert (tmp_path / "again.toml").read_text() == EARLIER_SESSION_TOML
+    # planning the loaded configuration again writes the same session.toml
+    p = plan_session(config, tmp_path / "s")
+    assert p.steps_per_phase == 18 and p.exact and p.header == {"gear": "paper-demo-gear (synthetic)",
+                                                                "serial": "DEMO-0", "operator": "vision-torsion demo",
+                                                                "date": "2026-11-27"}
+    assert (tmp_path / "s" / "session.toml").read_text().endswith(EARLIER_SESSION_TOML)
+
+
+def test_plan_session_checks_the_configuration_it_is_given(tmp_path):
+    from dataclasses import replace
+
+    with pytest.raises(SessionError, match=r"plan_session: config must be a SessionConfig \(see plan_config\), "
+                                           r"got dict"):
+        plan_session({"rig": {}}, tmp_path)
+    config = plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05)
+    bad = replace(config, protocol=replace(config.protocol, cycles=0))  # built by hand, not read from a file
+    with pytest.raises(SessionError, match=r"plan_session: 1 problem\(s\)\n  protocol\.cycles: must be a whole "
+                                           r"number >= 1"):
+        plan_session(bad, tmp_path)
+    assert not any(tmp_path.iterdir())

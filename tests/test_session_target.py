@@ -6,7 +6,7 @@ import pytest
 from vision_torsion.cli import main
 from vision_torsion.errors import SessionError
 from vision_torsion.session.config import config_from_dict, config_to_dict, load_config
-from vision_torsion.session.plan import plan_session
+from vision_torsion.session.plan import plan_config, plan_session
 from vision_torsion.session.process import process_session
 
 RIG = {"arm_radius_m": 0.05, "mass_tolerance_kg": 1e-4}
@@ -14,7 +14,7 @@ PROTOCOL = {"max_torque_nm": 0.2, "step_mass_kg": 0.02, "orientations_deg": [0.0
 
 
 def test_plan_writes_the_ready_target_and_reads_it_back(tmp_path):
-    plan_session(tmp_path / "s", steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring16")
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring16"), tmp_path / "s")
     cfg = load_config(tmp_path / "s" / "session.toml")
     assert cfg.target.name == "ring16" and cfg.target.n_markers == 16 and cfg.target.index == (0,)
     assert cfg.markers.pair == "largest"
@@ -23,7 +23,7 @@ def test_plan_writes_the_ready_target_and_reads_it_back(tmp_path):
 
 @pytest.mark.parametrize("target, pair", [("equal", "largest"), ("distinct", "distinct")])
 def test_two_marker_targets_are_kept(tmp_path, target, pair):
-    plan_session(tmp_path / "s", steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target=target)
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target=target), tmp_path / "s")
     cfg = load_config(tmp_path / "s" / "session.toml")
     assert cfg.target is None and cfg.markers.pair == pair
 
@@ -39,9 +39,9 @@ def test_plan_command_takes_a_target_file(tmp_path):
 
 
 def test_unknown_target_is_refused_by_plan(tmp_path):
-    with pytest.raises(SessionError, match=r"plan_session: target must be 'equal', 'distinct' or a target "
+    with pytest.raises(SessionError, match=r"plan_config: target must be 'equal', 'distinct' or a target "
                                            r"description: ring99: no such file") as err:
-        plan_session(tmp_path / "s", steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring99")
+        plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring99"), tmp_path / "s")
     assert err.value.reason == "not_found" and not (tmp_path / "s" / "session.toml").exists()
 
 
@@ -57,7 +57,7 @@ def test_session_target_by_name():
 
 
 def test_process_refuses_a_session_of_an_n_marker_target(tmp_path):
-    plan_session(tmp_path / "s", steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring8")
+    plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring8"), tmp_path / "s")
     with pytest.raises(SessionError, match=r"\[target\] names the 8-marker target 'ring8', which `process` does "
                                            r"not measure yet") as err:
         process_session(tmp_path / "s", jobs=1)

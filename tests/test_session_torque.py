@@ -4,19 +4,19 @@ import math
 
 import pytest
 
-from vision_torsion.session.config import RigConfig
+from vision_torsion.measurements import TorqueRig
 from vision_torsion.session.torque import PHASES, couple_torque, pieces_per_pan
 
 
 def rig(**kw):
-    base = dict(arm_radius_m=0.05, mass_std_kg=0.0)
+    base = dict(step_mass_kg=0.02, arm_radius_m=0.05, mass_std_kg=0.0)
     base.update(kw)
-    return RigConfig(**base)
+    return TorqueRig(**base)
 
 
 def test_paper_value_per_100_g():
     # The paper: 0.0981 N·m per 100 g at r = 0.05 m (tau = 2 m g r, g = 9.81).
-    t = couple_torque(0.1, "positive_loading", rig(), step_mass_kg=0.02)
+    t = couple_torque(0.1, "positive_loading", rig())
     assert t.torque_nm == pytest.approx(0.0981, rel=1e-12)
 
 
@@ -26,7 +26,7 @@ def test_paper_value_per_100_g():
                                          ("positive_loading", 1)])
 def test_sign_from_phase(phase, sign):
     mass = 0.0 if phase == "reference" else 0.06
-    t = couple_torque(mass, phase, rig(), step_mass_kg=0.02)
+    t = couple_torque(mass, phase, rig())
     assert t.torque_nm == pytest.approx(sign * 2 * mass * 9.81 * 0.05, abs=0)
     assert set(PHASES) >= {phase}
 
@@ -37,7 +37,7 @@ def test_gum_uncertainty_against_hand_computation():
     u_w = 1e-4 / math.sqrt(3)
     r = rig(mass_std_kg=u_w, gravity_std_m_per_s2=0.01, arm_radius_std_m=1e-4,
             friction_torque_std_nm=2e-4)
-    t = couple_torque(0.1, "negative_unloading", r, step_mass_kg=0.02)
+    t = couple_torque(0.1, "negative_unloading", r)
     # hand computation, term by term (N·m):
     dg = 2 * 0.1 * 0.05 * 0.01            # d tau/d g * u_g  = 1.0e-4
     dr = 2 * 0.1 * 9.81 * 1e-4            # d tau/d r * u_r  = 1.962e-4
@@ -52,8 +52,7 @@ def test_gum_uncertainty_against_hand_computation():
 
 
 def test_reference_has_only_friction_uncertainty():
-    t = couple_torque(0.0, "reference", rig(mass_std_kg=1e-4, friction_torque_std_nm=3e-4),
-                      step_mass_kg=0.02)
+    t = couple_torque(0.0, "reference", rig(mass_std_kg=1e-4, friction_torque_std_nm=3e-4))
     assert (t.torque_nm, t.torque_std_nm, t.torque_common_std_nm) == (0.0, 3e-4, 0.0)
 
 

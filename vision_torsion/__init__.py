@@ -62,6 +62,7 @@ _LAZY = {
     "measure_target_folder": "rigid",
     "write_target_pdf": "targetsheet",
     # sessions
+    "plan_config": "session",
     "plan_session": "session",
     "load_session": "session",
     "process_session": "session",

@@ -49,6 +49,7 @@ __all__ = [
     "output_set",
     "check_output_dir",
     "os_reason",
+    "file_mode",
     "format_float",
     "write_records_csv",
     "MIN_FREE_BYTES",
@@ -82,8 +83,12 @@ def os_reason(exc: OSError) -> str:
 
 
 @lru_cache(maxsize=1)
-def _file_mode() -> int:
-    """``0o666`` less the process's umask (read once: setting it is the only way)."""
+def file_mode() -> int:
+    """The mode of a file this package creates: ``0o666`` less the process's umask.
+
+    The umask is read once (setting it is the only way to read it) and kept; a
+    program that changes its umask afterwards calls ``file_mode.cache_clear()``.
+    """
     mask = os.umask(0o022)
     os.umask(mask)
     return 0o666 & ~mask
@@ -145,7 +150,7 @@ def _append_record(folder: Path, lines: list[str]) -> None:
     interleave lines); a record that is not ours is never written to."""
     path = folder / RECORD_NAME
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, _file_mode())
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, file_mode())
         data = _RECORD_HEADER
     except FileExistsError:
         try:
@@ -287,7 +292,7 @@ def atomic_write_bytes(path, data: bytes, *, durable: bool = True, force: bool |
         raise OutputError(f"{p}: cannot write ({os_reason(exc)})") from exc
     try:
         with os.fdopen(fd, "wb") as fh:
-            os.fchmod(fh.fileno(), _file_mode())
+            os.fchmod(fh.fileno(), file_mode())
             fh.write(data)
             if durable:
                 fh.flush()

@@ -21,6 +21,7 @@ beside :mod:`.settings`.
 from __future__ import annotations
 
 import io
+import math
 import os
 from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
@@ -161,8 +162,10 @@ def couple_torque_nm(mass_kg, *, gravity_m_per_s2: float, arm_radius_m: float):
 class TorqueRig:
     """The constants of the force-couple rig that the torque model needs (SI units).
 
-    One object from ``session.toml`` (:attr:`vision_torsion.session.SessionConfig.torque_rig`)
-    to the analysis (``analyze_session(..., rig=...)``); checked once, here.
+    The one home of the rig's constants: session.toml's ``[rig]`` table (with
+    ``[protocol] step_mass_kg``) is read into it
+    (:attr:`vision_torsion.session.SessionConfig.rig`), and it goes on to the analysis
+    (``analyze_session(..., rig=...)``); checked once, here.
 
     Attributes
     ----------
@@ -180,12 +183,19 @@ class TorqueRig:
         1σ of r (m), >= 0.
     gravity_std_m_per_s2 : float
         1σ of g (m/s²), >= 0.
+    mass_tolerance_kg : float or None
+        The ± bound of one piece's mass as a session.toml gave it (kg), >= 0, kept
+        to write the file back as it was; `mass_std_kg` is then
+        ``mass_tolerance_kg / sqrt(3)`` (uniform within the bound, GUM 4.3.7). None
+        when the 1σ was given directly. Not part of :meth:`to_dict` (the torque
+        model uses `mass_std_kg`).
 
     Raises
     ------
     RigError
         A value that is not a finite number, a non-positive step mass, r or g, or a
-        negative uncertainty (the message names the constant).
+        negative uncertainty (the message names the constant); a `mass_std_kg`
+        that is not ``mass_tolerance_kg / sqrt(3)``.
 
     Examples
     --------
@@ -201,15 +211,37 @@ class TorqueRig:
     friction_torque_std_nm: float = 0.0
     arm_radius_std_m: float = 0.0
     gravity_std_m_per_s2: float = 0.0
+    mass_tolerance_kg: float | None = None
 
     #: Constants that must be > 0 (the others are uncertainties, >= 0).
     _POSITIVE = ("step_mass_kg", "gravity_m_per_s2", "arm_radius_m")
 
     def __post_init__(self):
         for f in fields(self):
+            if f.name == "mass_tolerance_kg" and self.mass_tolerance_kg is None:
+                continue
             v = check_number(getattr(self, f.name), name=f"rig: {f.name}", error=RigError, low=0,
                              low_open=f.name in self._POSITIVE)
             object.__setattr__(self, f.name, v)
+        tol = self.mass_tolerance_kg
+        if tol is not None and not math.isclose(self.mass_std_kg, tol / math.sqrt(3.0), rel_tol=1e-9, abs_tol=0.0):
+            raise RigError(f"rig: mass_std_kg {self.mass_std_kg:g} is not mass_tolerance_kg / sqrt(3) = "
+                           f"{tol / math.sqrt(3.0):g} (a ± bound is taken as uniform); give one of the two")
+
+    @classmethod
+    def from_tolerance(cls, *, mass_tolerance_kg: float, **constants) -> "TorqueRig":
+        """The rig with the ± bound `mass_tolerance_kg` (kg) of one piece's mass:
+        ``mass_std_kg = mass_tolerance_kg / sqrt(3)`` (uniform within the bound, GUM
+        4.3.7); `constants` are the other fields.
+
+        Examples
+        --------
+        >>> rig = TorqueRig.from_tolerance(mass_tolerance_kg=1e-4, step_mass_kg=0.02, arm_radius_m=0.05)
+        >>> round(rig.mass_std_kg * 1e6, 2)
+        57.74
+        """
+        tol = check_number(mass_tolerance_kg, name="rig: mass_tolerance_kg", error=RigError, low=0)
+        return cls(mass_std_kg=tol / math.sqrt(3.0), mass_tolerance_kg=tol, **constants)
 
     @classmethod
     def required(cls) -> tuple[str, ...]:
@@ -237,13 +269,6 @@ class TorqueRig:
                            f"and optionally {optional}")
         return cls(**{k: rig[k] for k in rig})
 
-    @classmethod
-    def from_rig(cls, rig, *, step_mass_kg: float) -> "TorqueRig":
-        """From an object holding the other constants as attributes (such as
-        :class:`vision_torsion.session.config.RigConfig`) and the step mass."""
-        return cls(step_mass_kg=step_mass_kg,
-                   **{f.name: getattr(rig, f.name) for f in fields(cls) if f.name != "step_mass_kg"})
-
     @property
     def step_torque_nm(self) -> float:
         """The torque of one weight piece on each pan of the pair, 2·m·g·r (N·m)."""
@@ -251,8 +276,11 @@ class TorqueRig:
                                 arm_radius_m=self.arm_radius_m)
 
     def to_dict(self) -> dict:
-        """The constants as a plain dict of floats (JSON-safe)."""
-        return asdict(self)
+        """The constants of the torque model as a plain dict of floats (JSON-safe;
+        :meth:`from_mapping` reads it back)."""
+        out = asdict(self)
+        del out["mass_tolerance_kg"]
+        return out
 
 
 def csv_line(position: int) -> int:

@@ -10,7 +10,14 @@ Modules, one job each:
 - :mod:`.uncertainty` — error model and propagation (first order, Monte Carlo);
 - :mod:`.loops` — validation of ``measurements.csv`` and loop assembly;
 - :mod:`.summary` — per-orientation and session summaries, orientation test;
-- :mod:`.session` — :func:`analyze_session`;
+- :mod:`.session` — :func:`analyze_session`, a short orchestrator over the figure
+  families below;
+- :mod:`.parameters` — :class:`AnalysisOptions`, the analysis' options, checked once;
+- :mod:`.rows` — the figure rows and issues every family returns;
+- the figure families, one module each: :mod:`.phase_figures` (phase stiffness),
+  :mod:`.loop_figures` (loop figures by Monte Carlo), :mod:`.catalogue_figures`
+  (K1–K3), :mod:`.model_figures` (bilinear, Preisach, Bouc–Wen fits and gates),
+  :mod:`.data_checks` (failed images, rig, sign, creep, outliers);
 - :mod:`.fitcheck` — the lack-of-fit gate, switching-phase stiffness, secant;
 - :mod:`.preisach` — the Preisach / Maxwell-slip model, fitted by NNLS;
 - :mod:`.catalogue` — K1, K2, K3 with catalogue (or fitted) break torques;
@@ -20,6 +27,6 @@ Modules, one job each:
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "preisach", "session", "summary")
+_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "parameters", "preisach", "session", "summary")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -49,6 +49,8 @@ __all__ = [
     "marginal_lack_of_fit",
     "local_torque_std",
     "fit_switch",
+    "least_midpoint",
+    "switch_in_bracket",
     "secant",
 ]
 
@@ -427,7 +429,7 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     ``θ = θ₀ + c₁·min(x, τ_s) + c₂·max(x − τ_s, 0)`` with ``x = |τ − τ_start|`` the
     torque taken since the phase's start; the switch ``τ_s`` is profiled over the
     mid-points between torque levels and then solved exactly between the best one's
-    two levels (:func:`_switch_in_bracket`), the compliances being a linear
+    two levels (:func:`switch_in_bracket`), the compliances being a linear
     least-squares fit for each switch (weights ``1/σ_eff²``).
 
     torque_sources : array_like (n, m), optional
@@ -469,12 +471,12 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     best = None
     for _ in range(2):  # effective variance: the weights depend on the local compliance
         # first the mid-point with the least sum of squares, then the exact optimum between its two torque levels
-        i = _least_midpoint(x, y, w, cands, design)
+        i = least_midpoint(x, y, w, cands, design)
         if i is None:
             raise AnalysisError("switch fit: no finite sum of squares at any mid-point between torque levels")
         lo_b = levels[max(i + min_per_side - 1, 0)]
         hi_b = levels[min(i + min_per_side, levels.size - 1)]
-        ts = _switch_in_bracket(x, y, w, lo_b, hi_b, design)
+        ts = switch_in_bracket(x, y, w, lo_b, hi_b, design)
         coef = weighted_lstsq(design(ts), y, w)[0]
         comp = np.where(x < ts, coef[1], coef[2])
         best = (ts, coef)
@@ -519,9 +521,14 @@ def fit_switch(torque_nm, angle_rad, *, angle_std_rad, torque_std_nm, min_per_si
     return out
 
 
-def _least_midpoint(x, y, w, cands, design):
+def least_midpoint(x, y, w, cands, design):
     """Index of the first of the switch candidates `cands` with the least weighted sum
     of squares of the hinge ``design`` (``lstsq`` each), or None if none is finite.
+
+    `x` is the torque taken since the phase's start (N·m), `y` the angle (rad), `w` the
+    weights (1/rad²), `cands` the switch torques to rank (N·m) and ``design(t)`` the
+    hinge's design matrix ``[1, min(x, t), max(x - t, 0)]`` (the step of
+    :func:`fit_switch` that picks the bracket).
 
     One stacked normal-equation solve ranks them all; only those within its rounding
     of the best are fitted by ``lstsq`` (:func:`vision_torsion.numerics.first_least`):
@@ -542,9 +549,10 @@ def _least_midpoint(x, y, w, cands, design):
                        rtol=1e-6, atol=slack)[1]
 
 
-def _switch_in_bracket(x, y, w, lo, hi, design) -> float:
+def switch_in_bracket(x, y, w, lo, hi, design) -> float:
     """The switch torque in ``[lo, hi]`` (two adjacent torque levels, no sample between)
-    with the least weighted sum of squares, exactly.
+    with the least weighted sum of squares, exactly (N·m; `x`, `y`, `w`, `design` as
+    :func:`least_midpoint` takes them).
 
     With no sample between ``lo`` and ``hi``, a switch there splits the samples the
     same way wherever it is, and the hinge is two straight lines (the samples at or

@@ -86,6 +86,9 @@ __all__ = [
     "bilinear_loop_energy",
     "BilinearFit",
     "fit_bilinear",
+    "bilinear_increments",
+    "bilinear_linear_solve",
+    "bilinear_profile_sse",
     "bouc_wen_response",
     "BoucWenFit",
     "fit_bouc_wen",
@@ -113,10 +116,21 @@ def _loading_part(a: np.ndarray, b: np.ndarray, tau_c: float) -> np.ndarray:
     return np.where(b > a, up, down)
 
 
-def _bilinear_increments(tau: np.ndarray, tau_c: float) -> tuple[np.ndarray, np.ndarray]:
+def bilinear_increments(tau: np.ndarray, tau_c: float) -> tuple[np.ndarray, np.ndarray]:
     """Torque amounts taken at the unloading (U) and loading (L) compliance, per sample.
 
-    Returned cumulative: ``theta = theta_start + c_u*U + c_l*L``.
+    Parameters
+    ----------
+    tau : numpy.ndarray, shape (n,)
+        Torques in acquisition order (N·m).
+    tau_c : float
+        Critical torque of the bilinear model (N·m), >= 0.
+
+    Returns
+    -------
+    (U, L) : two numpy.ndarray, shape (n,)
+        Cumulative from the first sample (N·m, 0 there): the model's angle is
+        ``theta = theta_start + c_u*U + c_l*L`` with the compliances ``c = 1/k`` (rad/(N·m)).
     """
     a, b = tau[:-1], tau[1:]
     lo = _loading_part(a, b, tau_c)
@@ -200,7 +214,7 @@ def bilinear_response(torque_nm, *, k_u, k_l, tau_c, theta_start="centred") -> n
         start = _bilinear_centred_start(tau, c_u, c_l, float(tau_c))
     else:
         start = check_number(theta_start, name="theta_start", error=AnalysisError, unit="rad")
-    un, lo = _bilinear_increments(tau, float(tau_c))
+    un, lo = bilinear_increments(tau, float(tau_c))
     return start + c_u * un + c_l * lo
 
 
@@ -324,7 +338,23 @@ class BilinearFit:
         )
 
 
-def _bilinear_linear_solve(un, lo, th, w):
+def bilinear_linear_solve(un, lo, th, w):
+    """The weighted least-squares fit ``th = theta0 + c_u*un + c_l*lo`` (``numpy.linalg.lstsq``).
+
+    Parameters
+    ----------
+    un, lo : numpy.ndarray, shape (n,)
+        The cumulative torque amounts of :func:`bilinear_increments` (N·m).
+    th : numpy.ndarray, shape (n,)
+        Angles (rad).
+    w : numpy.ndarray, shape (n,)
+        Weights (1/rad²).
+
+    Returns
+    -------
+    (numpy.ndarray, float)
+        ``(theta0, c_u, c_l)`` (rad, rad/(N·m), rad/(N·m)) and the weighted sum of squares.
+    """
     x = np.column_stack([np.ones_like(un), un, lo])
     sw = np.sqrt(w)
     coef, *_ = np.linalg.lstsq(x * sw[:, None], th * sw, rcond=None)
@@ -332,10 +362,12 @@ def _bilinear_linear_solve(un, lo, th, w):
     return coef, float(np.sum(w * r * r))
 
 
-def _bilinear_profile_sse(tau, th, w, grid):
-    """Weighted SSE of the linear fit at every switch torque of `grid`, in one pass.
+def bilinear_profile_sse(tau, th, w, grid):
+    """Weighted SSE of the linear fit at every switch torque of `grid` (N·m), in one pass.
 
-    The same profile as ``_bilinear_linear_solve(*_bilinear_increments(tau, tc), th, w)``
+    `tau` (N·m), `th` (rad) and `w` (1/rad²) as :func:`bilinear_linear_solve` takes them;
+    returns an array of the grid's shape. The same profile as
+    ``bilinear_linear_solve(*bilinear_increments(tau, tc), th, w)[1]``
     for each ``tc`` (agrees to ~1e-9 relative; ``tests/test_analysis_speed.py``), but the
     increments of all candidates are built as one array and the 3-parameter weighted
     normal equations solved as a stack: the grid was ~400 separate ``lstsq`` calls per
@@ -406,12 +438,12 @@ def fit_bilinear(
     amp = float(np.max(np.abs(tau)))
 
     def profile(tc):
-        un, lo = _bilinear_increments(tau, tc)
-        return _bilinear_linear_solve(un, lo, th, w)
+        un, lo = bilinear_increments(tau, tc)
+        return bilinear_linear_solve(un, lo, th, w)
 
     grid = np.linspace(0.0, amp, n_grid + 1)[1:-1]
     try:
-        sse = _bilinear_profile_sse(tau, th, w, grid)
+        sse = bilinear_profile_sse(tau, th, w, grid)
     except np.linalg.LinAlgError:  # a degenerate candidate: profile each one on its own
         sse = np.array([profile(tc)[1] for tc in grid])
     i = int(np.argmin(sse))
@@ -435,7 +467,7 @@ def fit_bilinear(
         )
 
     def model(p, t=tau):
-        un, lo = _bilinear_increments(t, p[3])
+        un, lo = bilinear_increments(t, p[3])
         return p[0] + p[1] * un + p[2] * lo
 
     p = np.array([theta0, c_u, c_l, tc])

@@ -50,7 +50,8 @@ from scipy import optimize
 from ..errors import AnalysisError
 from .fitcheck import LackOfFit, lack_of_fit, marginal_lack_of_fit, path_compliance
 
-__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "torque_sensitivity"]
+__all__ = ["PreisachFit", "fit_preisach", "preisach_response", "relay_states", "relay_thresholds", "relay_pairs",
+           "torque_sensitivity", "loop_description"]
 
 
 def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
@@ -77,7 +78,10 @@ def relay_states(torque_nm, alpha_nm, beta_nm) -> np.ndarray:
     return out
 
 
-def _thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
+def relay_thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
+    """The relay thresholds of a torque path `tau` (N·m): the mid-points between its
+    torque levels (rounded to 1e-12 N·m), thinned evenly to at most `max_thresholds`,
+    and the two extreme levels; ascending (N·m)."""
     levels = np.unique(np.round(tau, 12))
     mids = 0.5 * (levels[1:] + levels[:-1])
     if mids.size > max_thresholds:
@@ -88,8 +92,9 @@ def _thresholds(tau: np.ndarray, max_thresholds: int) -> np.ndarray:
     return np.concatenate([[levels[0]], mids, [levels[-1]]])
 
 
-def _relays(h: np.ndarray):
-    """Symmetric relay pairs from thresholds ``h``: arrays of (α, β) and their mirrors.
+def relay_pairs(h: np.ndarray):
+    """Symmetric relay pairs from thresholds ``h`` (N·m): arrays α, β and their mirrors
+    −β, −α (N·m).
 
     Every ``(α, β) = (h[i], h[j])`` with ``j ≤ i`` (``j = i``: a reversible element,
     nonlinear elasticity), in that order, except a pair whose mirror ``(−β, −α)`` came
@@ -135,6 +140,14 @@ class PreisachFit:
     n_params : int
         Positive weights + ``c₀`` if positive + ``θ₀``.
     check : LackOfFit
+    levels_nm : ndarray
+        The loop's torque levels, N·m.
+    weights : ndarray
+        The least-squares weights of the samples in the final fit, 1/rad².
+
+    Only the model's loop is identified by one loop's data, not its parameters: other
+    relay layouts, and ``c₀`` traded for reversible relays, fit as well (``c₀`` often
+    comes out 0). :func:`loop_description` gives what the data do identify.
     """
 
     alpha_nm: np.ndarray
@@ -146,6 +159,7 @@ class PreisachFit:
     n_params: int = 0
     check: LackOfFit | None = None
     levels_nm: np.ndarray | None = field(default=None, repr=False)
+    weights: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def residual_rms_rad(self) -> float:
@@ -314,8 +328,8 @@ def fit_preisach(
         raise AnalysisError("Preisach fit needs torque of both signs (the torque never reverses)")
     if not np.all(sa > 0):
         raise AnalysisError("Preisach fit needs a positive angle uncertainty for every sample")
-    h = _thresholds(tau, max_thresholds)
-    a, b, am, bm = _relays(h)
+    h = relay_thresholds(tau, max_thresholds)
+    a, b, am, bm = relay_pairs(h)
     x = _design(tau, a, b, am, bm)
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0
@@ -352,13 +366,85 @@ def fit_preisach(
         n_params=n_pos,
         check=check,
         levels_nm=np.unique(np.round(tau, 12)),
+        weights=w_fit,
     )
 
 
-def density_summary(fit: PreisachFit) -> dict:
-    """Total hysteretic weight (rad) and the weight-averaged relay half-width (N·m)."""
-    m = fit.hysteretic
-    w = fit.weight_rad[m]
-    tot = float(np.sum(w))
-    half = 0.5 * (fit.alpha_nm[m] - fit.beta_nm[m])
-    return {"total_weight_rad": tot, "mean_half_width_nm": float(np.sum(w * half) / tot) if tot > 0 else math.nan}
+def loop_description(fit: PreisachFit, torque_nm, *, angle_std_rad, torque_sources=None) -> dict:
+    """The numbers one loop identifies in its Preisach fit.
+
+    The relay weights, thresholds and ``c₀`` are not identified (see :class:`PreisachFit`);
+    the model's values at the measured levels are, and so is every number that depends on
+    them alone:
+
+    - ``loop_energy_j``: the model's ``∮τ dθ`` over the fitted major loop, ``Σ 2·μⱼ·(αⱼ − βⱼ)``
+      over the hysteretic relays (each switches up at α and down at β once a cycle; the
+      elastic part and the reversible relays close on themselves) — the integral of the
+      dissipation distribution. No 1σ is given for it: its scatter is set by the fit's
+      non-negativity (which relays the noise leaves active), which a first-order
+      propagation misses; compare it with the loop's measured ``loop_energy`` figure;
+    - ``reversal_stiffness_nm_per_rad``: the model's stiffness over the first level step
+      after the reversal at the loop's top (the elastic slope at reversal, as the levels
+      resolve it; the model is point-symmetric, so the bottom reversal has the same), with
+      ``_std_angle`` and ``_std_torque``, its 1σ parts from the angle noise and the
+      torque errors.
+
+    Parameters
+    ----------
+    fit : PreisachFit
+        The fit of the loop (its ``weights`` set, as :func:`fit_preisach` leaves them).
+    torque_nm : array_like (n,)
+        The loop's torque path the fit was made on (N·m), coming down from its top.
+    angle_std_rad : array_like (n,)
+        1σ of each angle (rad).
+    torque_sources : array_like (n, m), optional
+        Loading matrix of the image-to-image torque errors (N·m per unit source), carried
+        to the angles by :func:`torque_sensitivity`; without it the torque part is NaN.
+
+    Returns
+    -------
+    dict
+        ``loop_energy_j``, ``reversal_stiffness_nm_per_rad`` and its ``_std_angle``,
+        ``_std_torque`` (NaN when the path has no step after its top).
+
+    Notes
+    -----
+    For its active set the non-negative fit is a weighted linear least-squares fit, so the
+    model's step ``Δθ̂`` after the reversal is a linear function ``sᵀθ`` of the angles
+    (through the pseudo-inverse: it is estimable though the parameters are not), and
+    ``σ_k = k²·σ_Δθ̂/|Δτ|`` for ``k = Δτ/Δθ̂``; the active set is held fixed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from vision_torsion.analysis.models import bilinear_response
+    >>> path = np.concatenate([np.linspace(0.3, -0.3, 31), np.linspace(-0.28, 0.3, 30)])  # N·m, 0.02 apart
+    >>> fit = fit_preisach(path, bilinear_response(path, k_u=4.4, k_l=0.3, tau_c=0.15), angle_std_rad=1e-5,
+    ...                    torque_std_nm=0.0)
+    >>> d = loop_description(fit, path, angle_std_rad=1e-5)
+    >>> round(d["reversal_stiffness_nm_per_rad"], 3)  # k_u: the bilinear loop is stiff after a reversal
+    4.4
+    >>> round(d["loop_energy_j"], 3)  # (1/k_l − 1/k_u)·τ_c² = 0.0699 J, up to the levels' spacing
+    0.07
+    """
+    tau = np.asarray(torque_nm, float).reshape(-1)
+    sa = np.broadcast_to(np.asarray(angle_std_rad, float), tau.shape)
+    per_weight = np.where(fit.hysteretic, 2.0 * (fit.alpha_nm - fit.beta_nm), 0.0)
+    out = {"loop_energy_j": float(np.sum(per_weight * fit.weight_rad)), "reversal_stiffness_nm_per_rad": math.nan,
+           "reversal_stiffness_nm_per_rad_std_angle": math.nan, "reversal_stiffness_nm_per_rad_std_torque": math.nan}
+    a = int(np.argmax(tau))
+    model = fit.predict(tau)
+    if a + 1 >= tau.size or model[a + 1] == model[a]:
+        return out
+    j = fit.active_design(tau)
+    w = fit.weights if fit.weights is not None else 1.0 / sa**2
+    solve = np.linalg.pinv(j.T @ (j * w[:, None])) @ (j * w[:, None]).T  # active coefficients = solve @ θ
+    d_tau = tau[a + 1] - tau[a]
+    k = d_tau / (model[a + 1] - model[a])
+    sens = (k * k / abs(d_tau)) * ((j[a + 1] - j[a]) @ solve)
+    out["reversal_stiffness_nm_per_rad"] = float(k)
+    out["reversal_stiffness_nm_per_rad_std_angle"] = float(np.sqrt(np.sum((sens * sa) ** 2)))
+    if torque_sources is not None:
+        carried = torque_sensitivity(tau, model) @ np.asarray(torque_sources, float).reshape(tau.size, -1)
+        out["reversal_stiffness_nm_per_rad_std_torque"] = float(np.sqrt(np.sum((sens @ carried) ** 2)))
+    return out

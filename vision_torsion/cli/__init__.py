@@ -50,13 +50,14 @@ import os
 import re
 import sys
 
-__all__ = ["main", "build_parser", "failure_line", "add_common_options", "progress_enabled",
+__all__ = ["main", "build_parser", "COMMAND_MODULES", "failure_line", "add_common_options", "progress_enabled",
            "Terminal", "printable", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL"]
 
 EXIT_OK, EXIT_FAILED, EXIT_UNUSABLE, EXIT_INTERNAL = 0, 1, 2, 3
 
-# Subcommand modules, in the order `--help` lists them.
-_COMMAND_MODULES = [
+#: The subcommand modules of this package, in the order ``--help`` lists them; each
+#: registers at least one command (:func:`build_parser`).
+COMMAND_MODULES = (
     "measure",
     "synth",
     "plan",
@@ -71,7 +72,7 @@ _COMMAND_MODULES = [
     "calibrate",
     "stiffness",
     "campaign",
-]
+)
 
 
 def _add_common(parser: argparse.ArgumentParser, *, top: bool) -> None:
@@ -114,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(parser, top=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in _COMMAND_MODULES:
+    for name in COMMAND_MODULES:
         module = importlib.import_module(f".{name}", __name__)
         module.register(sub)
     return parser

@@ -91,12 +91,14 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..fileio import check_output_dir
-    from ..session.plan import plan_session
+    from ..session.plan import plan_config, plan_session
 
     created = not Path(args.out_dir).exists()
     check_output_dir(args.out_dir)  # writable, with space, before anything is written
     try:
-        plan = _plan(args, plan_session)
+        plan = plan_session(_config(args, plan_config), args.out_dir, image_suffix=args.image_type,
+                            overwrite=args.force, preconditioning_cycles=args.preconditioning,
+                            closing=args.closing, pdf=not args.no_pdf)
     except BaseException:
         if created:  # a refused plan leaves no empty folder behind (only the one this run made)
             with contextlib.suppress(OSError):
@@ -120,18 +122,16 @@ def run(args) -> int:
     return 0
 
 
-def _plan(args, plan_session):
-    """plan_session with the command line's options."""
-    return plan_session(
-        args.out_dir, max_torque_nm=args.max_torque, step_mass_kg=args.step_mass,
+def _config(args, plan_config):
+    """The session's configuration from the command line's options."""
+    return plan_config(
+        max_torque_nm=args.max_torque, steps=args.steps, step_mass_kg=args.step_mass,
         arm_radius_m=args.arm_radius, orientations_deg=args.orientations,
         cycles=args.cycles, gravity_m_per_s2=args.gravity,
         gravity_std_m_per_s2=args.gravity_std, arm_radius_std_m=args.arm_radius_std,
         mass_tolerance_kg=args.mass_tolerance, friction_torque_std_nm=args.friction_std,
         polarity=args.polarity, radius_range=args.radius_range,
-        angle_sign=args.angle_sign, image_suffix=args.image_type, overwrite=args.force,
-        target=args.target,
-        steps=args.steps, preconditioning_cycles=args.preconditioning, closing=args.closing,
+        angle_sign=args.angle_sign, target=args.target,
         header={k: getattr(args, k) for k in ("gear", "serial", "operator", "date", "notes")
                 if getattr(args, k)},
-        pdf=not args.no_pdf, rated_torque_nm=args.rated_torque, catalogue=args.catalogue)
+        rated_torque_nm=args.rated_torque, catalogue=args.catalogue)

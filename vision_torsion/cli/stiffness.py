@@ -62,14 +62,9 @@ def run(args) -> int:
     """Run the analysis and write the results (replaced as a set or not at all);
     returns the exit status."""
     from ..fileio import check_output_dir, output_set, write_csv, write_json
+    from ..plotting import save_figure
+    from ..report.stiffness_figures import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
     from ..stiffness.analysis import analyze_stiffness_curve
-    from ..stiffness.plots import (
-        plot_meshing,
-        plot_step_stiffness,
-        plot_stiffness,
-        plot_torque_angle,
-        save_figure,
-    )
     from ..stiffness.rig import load_rig
     from ..stiffness.steps import step_stiffness, summarise_steps
 

@@ -15,7 +15,8 @@ def register(subparsers) -> None:
         help="follow a test while it is shot: each photograph measured, checked and shown live",
         description="Follow the camera's folder (--camera-dir, else SESSION_DIR/images) while the "
         "test is shot. Each photograph is measured as soon as the camera has finished writing "
-        "it, bound to the next planned row, printed (row, torque, angle, Δangle) and drawn on a "
+        "it (closed the file, or its size stopped changing), bound to the next planned row, printed "
+        "(row, torque, angle, Δangle) and drawn on a "
         "live page, OUT_DIR/live.html, that reloads itself. Warnings come at that image or the "
         "next, naming it: no movement or the wrong direction, a step out of line with its "
         "neighbours (a forgotten or extra weight, a missed shot; the next image tells it from the "
@@ -33,7 +34,12 @@ def register(subparsers) -> None:
                    help="the camera's folder (read only); default SESSION_DIR/images")
     add_output_option(p, "SESSION_DIR/results")
     p.add_argument("--poll", type=float, default=0.5, metavar="S",
-                   help="seconds between looks at the folder")
+                   help="longest time between looks at the folder (a file closed in it is seen at once, "
+                        "through the filesystem's notifications)")
+    p.add_argument("--no-events", action="store_true",
+                   help="only look at the folder every --poll seconds, without the filesystem's "
+                        "notifications (chosen by itself, and said so, when the watchdog package is "
+                        "missing, the folder is on a network share, or the notification limit is reached)")
     p.add_argument("--settle", type=float, default=1.0, metavar="S",
                    help="seconds a file must stay unchanged before it is read")
     p.add_argument("--give-up", type=float, default=10.0, metavar="S",
@@ -58,7 +64,8 @@ def run(args) -> int:
 
     res = watch_session(args.session_dir, camera_dir=args.camera_dir, out_dir=args.out_dir,
                         poll_s=args.poll, settle_s=args.settle, give_up_s=args.give_up,
-                        finish=None if args.no_report else report)
+                        finish=None if args.no_report else report,
+                        events="poll" if args.no_events else "auto")
     print(f"{res.n_bound} of {res.n_rows} planned images bound; {res.n_warnings} with warnings; "
           f"live page {res.page}")
     return 1 if res.n_warnings else 0

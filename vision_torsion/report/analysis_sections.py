@@ -1,6 +1,7 @@
 """Report sections on whether the figures can be signed: the uncertainty budget of the
 headline figures, the lack-of-fit test of every model, the checks on the data, and
-the Preisach model's element distribution.
+the Preisach model as a description of the loop (its loop, its residuals and the
+numbers one loop identifies).
 
 Each function returns ``(title, html)`` for :func:`vision_torsion.report.write_report`'s
 ``extra_sections``; values are rounded to two significant digits of their
@@ -207,10 +208,39 @@ def preisach_section(analysis):
         "<p>Relays that switch up at α and down at β (each with its mirror), weights ≥ 0 fitted by "
         "non-negative least squares: a description of the loop's shape, not a measurement of parameters. "
         "The relay layout and the elastic compliance are not identified by one loop (other layouts fit as "
-        "well), so they are not reported; the loop's identifiable figures (stiffnesses, widths, energy) are "
-        f"in the tables above. This loop: {html.escape(verdict)}.</p>"
+        "well, and the elastic compliance often comes out 0), so they are not reported. What one loop does "
+        "identify is below, for the loops the model describes (its gate passes): the model's stiffness over "
+        "the first level step after a reversal (± u95, k = 2, the fit's active set held fixed) and the "
+        "integral of its dissipation distribution, the model's ∮τ dθ, beside the loop energy measured from "
+        "the levels (± u95; the model's ∮τ dθ has no ± of its own: its scatter comes from which relays the fit "
+        f"leaves active, so it is a check on the measured one). The loop plotted: {html.escape(verdict)}.</p>"
     )
-    return title, text + _img(svg_bytes(fig), "Preisach model loop and residuals")
+    return title, text + _img(svg_bytes(fig), "Preisach model loop and residuals") + _table(
+        _preisach_numbers(analysis, fits, loops), left=("orientation", "cycle", "model"))
+
+
+def _preisach_numbers(analysis, fits, loops) -> pd.DataFrame:
+    """The identifiable numbers of each loop's Preisach fit (:func:`vision_torsion.analysis.preisach.loop_description`),
+    a row per fitted loop; none for a loop whose gate rejects the model."""
+    from ..analysis.preisach import loop_description
+
+    energy = {(float(r.orientation_deg), int(r.cycle)): (r.value, r.u95)
+              for r in analysis.figures[analysis.figures["figure"] == "loop_energy"].itertuples(index=False)}
+    rows = []
+    for (o, c), pre in fits:
+        lp = loops[(o, c)]
+        row = {"orientation": f"{o:g}°", "cycle": str(c), "model": "fits" if not pre.check.rejected else "rejected",
+               "stiffness after a reversal (N·m/rad)": "—", "model's ∮τ dθ (J)": "—"}
+        if not pre.check.rejected:
+            d = loop_description(pre, lp.torque_nm, angle_std_rad=lp.angle_std_rad, torque_sources=lp.local_sources())
+            key = "reversal_stiffness_nm_per_rad"
+            std = math.hypot(d[f"{key}_std_angle"], d[f"{key}_std_torque"])
+            row["stiffness after a reversal (N·m/rad)"] = fmt_value(d[key], 2.0 * std)
+            row["model's ∮τ dθ (J)"] = f"{d['loop_energy_j']:.4g}"
+        row["loop energy measured (J)"] = fmt_value(*energy.get((float(o), int(c)), (math.nan, math.nan)))
+        row["residual RMS (arcmin)"] = f"{math.degrees(pre.residual_rms_rad) * 60.0:.2g}"
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 def analysis_sections(analysis) -> list:

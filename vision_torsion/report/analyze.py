@@ -183,7 +183,7 @@ def analysis_options(config) -> dict:
     proto, test = config.protocol, config.test
     kw = dict(
         max_torque_nm=proto.max_torque_nm,
-        rig=config.torque_rig,
+        rig=config.rig,
         fit_breaks=test.fit_breaks,
         **gear_options(config.gear),
     )
@@ -440,7 +440,7 @@ def analyze_table(
             {
                 "arm radius r (m)": config.rig.arm_radius_m,
                 "gravity g (m/s²)": config.rig.gravity_m_per_s2,
-                "mass per weight piece (kg)": config.protocol.step_mass_kg,
+                "mass per weight piece (kg)": config.rig.step_mass_kg,
                 "maximum torque (N·m)": config.protocol.max_torque_nm,
             }
         )

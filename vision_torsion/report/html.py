@@ -43,10 +43,11 @@ def _table1(stiff: pd.DataFrame) -> str:
     def values(v, u):
         return [fmt_value(a, b) if np.isfinite(a) else "—" for a, b in zip(stiff[v], stiff[u])]
 
+    flags = stiff["flag"] if "flag" in stiff else pd.Series([""] * len(stiff))
     out = pd.DataFrame(
         {
             "orientation": [f"{o:g}°" for o in stiff["orientation_deg"]],
-            "phase": stiff["phase"].str.replace("_", " "),
+            "phase": [p.replace("_", " ") + ("†" if fl else "") for p, fl in zip(stiff["phase"], flags)],
             "torque range (N·m)": [
                 f"{a:+.3g} to {b:+.3g}" if np.isfinite(a) else "—"
                 for a, b in zip(stiff["torque_from_nm"], stiff["torque_to_nm"])
@@ -60,10 +61,18 @@ def _table1(stiff: pd.DataFrame) -> str:
             "cycles": stiff["n_cycles"].astype(str),
         }
     )
+    # † rows shown with a flag: each reason once, with the rows it holds for
+    why = {}
+    for o, phase, fl in zip(stiff["orientation_deg"], stiff["phase"], flags):
+        for text in filter(None, str(fl).split("; ")):
+            why.setdefault(text, []).append(f"{o:g}° {phase.replace('_', ' ')}")
+    notes = "".join(f"<li>{html.escape(', '.join(at))}: {html.escape(text)}</li>" for text, at in why.items())
     return (_table(out, left=("orientation", "phase"))
             + '<p class="muted">A phase whose stiffness switches is not one straight line: its "one line" '
             "stiffness is withheld (—) and its stiffnesses below and above the switch are given. Stiffness in "
-            "N·m/rad throughout (N·m/arcmin in stiffness_table.csv).</p>")
+            "N·m/rad throughout (N·m/arcmin in stiffness_table.csv).</p>"
+            + ('<p class="note">† A value of the row is shown with a flag:</p><ul class="note">' + notes + "</ul>"
+               if notes else ""))
 
 
 def _metrics(mt: pd.DataFrame, orients, *, one_loop: bool = False) -> str:

@@ -75,10 +75,10 @@ def _conditions(session, n_images: int, n_failed: int) -> dict:
         "session folder": str(session.folder),
         "arm radius r (m)": rig.arm_radius_m,
         "gravity g (m/s²)": rig.gravity_m_per_s2,
-        "mass per weight piece (kg)": proto.step_mass_kg,
+        "mass per weight piece (kg)": rig.step_mass_kg,
         "mass standard uncertainty per piece (kg)": _g6(rig.mass_std_kg),
         "pulley friction torque std (N·m)": rig.friction_torque_std_nm,
-        "torque per step, 2·m·g·r (N·m)": _g6(session.config.torque_rig.step_torque_nm),
+        "torque per step, 2·m·g·r (N·m)": _g6(rig.step_torque_nm),
         "maximum torque (N·m)": _g6(proto.max_torque_nm),
         "flexspline orientations (deg)": list(proto.orientations_deg),
         "cycles per orientation": proto.cycles,
@@ -123,8 +123,9 @@ def _stiffness_section(measurements: pd.DataFrame):
     from ..errors import VisionTorsionError
     from ..htmlpage import image_tag as _img
     from ..htmlpage import table_html as _table
-    from ..stiffness.report import stiffness_section
+    from ..stiffness.section import stiffness_section
     from .figures import svg_bytes
+    from .stiffness_figures import section_figures
 
     try:
         section = stiffness_section(measurements)
@@ -140,7 +141,7 @@ def _stiffness_section(measurements: pd.DataFrame):
         "<code>stiffness_steps.csv</code>.</p>",
         _table(_step_table(section.summary), left=("step",)),
     ]
-    for name, fig in section.figures.items():
+    for name, fig in section_figures(section).items():
         parts.append(f"<figure>{_img(svg_bytes(fig), name.replace('_', ' '))}</figure>")
     return _STIFFNESS_TITLE, "\n".join(parts), section.steps
 

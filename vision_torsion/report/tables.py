@@ -9,7 +9,7 @@ import pandas as pd
 
 from ..analysis.loops import LOOP_PHASES
 
-__all__ = ["STIFFNESS_TABLE_COLUMNS", "stiffness_table", "metrics_table"]
+__all__ = ["STIFFNESS_TABLE_COLUMNS", "stiffness_table", "metrics_table", "orientation_flags"]
 
 #: Columns of stiffness_table.csv (paper, Table 1, with uncertainties and catalogue units).
 STIFFNESS_TABLE_COLUMNS = [
@@ -21,6 +21,8 @@ STIFFNESS_TABLE_COLUMNS = [
     "stiffness_above_nm_per_rad", "stiffness_above_std_nm_per_rad",
     # every phase: the secant from its first to its last image
     "secant_nm_per_rad", "secant_std_nm_per_rad",
+    # why a value of the row is shown flagged (a creep finding flags every figure of its orientation), or ""
+    "flag",
 ]
 _ARCMIN_PER_RAD = 180.0 * 60.0 / math.pi
 
@@ -47,9 +49,12 @@ def stiffness_table(analysis) -> pd.DataFrame:
     the four rows of its orientation. A phase whose straight line does not fit its
     data (its stiffness withheld, NaN) carries its stiffness below and above the
     switch and the switch torque; every phase its secant. Missing figures are NaN.
+    ``flag`` says why a value of the row is flagged (:func:`orientation_flags`; each
+    reason once), or is "".
     """
     ph = analysis.phases
     po = _index(analysis.per_orientation)
+    flags = orientation_flags(analysis)
     rows = []
     ranges = {}  # (orientation, phase) -> median torque range over cycles
     if len(ph):
@@ -75,6 +80,10 @@ def stiffness_table(analysis) -> pd.DataFrame:
                 "switch_torque_nm": switch, "stiffness_below_nm_per_rad": below,
                 "stiffness_below_std_nm_per_rad": below_std, "stiffness_above_nm_per_rad": above,
                 "stiffness_above_std_nm_per_rad": above_std, "secant_nm_per_rad": sec, "secant_std_nm_per_rad": sec_std,
+                "flag": "; ".join(dict.fromkeys(
+                    flags[(float(orient), f)] for f in ("hysteresis", f"k_{phase}", f"k_{phase}_below",
+                                                        f"k_{phase}_above", f"switch_{phase}", f"k_{phase}_secant")
+                    if (float(orient), f) in flags)),
             })
     return pd.DataFrame(rows, columns=STIFFNESS_TABLE_COLUMNS)
 
@@ -134,28 +143,42 @@ CATALOGUE_FIGURES = figure_rows([
 ])
 
 
+def orientation_flags(analysis) -> dict:
+    """``{(orientation_deg, figure): why its orientation mean is shown flagged}``, for the flagged ones.
+
+    A mean over cycles is flagged as :func:`vision_torsion.analysis.summary.summarise_figures`
+    says, with the reasons its flagged loop values all share added (an orientation's creep
+    finding, a torque model that was not declared: each flags every figure of the loop); a mean
+    of one loop is flagged only when that loop's value is (that it holds no repeatability is
+    said once, for the whole table).
+    """
+    figs = analysis.figures
+    flagged = figs[figs["flag"].astype(str) != ""]
+    loop_flags = {}
+    for o, f, g in zip(flagged["orientation_deg"], flagged["figure"], flagged["flag"].astype(str)):
+        loop_flags.setdefault((float(o), f), []).append(g)
+    pof = analysis.per_orientation
+    out = {}
+    for o, f, g, n in zip(pof["orientation_deg"], pof["figure"], pof["flag"], pof["n_cycles"]):
+        texts = loop_flags.get((float(o), f), [])
+        if n == 1 and texts:
+            out[(float(o), f)] = "; ".join(dict.fromkeys(texts))
+        elif g and n > 1:
+            shared = [part for part in texts[0].split("; ") if all(part in t for t in texts)] if texts else []
+            out[(float(o), f)] = "; ".join(dict.fromkeys([str(g), *shared]))
+    return out
+
+
 def metrics_table(analysis) -> pd.DataFrame:
     """Wide table of the catalogue metrics: one row per figure, one column per orientation.
 
     Cells are ``(mean, std)`` tuples of the orientation mean (NaN when missing); the
     last columns hold the session mean, its standard uncertainty, the sd between
     loops and the orientation test's Holm-adjusted p-value; ``flags`` maps an orientation to why its
-    mean is flagged (:func:`vision_torsion.analysis.summary.summarise_figures`), for
-    the flagged ones. A mean of one loop is flagged only when that loop's value is
-    (that it holds no repeatability is said once, for the whole table).
+    mean is flagged (:func:`orientation_flags`), for the flagged ones.
     """
     po = _index(analysis.per_orientation)
-    pof = analysis.per_orientation
-    flags = {(float(o), f): str(g) for o, f, g, n in zip(pof["orientation_deg"], pof["figure"], pof["flag"],
-                                                         pof["n_cycles"]) if g and n > 1}
-    # a mean of one loop is that loop's value: flagged when the loop value is (the report
-    # says once that every mean of one loop holds no repeatability, not on every cell)
-    figs = analysis.figures
-    for o, f, g, n in zip(pof["orientation_deg"], pof["figure"], pof["flag"], pof["n_cycles"]):
-        if g and n == 1:
-            loop = figs[(figs["orientation_deg"] == o) & (figs["figure"] == f) & (figs["flag"].astype(str) != "")]
-            if len(loop):
-                flags[(float(o), f)] = "; ".join(dict.fromkeys(loop["flag"].astype(str)))
+    flags = orientation_flags(analysis)
     orients = sorted({lp.orientation_deg for lp in analysis.loop_data})
     rows = []
     for fig, label, unit, scale in CATALOGUE_FIGURES:

@@ -43,7 +43,7 @@ from pathlib import Path
 
 from ..errors import SessionError
 from ..fileio import check_output_dir, check_replaceable
-from ..measurements import couple_torque_nm, output_folder
+from ..measurements import output_folder
 from .binding import BINDING_NAME, Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
@@ -182,8 +182,7 @@ def _sequences(session: Session, bound, pairs, sign):
 
 
 def _step_torque(session: Session) -> float:
-    proto, rig = session.config.protocol, session.config.rig
-    return couple_torque_nm(proto.step_mass_kg, gravity_m_per_s2=rig.gravity_m_per_s2, arm_radius_m=rig.arm_radius_m)
+    return session.config.rig.step_torque_nm
 
 
 def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[int, object]]:

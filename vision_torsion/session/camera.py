@@ -12,8 +12,10 @@ order they were taken:
 - ``by="name"``: natural name order (IMG_2 < IMG_10).
 
 What is not a photograph is set aside with a reason, never measured: files whose
-name is not an image type (sidecars such as ``.THM`` or ``.XMP``), and byte-for-byte
-copies of an earlier file (the same photograph saved twice is not a new shot).
+name is not an image type (sidecars such as ``.THM`` or ``.XMP``), files larger than
+an image file may be (:data:`~vision_torsion.images.MAX_IMAGE_FILE_BYTES`: refused
+without being read, as the image reader does), and byte-for-byte copies of an
+earlier file (the same photograph saved twice is not a new shot).
 Subfolders are not looked into.
 """
 
@@ -25,8 +27,8 @@ from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
-from ..errors import SessionError
-from ..images import IMAGE_SUFFIXES
+from ..errors import ImageReadError, SessionError
+from ..images import IMAGE_SUFFIXES, read_image_bytes
 from ..measure import natural_key
 
 __all__ = ["CameraFile", "CameraListing", "list_camera_files", "capture_time", "ORDERS"]
@@ -151,10 +153,10 @@ def list_camera_files(camera_dir, *, by: str = "time") -> CameraListing:
     # a copy is the later of two identical files (by capture time, then the shorter name)
     originals: dict[str, CameraFile] = {}
     for f in sorted(found, key=lambda f: (f.time, len(f.name), natural_key(f.name))):
-        try:
-            h = xxhash.xxh3_128_hexdigest(f.path.read_bytes())
-        except OSError as exc:
-            ignored.append((f.name, f"cannot be read ({exc.strerror or exc}); not bound"))
+        try:  # the image reader's limit, checked before the file is read
+            h = xxhash.xxh3_128_hexdigest(read_image_bytes(f.path, signature=False))
+        except ImageReadError as exc:  # too large, or cannot be read
+            ignored.append((f.name, f"{str(exc).removeprefix(f'{f.path}: ')}; not bound"))
             continue
         if h in originals:
             ignored.append((f.name, f"the same bytes as {originals[h].name} (a copy, not a new "

@@ -15,7 +15,6 @@ instead when a calibration certificate states a 1σ value; giving both is an err
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,7 +30,6 @@ from ..textfiles import read_toml
 from ..validate import number_problem
 
 __all__ = [
-    "RigConfig",
     "ProtocolConfig",
     "GearConfig",
     "TestConfig",
@@ -54,40 +52,6 @@ _FORMAT_VERSION = 1
 
 
 @dataclass(frozen=True)
-class RigConfig:
-    """Constants of the force-couple loading rig (SI units).
-
-    Attributes
-    ----------
-    arm_radius_m : float
-        Radius r of the torque disk at which the wires pull (m).
-    gravity_m_per_s2 : float
-        Local gravitational acceleration g (m/s²), 9.81 by default.
-    mass_std_kg : float
-        Standard uncertainty (1σ) of the mass of one weight piece (kg); derived from
-        ``mass_tolerance_kg / sqrt(3)`` when the file gives a ± tolerance.
-    mass_tolerance_kg : float or None
-        The ± bound as written in the file, kept for writing it back.
-    friction_torque_std_nm : float
-        Standard uncertainty of the torque lost or added by pulley friction (N·m), 0
-        by default.
-    arm_radius_std_m : float
-        Standard uncertainty of r (m), 0 by default.
-    gravity_std_m_per_s2 : float
-        Standard uncertainty of g (m/s²), 0 by default. When 9.81 is used instead of
-        the local value, the latitude range 9.780-9.832 m/s² suggests 0.015.
-    """
-
-    arm_radius_m: float
-    mass_std_kg: float
-    gravity_m_per_s2: float = 9.81
-    mass_tolerance_kg: float | None = None
-    friction_torque_std_nm: float = 0.0
-    arm_radius_std_m: float = 0.0
-    gravity_std_m_per_s2: float = 0.0
-
-
-@dataclass(frozen=True)
 class ProtocolConfig:
     """The planned protocol (what :func:`~vision_torsion.session.plan.plan_session` wrote).
 
@@ -97,15 +61,15 @@ class ProtocolConfig:
         Flexspline orientations relative to the circular spline (degrees).
     max_torque_nm : float
         Largest torque magnitude of a cycle (N·m), a whole number of step masses.
-    step_mass_kg : float
-        Mass of one weight piece, added to or removed from each pan per step (kg).
     cycles : int
         Cycles of the four phases per orientation.
+
+    The mass of one weight piece, written in ``[protocol]`` as ``step_mass_kg``, is
+    a rig constant in memory: :attr:`SessionConfig.rig` ``.step_mass_kg``.
     """
 
     orientations_deg: tuple[float, ...]
     max_torque_nm: float
-    step_mass_kg: float
     cycles: int = 1
 
 
@@ -196,7 +160,10 @@ class SessionConfig:
 
     Attributes
     ----------
-    rig : RigConfig
+    rig : TorqueRig
+        The rig constants: the ``[rig]`` table, with ``[protocol] step_mass_kg`` as
+        its step mass (:class:`~vision_torsion.measurements.TorqueRig`, the one home
+        of the rig's constants and of the step torque 2·m·g·r).
     markers : MeasureSettings
         How markers are found; ``correction`` (if any) is stored as written, relative
         to the session folder.
@@ -210,7 +177,7 @@ class SessionConfig:
         None for the two-marker target of ``[markers]``.
     """
 
-    rig: RigConfig
+    rig: TorqueRig
     protocol: ProtocolConfig
     markers: MeasureSettings = field(default_factory=MeasureSettings)
     angle_sign: int = 1
@@ -218,12 +185,6 @@ class SessionConfig:
     test: TestConfig = field(default_factory=TestConfig)
     spec: SpecConfig = field(default_factory=SpecConfig)
     target: Target | None = None
-
-    @property
-    def torque_rig(self) -> TorqueRig:
-        """The rig constants the torque model needs (:class:`~vision_torsion.measurements.TorqueRig`):
-        the ``[rig]`` table with the protocol's step mass, for ``analyze_session(rig=...)``."""
-        return TorqueRig.from_rig(self.rig, step_mass_kg=self.protocol.step_mass_kg)
 
 
 # -- validation ---------------------------------------------------------------------
@@ -290,7 +251,7 @@ _RIG_KEYS = (
 _PROTOCOL_KEYS = ("orientations_deg", "max_torque_nm", "step_mass_kg", "cycles")
 
 
-def _rig_from(table, problems) -> RigConfig | None:
+def _rig_from(table, step_mass_kg, problems) -> TorqueRig | None:
     _unknown(table, _RIG_KEYS, "rig", problems)
     kw = dict(
         arm_radius_m=_number(table, "arm_radius_m", problems, "rig", required=True, positive=True),
@@ -309,14 +270,15 @@ def _rig_from(table, problems) -> RigConfig | None:
             "rig.mass_tolerance_kg",
             "missing; expected the ± tolerance of one weight piece in kg (or rig.mass_std_kg, a 1σ value)",
         )
-    if tol is not None:
-        std = tol / math.sqrt(3.0)  # uniform distribution within ±tol (GUM 4.3.7)
-    if None in kw.values() or std is None:
+    if None in kw.values() or step_mass_kg is None or (tol is None and std is None) or problems.items:
         return None
-    return RigConfig(mass_std_kg=std, mass_tolerance_kg=tol, **kw)
+    if tol is not None:
+        return TorqueRig.from_tolerance(mass_tolerance_kg=tol, step_mass_kg=step_mass_kg, **kw)
+    return TorqueRig(step_mass_kg=step_mass_kg, mass_std_kg=std, **kw)
 
 
-def _protocol_from(table, problems) -> ProtocolConfig | None:
+def _protocol_from(table, problems) -> tuple[ProtocolConfig | None, float | None]:
+    """The ``[protocol]`` table, and its ``step_mass_kg`` (a rig constant in memory)."""
     _unknown(table, _PROTOCOL_KEYS, "protocol", problems)
     max_torque = _number(table, "max_torque_nm", problems, "protocol", required=True, positive=True)
     step = _number(table, "step_mass_kg", problems, "protocol", required=True, positive=True)
@@ -340,11 +302,10 @@ def _protocol_from(table, problems) -> ProtocolConfig | None:
     elif len(set(orient)) != len(orient):
         problems.add("protocol.orientations_deg", f"repeated orientation in {orient!r}")
         orient = None
-    if None in (max_torque, step, cycles, orient):
-        return None
-    return ProtocolConfig(
-        orientations_deg=tuple(float(v) for v in orient), max_torque_nm=max_torque, step_mass_kg=step, cycles=cycles
-    )
+    if None in (max_torque, cycles, orient):
+        return None, step
+    return ProtocolConfig(orientations_deg=tuple(float(v) for v in orient), max_torque_nm=max_torque,
+                          cycles=cycles), step
 
 
 _GEAR_KEYS = ("name", "serial", "ratio", "rated_torque_nm", "t1_nm", "t2_nm")
@@ -496,8 +457,8 @@ def config_from_dict(data: dict, *, source: str = CONFIG_NAME) -> SessionConfig:
     sign = data.get("angle_sign", 1)
     if isinstance(sign, bool) or sign not in (1, -1):
         problems.add("angle_sign", f"expected 1 or -1, got {sign!r}")
-    rig = _rig_from(_table(data, "rig", problems, required=True), problems)
-    protocol = _protocol_from(_table(data, "protocol", problems, required=True), problems)
+    protocol, step_mass_kg = _protocol_from(_table(data, "protocol", problems, required=True), problems)
+    rig = _rig_from(_table(data, "rig", problems, required=True), step_mass_kg, problems)
     markers = _markers_from(_table(data, "markers", problems, required=False), problems)
     gear = _gear_from(_table(data, "gear", problems, required=False), problems)
     test = _test_from(_table(data, "test", problems, required=False), problems)
@@ -546,7 +507,7 @@ def load_catalogue(path) -> tuple[GearConfig, SpecConfig]:
 
 def config_to_dict(config: SessionConfig) -> dict:
     """The TOML document for `config` (inverse of :func:`config_from_dict`)."""
-    rig = config.rig
+    rig = config.rig  # step_mass_kg is written in [protocol]
     rig_d = {"arm_radius_m": rig.arm_radius_m, "gravity_m_per_s2": rig.gravity_m_per_s2}
     if rig.mass_tolerance_kg is not None:
         rig_d["mass_tolerance_kg"] = rig.mass_tolerance_kg
@@ -564,7 +525,7 @@ def config_to_dict(config: SessionConfig) -> dict:
         "protocol": {
             "orientations_deg": list(p.orientations_deg),
             "max_torque_nm": p.max_torque_nm,
-            "step_mass_kg": p.step_mass_kg,
+            "step_mass_kg": rig.step_mass_kg,
             "cycles": p.cycles,
         },
     }

@@ -1,13 +1,19 @@
 """The live page of ``watch``: the loop so far against the plan, in a file that reloads.
 
-:func:`live_page` returns one self-contained HTML page (no script, no network) with
-a ``<meta http-equiv="refresh">`` so a browser opened on the file shows the latest
-state: progress, the next step to load, the torque–angle loop of the photographs so
-far (hand-written SVG: drawing it costs well under a millisecond, a matplotlib
-figure ~100 ms), the plan's torque sequence with the photographed rows marked, the
-latest images with Δangle, every warning on the image where it happened, whether
-each loop closes (and the drift at the closing image), and, once the watch has
-ended, a link to the report.
+:func:`live_page` returns one self-contained HTML page (no network) that a browser
+opened on the file keeps up to date: a few lines of script load the small stamp file
+``live-stamp.js`` beside it every 0.25 s (a ``<script>`` element, which a page
+opened from a ``file://`` address may load where ``fetch`` may not) and reload the
+page only when the stamp differs from the one the page was written with (so it does
+not flicker while nothing changes, and a browser restores the scroll position on a
+reload); without scripts, a ``<meta http-equiv="refresh">`` reloads it every second.
+:func:`stamp_script` is the stamp's text; the writer writes the page first, then its
+stamp. The page shows the latest state: progress, the next step to load, the
+torque–angle loop of the photographs so far (hand-written SVG: drawing it costs well
+under a millisecond, a matplotlib figure ~100 ms), the plan's torque sequence with
+the photographed rows marked, the latest images with Δangle, every warning on the
+image where it happened, whether each loop closes (and the drift at the closing
+image), and, once the watch has ended, a link to the report.
 
 Axes carry round ticks (1, 2, 2.5 or 5 × 10ⁿ). Photographs are joined only where
 the torque moved by at most one planned step between them: the pre-load from the
@@ -24,10 +30,15 @@ from dataclasses import dataclass
 
 from ..htmlpage import page_html
 
-__all__ = ["LivePoint", "live_page", "nice_ticks", "loop_closure", "LIVE_PAGE_NAME"]
+__all__ = ["LivePoint", "live_page", "nice_ticks", "loop_closure", "LIVE_PAGE_NAME", "LIVE_STAMP_NAME",
+           "stamp_script"]
 
 #: File name of the live page in the output folder.
 LIVE_PAGE_NAME = "live.html"
+#: File name of the live page's stamp beside it (:func:`stamp_script`).
+LIVE_STAMP_NAME = "live-stamp.js"
+#: Milliseconds between the page's looks at its stamp.
+_STAMP_POLL_MS = 250
 _W, _H, _PAD = 560, 380, 48
 _LIVE_CSS = """
 body {{ font-family: sans-serif; margin: 16px; color: #222; }}
@@ -283,9 +294,35 @@ def _closure_html(points, orientation) -> str:
             f"1 % of the angle span = {limit:.4f}°.</p>")
 
 
+def stamp_script(version: str) -> str:
+    """The text of ``live-stamp.js`` for the page written with `version` (letters,
+    digits, ``-`` and ``_`` only: it is put in a script)."""
+    if not version or not all(c.isascii() and (c.isalnum() or c in "-_") for c in version):
+        raise ValueError(f"version must be letters, digits, '-' or '_', got {version!r}")
+    return f'liveStamp("{version}");\n'
+
+
+def _reloader(version: str) -> str:
+    """The page's script: load the stamp every _STAMP_POLL_MS, reload when it changed."""
+    stamp_script(version)  # checks it
+    return ('<script>(function () {\n'
+            f'  var mine = "{version}", busy = false;\n'
+            '  window.liveStamp = function (s) { if (s !== mine) { location.reload(); } };\n'
+            '  setInterval(function () {\n'
+            '    if (busy) { return; }\n'
+            '    busy = true;\n'
+            '    var e = document.createElement("script");\n'
+            f'    e.src = "{LIVE_STAMP_NAME}?" + Date.now();\n'
+            '    e.onload = e.onerror = function () { e.remove(); busy = false; };\n'
+            '    document.head.appendChild(e);\n'
+            f'  }}, {_STAMP_POLL_MS});\n'
+            '})();</script>')
+
+
 def live_page(*, title: str, points, planned_torques, next_step: str | None,
-              next_torque_nm: float | None = None, messages=(), refresh_s: int = 2,
-              finished: bool = False, now: float | None = None, report_href: str = "report.html") -> str:
+              next_torque_nm: float | None = None, messages=(), refresh_s: int = 1,
+              finished: bool = False, now: float | None = None, report_href: str = "report.html",
+              version: str | None = None) -> str:
     """The live page's HTML.
 
     Parameters
@@ -303,7 +340,8 @@ def live_page(*, title: str, points, planned_torques, next_step: str | None,
     messages : sequence of str
         Other notices (files set aside, deleted, the folder gone), newest last.
     refresh_s : int
-        Seconds between reloads; no reload once `finished`.
+        Seconds between reloads in a browser without scripts; no reload once
+        `finished`.
     finished : bool
         The watch has ended.
     now : float, optional
@@ -311,6 +349,15 @@ def live_page(*, title: str, points, planned_torques, next_step: str | None,
     report_href : str
         Where the report will be, relative to the page (``watch`` writes it next to
         the page when it ends): linked once `finished`.
+    version : str, optional
+        The page's stamp (:func:`stamp_script`): with it, and not `finished`, the
+        page reloads as soon as ``live-stamp.js`` beside it holds another; the
+        meta refresh is then only for a browser without scripts.
+
+    Raises
+    ------
+    ValueError
+        `version` holds a character other than a letter, a digit, ``-`` or ``_``.
     """
     points = list(points)
     n_rows = len(planned_torques)
@@ -318,7 +365,9 @@ def live_page(*, title: str, points, planned_torques, next_step: str | None,
     next_torque = next_torque_nm if next_step is not None else None
     stamp = time.strftime("%H:%M:%S", time.localtime(now if now is not None else time.time()))
     warned = [p for p in points if p.warnings]
-    head = (f'<meta http-equiv="refresh" content="{int(refresh_s)}">' if not finished else "")
+    refresh = f'<meta http-equiv="refresh" content="{int(refresh_s)}">'
+    head = ("" if finished else refresh if version is None
+            else f"<noscript>{refresh}</noscript>{_reloader(version)}")
     rows = []
     for p in points[-12:][::-1]:
         cls = ' class="warn"' if p.warnings else ""
@@ -331,7 +380,8 @@ def live_page(*, title: str, points, planned_torques, next_step: str | None,
     warn_items = "".join(f"<li><b>{html.escape(p.file)}</b> (line {p.line}, {html.escape(p.label)}): "
                          + "; ".join(html.escape(w) for w in p.warnings) + "</li>" for p in warned)
     notes = "".join(f"<li>{html.escape(m)}</li>" for m in list(messages)[-10:])
-    state = ("finished" if finished else f"watching — reloads every {int(refresh_s)} s")
+    state = ("finished" if finished else f"watching — reloads every {int(refresh_s)} s" if version is None
+             else "watching — updates as each photograph comes in")
     closure = _closure_html(points, current)
     report = (f'<p class="next">Finished. The report: <a href="{html.escape(report_href)}">'
               f"{html.escape(report_href)}</a> (written next to this page as the watch ends; if it is missing, "

@@ -53,8 +53,7 @@ class Session:
         """
         if row.torque_nm is not None:
             return TorqueValue(row.torque_nm, row.torque_std_nm, math.nan)
-        return couple_torque(row.mass_kg, row.phase, self.config.rig,
-                             step_mass_kg=self.config.protocol.step_mass_kg)
+        return couple_torque(row.mass_kg, row.phase, self.config.rig)
 
 
 def load_session(session_dir, *, check_files: bool = True, missing: str = "error") -> Session:

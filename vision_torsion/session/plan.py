@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..errors import SessionError, TargetError
@@ -55,12 +55,12 @@ from ..images import IMAGE_SUFFIXES
 from ..measurements import CYCLE_PHASES, PHASES, couple_torque_nm
 from ..targets import Target, load_target
 from ..validate import check_number
-from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, write_config
+from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, config_to_dict, write_config
 from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
 from .plausibility import check_config_numbers
 from .torque import couple_torque
 
-__all__ = ["SessionPlan", "LostMotionLevel", "plan_session", "plan_rows", "lost_motion_levels",
+__all__ = ["SessionPlan", "LostMotionLevel", "plan_config", "plan_session", "plan_rows", "lost_motion_levels",
            "CAPTURE_SHEET_NAME", "LOST_MOTION_FRACTIONS", "LOST_MOTION_TOLERANCE", "HEADER_KEYS", "MAX_PLAN_IMAGES"]
 
 logger = logging.getLogger(__name__)
@@ -225,7 +225,7 @@ class SessionPlan:
         """One sentence naming T_R and the levels as planned ("" without a rated torque)."""
         if self.rated_torque_nm is None:
             return ""
-        step = self.config.protocol.step_mass_kg
+        step = self.config.rig.step_mass_kg
         parts = [f"{lv.label} → {lv.pieces} × {_num(step * 1000)} g per pan = ±{lv.torque_nm:.5f} N·m "
                  f"({100 * lv.achieved_fraction:.3g} % of T_R)" for lv in self.lost_motion_levels]
         return (f"Rated torque T_R = {self.rated_torque_nm:g} N·m (session.toml: [gear] rated_torque_nm). "
@@ -293,7 +293,7 @@ def plan_rows(config: SessionConfig, steps_per_phase: int, *, suffix: str = ".pn
                 "cycle": str(cycle),
                 "phase": phase,
                 "step": str(step),
-                "mass_kg": _num(pieces * proto.step_mass_kg),
+                "mass_kg": _num(pieces * config.rig.step_mass_kg),
             }
         )
 
@@ -317,9 +317,8 @@ def _pan_text(pieces: int, step_mass_kg: float) -> str:
 
 def _capture_sheet(plan: SessionPlan) -> str:
     cfg, n = plan.config, plan.steps_per_phase
-    step = cfg.protocol.step_mass_kg
     rig = cfg.rig
-    per_step = couple_torque(step, "positive_loading", rig, step_mass_kg=step).torque_nm
+    step, per_step = rig.step_mass_kg, rig.step_torque_nm
     lines = [
         "# Capture sheet",
         "",
@@ -370,7 +369,7 @@ def _capture_sheet(plan: SessionPlan) -> str:
                 "|---|---|---|---|---|---|---|---|---|",
             ]
         pieces = round(float(row["mass_kg"]) / step)
-        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig, step_mass_kg=step).torque_nm
+        torque = couple_torque(float(row["mass_kg"]), row["phase"], rig).torque_nm
         plus = _pan_text(pieces if row["phase"].startswith("positive") else 0, step)
         minus = _pan_text(pieces if row["phase"].startswith("negative") else 0, step)
         number += 1
@@ -395,13 +394,46 @@ def _capture_sheet(plan: SessionPlan) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plan_session(
-    out_dir,
+def _header(config: SessionConfig) -> dict:
+    """The test's identity in `config` as :data:`HEADER_KEYS` keys (for the capture sheet)."""
+    out = {}
+    for key, (table, name) in HEADER_KEYS.items():
+        value = getattr(getattr(config, table), name)
+        if value is not None and str(value).strip():
+            out[key] = str(value)
+    return out
+
+
+def _described_target(target) -> Target:
+    """The N-marker target `target` names (a Target, a ready target's name, a file)."""
+    try:
+        return target if isinstance(target, Target) else load_target(target)
+    except TargetError as exc:
+        raise SessionError(f"plan_config: target must be 'equal', 'distinct' or a target description: {exc}",
+                           reason=exc.reason) from exc
+
+
+def _add_catalogue(doc: dict, catalogue, *, rated_torque_nm) -> None:
+    """Copy the catalogue file's ``[gear]`` and ``[spec]`` entries into the session.toml
+    document `doc`; a rated torque given besides must be the catalogue's."""
+    from .config import load_catalogue
+
+    cat_gear, cat_spec = load_catalogue(catalogue)
+    if rated_torque_nm is not None and cat_gear.rated_torque_nm not in (None, float(rated_torque_nm)):
+        raise SessionError(f"plan_config: rated_torque_nm {rated_torque_nm:g} differs from the catalogue file's "
+                           f"{cat_gear.rated_torque_nm:g} ({catalogue}); give one")
+    for table, entries in (("gear", cat_gear), ("spec", cat_spec)):
+        given = {k: v for k, v in vars(entries).items() if v is not None}
+        if given:
+            doc.setdefault(table, {}).update(given)
+
+
+def plan_config(
     *,
     max_torque_nm: float | None = None,
+    steps: int | None = None,
     step_mass_kg: float,
     arm_radius_m: float,
-    steps: int | None = None,
     orientations_deg=DEFAULT_ORIENTATIONS_DEG,
     cycles: int = 1,
     gravity_m_per_s2: float = 9.81,
@@ -412,116 +444,83 @@ def plan_session(
     polarity: str = "dark",
     radius_range=None,
     angle_sign: int = 1,
-    image_suffix: str = ".png",
-    overwrite: bool = False,
     target="equal",
-    preconditioning_cycles: int = 0,
-    closing: bool = False,
     header: dict | None = None,
-    pdf: bool = False,
     rated_torque_nm: float | None = None,
     catalogue=None,
-) -> SessionPlan:
-    """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
+) -> SessionConfig:
+    """The :class:`~vision_torsion.session.config.SessionConfig` of a new session
+    from the planner's values (``vision-torsion plan``'s options), validated as
+    session.toml is (:func:`~vision_torsion.session.config.config_from_dict`).
 
     Parameters
     ----------
-    out_dir : str or os.PathLike
-        The session folder to create (may exist if it holds no session yet).
     max_torque_nm : float, optional
-        Largest torque magnitude (N·m); snapped down to whole step masses (the plan
-        names the nearest achievable maxima below and above).
+        Largest torque magnitude (N·m); :func:`plan_session` snaps it down to whole
+        step masses (and names the nearest achievable maxima below and above).
+    steps : int, optional
+        Steps per phase instead of `max_torque_nm` (give exactly one of the two):
+        the maximum torque is `steps` step torques 2·m·g·r.
     step_mass_kg : float
         Mass added to or removed from each pan per step (kg).
     arm_radius_m : float
         Radius of the torque disk at the wires (m).
-    steps : int, optional
-        Steps per phase instead of `max_torque_nm` (give exactly one of the two).
     orientations_deg : sequence of float
         Flexspline orientations (degrees), the paper's six by default.
     cycles : int
         Cycles of the four phases per orientation.
     gravity_m_per_s2, mass_tolerance_kg, friction_torque_std_nm, arm_radius_std_m,
     gravity_std_m_per_s2 :
-        Rig constants written to ``[rig]`` (see :class:`RigConfig`);
+        Rig constants written to ``[rig]`` (see :class:`~vision_torsion.measurements.TorqueRig`);
         `mass_tolerance_kg` is the ± bound of one weight piece (the paper's ±0.1 g
         by default).
     polarity, radius_range :
         Marker settings written to ``[markers]``.
+    angle_sign : {1, -1}
+        Written to ``angle_sign``.
     target : {"equal", "distinct"}, Target, str or os.PathLike
         Two equal markers (identity tracked between images), two markers of
         clearly different radii (``pair = "distinct"`` in ``[markers]``: identity
         certain at any angle, recommended), or an N-marker target (a
         :class:`~vision_torsion.targets.Target`, a ready target's name such as
         ``"ring16"``, or a target file), written to session.toml as ``[target]``.
-    angle_sign : {1, -1}
-        Written to ``angle_sign``.
-    image_suffix : str
-        File type of the images to save (".png", ".tif", ...).
-    overwrite : bool
-        Replace an existing session.toml / manifest.csv in `out_dir`.
-    preconditioning_cycles : int
-        Full cycles to +Tmax and −Tmax before each reference image, to settle the
-        gear; on the capture sheet, not photographed.
-    closing : bool
-        End each orientation with a ``closing`` image at zero torque, after the last
-        cycle is unloaded back to zero (not photographed on the way).
     header : dict, optional
         The test's identity (keys ``gear``, ``serial``, ``operator``, ``date``,
-        ``notes``): printed on the capture sheet (blank fields to fill in by hand
-        otherwise) and written to session.toml as ``[gear] name``/``serial`` and
-        ``[test] operator``/``date``/``notes``, from where the report and
-        summary.json take them.
-    pdf : bool
-        Also print the capture sheet to ``capture_sheet.pdf`` with a headless
-        Chromium, when one is installed (:mod:`.sheet`); ``capture_sheet.html`` is
-        always written.
+        ``notes``, see :data:`HEADER_KEYS`): session.toml's ``[gear] name``/``serial``
+        and ``[test] operator``/``date``/``notes``, from where the capture sheet,
+        the report and summary.json take them.
     rated_torque_nm : float, optional
-        The gear's rated torque T_R (N·m): the plan names the lost-motion levels at
-        ±3 % and ±4 % of it, realised by whole numbers of step masses (see
-        :func:`lost_motion_levels`; refused when they cannot be); written to
-        session.toml as ``[gear] rated_torque_nm``.
+        The gear's rated torque T_R (N·m), ``[gear] rated_torque_nm``: the plan names
+        the lost-motion levels at ±3 % and ±4 % of it (:func:`lost_motion_levels`).
     catalogue : path-like, optional
         The gear type's catalogue file (``[gear]`` ratio, rated torque, T1/T2 and
         ``[spec]`` limits, :func:`~vision_torsion.session.config.load_catalogue`),
-        copied into session.toml; its rated torque names the lost-motion levels
-        when `rated_torque_nm` is not given (a different one is refused).
+        copied into ``[gear]`` and ``[spec]``; its rated torque is taken when
+        `rated_torque_nm` is not given (a different one is refused).
 
     Returns
     -------
-    SessionPlan
+    SessionConfig
 
     Raises
     ------
     SessionError
-        Invalid parameters (named as their session.toml keys), both or neither of
-        `max_torque_nm` and `steps`, a maximum torque below one step, or a folder
-        that already holds a session; lost-motion levels the weight pieces cannot
-        realise; a target that is neither ``equal``, ``distinct`` nor a readable
-        target description (the reason of its :class:`TargetError` kept); numbers
-        ``process`` would refuse as implausible
-        (:func:`~vision_torsion.session.plausibility.check_config_numbers`: an arm
-        radius in mm, g in cm/s², more than
-        :data:`~vision_torsion.session.plausibility.MAX_STEPS_PER_PHASE` pieces per
-        pan); more than :data:`MAX_PLAN_IMAGES` images. All checked before anything
-        is written.
+        Invalid values (named as their session.toml keys), both or neither of
+        `max_torque_nm` and `steps`, `steps` not a whole number >= 1, an unknown
+        header key, a target that is neither ``equal``, ``distinct`` nor a readable
+        target description (the reason of its :class:`TargetError` kept), a
+        catalogue file that is invalid or whose rated torque differs.
 
     Examples
     --------
-    >>> import tempfile
-    >>> plan = plan_session(tempfile.mkdtemp(), max_torque_nm=0.36, step_mass_kg=0.02,
-    ...                     arm_radius_m=0.05)
-    >>> plan.steps_per_phase, round(plan.max_torque_nm, 5), plan.exact, len(plan.rows)
-    (18, 0.35316, False, 444)
+    >>> config = plan_config(steps=18, step_mass_kg=0.02, arm_radius_m=0.05)
+    >>> round(config.protocol.max_torque_nm, 5), round(config.rig.step_torque_nm, 5)
+    (0.35316, 0.01962)
     """
-    folder = Path(out_dir)
     if (max_torque_nm is None) == (steps is None):
-        raise SessionError("plan_session: give either max_torque_nm or steps (steps per phase), not both or neither")
+        raise SessionError("plan_config: give either max_torque_nm or steps (steps per phase), not both or neither")
     if steps is not None:
-        steps = check_number(steps, name="plan_session: steps", error=SessionError, low=1, whole=True)
-    preconditioning_cycles = check_number(preconditioning_cycles, name="plan_session: preconditioning_cycles",
-                                          error=SessionError, low=0, whole=True)
-    if steps is not None:
+        steps = check_number(steps, name="plan_config: steps", error=SessionError, low=1, whole=True)
         step_nm = couple_torque_nm(step_mass_kg, gravity_m_per_s2=gravity_m_per_s2, arm_radius_m=arm_radius_m)
         max_torque_nm = float(f"{steps * step_nm:.12g}")
     markers = {"polarity": polarity}
@@ -530,11 +529,7 @@ def plan_session(
         if target == "distinct":
             markers["pair"] = "distinct"
     else:
-        try:
-            described = target if isinstance(target, Target) else load_target(target)
-        except TargetError as exc:
-            raise SessionError(f"plan_session: target must be 'equal', 'distinct' or a target description: {exc}",
-                               reason=exc.reason) from exc
+        described = _described_target(target)
     if radius_range is not None:
         markers["radius_range"] = list(radius_range)
     doc = {
@@ -556,36 +551,102 @@ def plan_session(
         },
     }
     if catalogue is not None:
-        from .config import load_catalogue
-
-        cat_gear, cat_spec = load_catalogue(catalogue)
-        if rated_torque_nm is not None and cat_gear.rated_torque_nm not in (None, float(rated_torque_nm)):
-            raise SessionError(f"plan_session: rated_torque_nm {rated_torque_nm:g} differs from the catalogue file's "
-                               f"{cat_gear.rated_torque_nm:g} ({catalogue}); give one")
-        if rated_torque_nm is None:
-            rated_torque_nm = cat_gear.rated_torque_nm
-        for table, entries in (("gear", cat_gear), ("spec", cat_spec)):
-            given = {k: v for k, v in vars(entries).items() if v is not None}
-            if given:
-                doc.setdefault(table, {}).update(given)
+        _add_catalogue(doc, catalogue, rated_torque_nm=rated_torque_nm)
+    if rated_torque_nm is not None:
+        doc.setdefault("gear", {})["rated_torque_nm"] = rated_torque_nm
     header = {k: v for k, v in (header or {}).items() if v is not None and str(v).strip()}
     unknown = sorted(set(header) - set(HEADER_KEYS))
     if unknown:
-        raise SessionError(f"plan_session: header key(s) {', '.join(map(repr, unknown))} unknown; "
+        raise SessionError(f"plan_config: header key(s) {', '.join(map(repr, unknown))} unknown; "
                            f"expected some of {', '.join(HEADER_KEYS)}")
     for key, value in header.items():
         table, name = HEADER_KEYS[key]
         doc.setdefault(table, {})[name] = str(value)
     if described is not None:
         doc["target"] = {"name": described.name, **{k: v for k, v in described.spec if v is not None}}
-    config = config_from_dict(doc, source="plan_session")
+    return config_from_dict(doc, source="plan_config")
+
+
+def plan_session(
+    config: SessionConfig,
+    out_dir,
+    *,
+    image_suffix: str = ".png",
+    overwrite: bool = False,
+    preconditioning_cycles: int = 0,
+    closing: bool = False,
+    pdf: bool = False,
+) -> SessionPlan:
+    """Write a new session folder: session.toml, manifest.csv, capture sheets, images/.
+
+    Parameters
+    ----------
+    config : SessionConfig
+        The session to plan: rig, protocol, markers or target, the test's identity
+        (``[gear]``, ``[test]``: printed on the capture sheet, blank fields to fill in
+        by hand otherwise) and catalogue limits; from :func:`plan_config`, or any
+        :class:`~vision_torsion.session.config.SessionConfig` (it is validated as
+        session.toml is). The protocol's ``max_torque_nm`` is snapped down to whole
+        step masses (the plan names the nearest achievable maxima below and above);
+        with ``[gear] rated_torque_nm`` the plan names the lost-motion levels at ±3 %
+        and ±4 % of it, realised by whole numbers of step masses (see
+        :func:`lost_motion_levels`; refused when they cannot be).
+    out_dir : str or os.PathLike
+        The session folder to create (may exist if it holds no session yet).
+    image_suffix : str
+        File type of the images to save (".png", ".tif", ...).
+    overwrite : bool
+        Replace an existing session.toml / manifest.csv in `out_dir`.
+    preconditioning_cycles : int
+        Full cycles to +Tmax and −Tmax before each reference image, to settle the
+        gear; on the capture sheet, not photographed.
+    closing : bool
+        End each orientation with a ``closing`` image at zero torque, after the last
+        cycle is unloaded back to zero (not photographed on the way).
+    pdf : bool
+        Also print the capture sheet to ``capture_sheet.pdf`` with a headless
+        Chromium, when one is installed (:mod:`.sheet`); ``capture_sheet.html`` is
+        always written.
+
+    Returns
+    -------
+    SessionPlan
+
+    Raises
+    ------
+    SessionError
+        An invalid configuration (named as its session.toml keys), a maximum torque
+        below one step, or a folder that already holds a session; lost-motion levels
+        the weight pieces cannot realise; numbers ``process`` would refuse as
+        implausible (:func:`~vision_torsion.session.plausibility.check_config_numbers`:
+        an arm radius in mm, g in cm/s², more than
+        :data:`~vision_torsion.session.plausibility.MAX_STEPS_PER_PHASE` pieces per
+        pan); more than :data:`MAX_PLAN_IMAGES` images. All checked before anything
+        is written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> config = plan_config(max_torque_nm=0.36, step_mass_kg=0.02, arm_radius_m=0.05)
+    >>> plan = plan_session(config, tempfile.mkdtemp())
+    >>> plan.steps_per_phase, round(plan.max_torque_nm, 5), plan.exact, len(plan.rows)
+    (18, 0.35316, False, 444)
+    """
+    folder = Path(out_dir)
+    if not isinstance(config, SessionConfig):
+        raise SessionError(f"plan_session: config must be a SessionConfig (see plan_config), "
+                           f"got {type(config).__name__}")
+    config = config_from_dict(config_to_dict(config), source="plan_session")  # checked as session.toml is
+    preconditioning_cycles = check_number(preconditioning_cycles, name="plan_session: preconditioning_cycles",
+                                          error=SessionError, low=0, whole=True)
     check_config_numbers(config, source="plan_session")  # what process would refuse, refused now
     if image_suffix.lower() not in IMAGE_SUFFIXES:
         raise SessionError(
             f"plan_session: image_suffix {image_suffix!r} is not an image "
             f"type; expected one of {', '.join(IMAGE_SUFFIXES)}"
         )
-    per_step = config.torque_rig.step_torque_nm
+    per_step = config.rig.step_torque_nm
+    max_torque_nm = config.protocol.max_torque_nm
     n = math.floor(max_torque_nm / per_step + 1e-9)
     planned_max = float(f"{n * per_step:.12g}")  # no 0.35316000000000003 in the file
     if n < 1:
@@ -600,8 +661,9 @@ def plan_session(
             f"(2 + 4 phases × {n} steps × {config.protocol.cycles} cycle(s))), more than the "
             f"{MAX_PLAN_IMAGES} a plan may have; fewer orientations, cycles or steps"
         )
+    rated_torque_nm = config.gear.rated_torque_nm
     levels = () if rated_torque_nm is None else lost_motion_levels(
-        rated_torque_nm, step_mass_kg=step_mass_kg, torque_per_step_nm=per_step, steps_per_phase=n)
+        rated_torque_nm, step_mass_kg=config.rig.step_mass_kg, torque_per_step_nm=per_step, steps_per_phase=n)
     existing = [name for name in (CONFIG_NAME, MANIFEST_NAME) if (folder / name).exists()]
     if existing and not overwrite:
         raise SessionError(
@@ -611,9 +673,7 @@ def plan_session(
 
     check_replaceable(folder / name for name in (CONFIG_NAME, MANIFEST_NAME, CAPTURE_SHEET_NAME,
                                                  CAPTURE_SHEET_HTML, CAPTURE_SHEET_PDF))
-    if levels:  # the analysis reads T_R from here for lost motion
-        doc.setdefault("gear", {})["rated_torque_nm"] = float(rated_torque_nm)
-    planned = config_from_dict({**doc, "protocol": {**doc["protocol"], "max_torque_nm": planned_max}})
+    planned = replace(config, protocol=replace(config.protocol, max_torque_nm=planned_max))
     plan = SessionPlan(
         folder=folder,
         config=planned,
@@ -624,7 +684,7 @@ def plan_session(
         torque_per_step_nm=per_step,
         preconditioning_cycles=int(preconditioning_cycles),
         closing=bool(closing),
-        header=header,
+        header=_header(config),
         rated_torque_nm=None if rated_torque_nm is None else float(rated_torque_nm),
         lost_motion_levels=levels,
     )
@@ -635,7 +695,7 @@ def plan_session(
             "planned %d steps = %.6g N·m (the nearest achievable maxima are %.6g N·m "
             "with %d steps and %.6g N·m with %d; or give --steps)",
             max_torque_nm,
-            step_mass_kg,
+            config.rig.step_mass_kg,
             n,
             plan.max_torque_nm,
             below,

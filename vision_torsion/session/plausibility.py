@@ -31,7 +31,6 @@ from __future__ import annotations
 import math
 
 from ..errors import ManifestError, SessionError
-from ..measurements import couple_torque_nm
 
 __all__ = ["check_session_numbers", "check_config_numbers", "ARM_RADIUS_RANGE_M", "GRAVITY_RANGE_M_PER_S2",
            "STEP_MASS_RANGE_KG", "TORQUE_SLIP_FACTOR", "MAX_STEPS_PER_PHASE"]
@@ -68,7 +67,7 @@ def _config_problems(config) -> list[str]:
         problems.append(f"rig.gravity_m_per_s2 = {g:g} m/s² is outside the Earth's "
                         f"{lo:g}..{hi:g} m/s²{hint}")
     lo, hi = STEP_MASS_RANGE_KG
-    m = proto.step_mass_kg
+    m = rig.step_mass_kg
     if not lo <= m <= hi:
         hint = ": grams? (write kg, e.g. 0.02)" if lo <= m / 1000 <= hi else ""
         problems.append(f"protocol.step_mass_kg = {m:g} kg is outside {lo:g}..{hi:g} kg{hint}")
@@ -101,9 +100,7 @@ def check_config_numbers(config, *, source=None) -> None:
 
 
 def _pieces(config) -> float:
-    rig, proto = config.rig, config.protocol
-    return proto.max_torque_nm / couple_torque_nm(proto.step_mass_kg, gravity_m_per_s2=rig.gravity_m_per_s2,
-                                                  arm_radius_m=rig.arm_radius_m)
+    return config.protocol.max_torque_nm / config.rig.step_torque_nm
 
 
 def _max_pieces(config) -> int:
@@ -112,8 +109,7 @@ def _max_pieces(config) -> int:
 
 
 def _row_problems(config, manifest) -> list[str]:
-    proto = config.protocol
-    step = proto.step_mass_kg
+    proto, step = config.protocol, config.rig.step_mass_kg
     most = _max_pieces(config)
     top_mass = most * step
     problems = []

@@ -109,8 +109,8 @@ def _pan(pieces: int, step_kg: float) -> str:
 def capture_sheet_html(plan) -> str:
     """The capture sheet of a :class:`~vision_torsion.session.plan.SessionPlan` as HTML."""
     cfg, n = plan.config, plan.steps_per_phase
-    step = cfg.protocol.step_mass_kg
     rig = cfg.rig
+    step = rig.step_mass_kg
     esc = html.escape
     fields = "".join(
         f"<tr><th>{label}</th><td>{esc(str(plan.header.get(key, '')))}</td></tr>" for key, label in _HEADER_FIELDS
@@ -171,7 +171,7 @@ def capture_sheet_html(plan) -> str:
                 "step, no photographs</td><td></td><td></td><td>☐</td></tr>"
             )
         pieces = round(float(row["mass_kg"]) / step)
-        torque = couple_torque(float(row["mass_kg"]), phase, rig, step_mass_kg=step).torque_nm
+        torque = couple_torque(float(row["mass_kg"]), phase, rig).torque_nm
         plus = _pan(pieces if phase.startswith("positive") else 0, step)
         minus = _pan(pieces if phase.startswith("negative") else 0, step)
         number += 1

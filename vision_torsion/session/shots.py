@@ -17,7 +17,8 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..images import GreyImage
+from ..errors import ImageReadError
+from ..images import GreyImage, read_image_bytes
 from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
@@ -180,10 +181,10 @@ class ShotMeasurer:
 
         path = Path(path)
         t0 = time.perf_counter()
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            return Shot(path, None, f"{path.name}: cannot be read ({exc.strerror or exc})")
+        try:  # its size checked before it is read (a non-image is refused by the decoder)
+            data = read_image_bytes(path, signature=False)
+        except ImageReadError as exc:
+            return Shot(path, None, str(exc).replace(str(path), path.name))
         image_hash = content_hash(data)
         key = cache_key(image_hash, self.key)
         t1 = time.perf_counter()

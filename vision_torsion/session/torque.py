@@ -12,8 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..measurements import PHASE_SIGN, PHASES, couple_torque_nm, pieces_per_pan
-from .config import RigConfig
+from ..measurements import PHASE_SIGN, PHASES, TorqueRig, couple_torque_nm, pieces_per_pan
 
 # PHASES, PHASE_SIGN and pieces_per_pan are defined in vision_torsion.measurements
 # (the one home of the measurements vocabulary) and re-exported here.
@@ -41,8 +40,7 @@ class TorqueValue:
     torque_common_std_nm: float
 
 
-def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: float
-                  ) -> TorqueValue:
+def couple_torque(mass_kg: float, phase: str, rig: TorqueRig) -> TorqueValue:
     """Torque of a force couple with `mass_kg` on each pan of the loaded pair.
 
     Parameters
@@ -52,11 +50,9 @@ def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: f
     phase : str
         One of :data:`PHASES`; gives the sign (``positive_*`` +, ``negative_*`` -,
         ``reference`` and ``closing`` 0).
-    rig : RigConfig
-        r, g and their uncertainties, the mass uncertainty of one weight piece and
-        the friction term.
-    step_mass_kg : float
-        Mass of one weight piece (kg), to count the pieces on a pan.
+    rig : TorqueRig
+        r, g and their uncertainties, the mass of one weight piece (to count the
+        pieces on a pan) and its uncertainty, and the friction term.
 
     Returns
     -------
@@ -87,14 +83,13 @@ def couple_torque(mass_kg: float, phase: str, rig: RigConfig, *, step_mass_kg: f
 
     Examples
     --------
-    >>> from vision_torsion.session.config import RigConfig
-    >>> rig = RigConfig(arm_radius_m=0.05, mass_std_kg=0.0)
-    >>> round(couple_torque(0.1, "negative_loading", rig, step_mass_kg=0.02).torque_nm, 6)
+    >>> rig = TorqueRig(step_mass_kg=0.02, arm_radius_m=0.05, mass_std_kg=0.0)
+    >>> round(couple_torque(0.1, "negative_loading", rig).torque_nm, 6)
     -0.0981
     """
     sign = PHASE_SIGN[phase]
     g, r = rig.gravity_m_per_s2, rig.arm_radius_m
-    n = pieces_per_pan(mass_kg, step_mass_kg)
+    n = pieces_per_pan(mass_kg, rig.step_mass_kg)
     tau = sign * couple_torque_nm(mass_kg, gravity_m_per_s2=g, arm_radius_m=r)
     var_g = (2.0 * mass_kg * r * rig.gravity_std_m_per_s2) ** 2
     var_r = (2.0 * mass_kg * g * rig.arm_radius_std_m) ** 2

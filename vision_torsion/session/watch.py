@@ -11,11 +11,15 @@ A tick:
 
 1. lists the camera folder (``--camera-dir``, else ``SESSION_DIR/images``). Gone?
    Says so once, and waits for it to come back.
-2. A file is complete when its size and modification time have not changed for
-   `settle_s` (a camera writes in chunks) and it decodes (a PNG without its IEND
-   chunk, a JPEG without its end marker is waited for, not measured). Files whose
-   time is already older than `settle_s` when first seen (a resumed watch) are
-   complete at once.
+2. A file is complete when it was closed after writing and has not changed since
+   (the filesystem events of :mod:`.events`: a tick follows within milliseconds),
+   or when its size and modification time have not changed for `settle_s` (a
+   camera writes in chunks; the rule when events are not available: polling), and
+   it decodes (a PNG without its IEND chunk, a JPEG without its end marker is
+   waited for, not measured). Files whose time is already older than `settle_s`
+   when first seen (a resumed watch) are complete at once. A file larger than an
+   image file may be (:data:`~vision_torsion.images.MAX_IMAGE_FILE_BYTES`) is set
+   aside, naming it and the limit, without being read.
 3. Each complete file, in capture order (file time, then natural name order), is
    measured (:class:`~.shots.ShotMeasurer`: ``process``'s cache, shared) and bound
    to the next planned row not yet photographed (with no ``--camera-dir``, a file
@@ -31,7 +35,8 @@ A tick:
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
    blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
    one (> 0.5 % of the pixels at full scale), are returned at once as events.
-5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically, and
+5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
+   its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
    seconds and at the end.
 
@@ -52,13 +57,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text, check_output_dir
-from ..images import IMAGE_SUFFIXES
+from ..fileio import atomic_write_text, check_output_dir, check_replaceable
+from ..images import IMAGE_SUFFIXES, MAX_IMAGE_FILE_BYTES
 from ..measure import natural_key
 from ..measurements import output_folder
 from .bind import row_text
 from .binding import Binding, load_binding, write_binding
-from .live import LIVE_PAGE_NAME, LivePoint, live_page
+from .events import EVENT_MODES, FolderEvents
+from .live import LIVE_PAGE_NAME, LIVE_STAMP_NAME, LivePoint, live_page, stamp_script
 from .load import load_session
 from .steps import StepPoint, check_steps, gear_kinks
 
@@ -143,28 +149,37 @@ class Watcher:
         its photograph, and on closing).
     clock : callable
         Monotonic clock (seconds); tests pass their own.
+    events : {"auto", "poll"}
+        Follow the camera folder's filesystem events (:mod:`.events`; polling where
+        they do not work, :attr:`events` ``.why_polling`` says why), or only poll.
 
     Raises
     ------
     SessionError
-        The session is unusable, the camera folder is the output folder, or
-        `settle_s` or `give_up_s` is not a finite number of seconds >= 0.
+        The session is unusable, the camera folder is the output folder,
+        `settle_s` or `give_up_s` is not a finite number of seconds >= 0, or
+        `events` is not one of "auto", "poll".
     OutputError
         The output folder, or with a camera folder the session folder (where
-        ``binding.json`` goes), cannot be written: said before any photograph.
+        ``binding.json`` goes), cannot be written, or the output folder holds a
+        ``live.html`` or ``live-stamp.js`` this tool did not write: said before any
+        photograph.
 
     Use as a context manager (or call :meth:`close`): closing merges the cache.
     """
 
     def __init__(self, session_dir, *, camera_dir=None, out_dir=None, settle_s: float = 1.0,
                  give_up_s: float = 10.0, page: bool = True, binding_every_s: float = 5.0,
-                 clock=time.monotonic):
+                 clock=time.monotonic, events: str = "auto"):
         from .shots import ShotMeasurer
 
         for what, value in (("settle_s", settle_s), ("give_up_s", give_up_s)):
             if not (isinstance(value, (int, float)) and 0 <= value < math.inf):
                 raise SessionError(f"{what} = {value!r}: expected a finite number of seconds >= 0",
                                    reason="bad_option")
+        if events not in EVENT_MODES:
+            raise SessionError(f"events = {events!r}: expected one of {', '.join(EVENT_MODES)}",
+                               reason="bad_option")
         self.session = load_session(session_dir, check_files=False)
         folder = self.session.folder
         self.camera_mode = camera_dir is not None
@@ -174,6 +189,8 @@ class Watcher:
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
         # before the first photograph: a watch must not announce itself and then die
         check_output_dir(self.out)  # live.html and the cache
+        if page:  # another program's page or stamp is refused before anything is written
+            check_replaceable([self.out / LIVE_PAGE_NAME, self.out / LIVE_STAMP_NAME])
         if self.camera_mode:
             check_output_dir(folder)  # binding.json
         self.settle_s, self.give_up_s, self.page, self.clock = settle_s, give_up_s, page, clock
@@ -194,12 +211,13 @@ class Watcher:
         self.folder_gone = False
         self.timings: list[dict] = []
         cfg = self.session.config
-        self.step_torque = cfg.torque_rig.step_torque_nm
+        self.step_torque = cfg.rig.step_torque_nm
         self.torques = [self.session.torque(row).torque_nm for row in rows]
         self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
         self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)
         self.swapped: dict[int, tuple[int, str]] = {}  # position -> (its partner, the diagnosis)
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
+        self.events = FolderEvents(self.camera, mode=events)
         self._closed = False
         self.binding_every_s = binding_every_s
         self._binding_written = -math.inf
@@ -217,6 +235,7 @@ class Watcher:
         """Merge the cache logs and write the final page (once)."""
         if not self._closed:
             self._closed = True
+            self.events.close()
             self.measurer.__exit__(None, None, None)
             if self.bound:
                 self._save(force=True)
@@ -234,6 +253,12 @@ class Watcher:
             if i not in self.bound and row.line not in self.missing:
                 return i, row
         return None
+
+    def wait(self, timeout: float) -> bool:
+        """Wait until something happens in the camera folder (a file closed, renamed
+        or deleted), at most `timeout` seconds; True when something did (polling:
+        just waits)."""
+        return self.events.wait(timeout)
 
     def _vanished(self, names) -> list[WatchEvent]:
         """A notice for each file seen before that is no longer among `names`."""
@@ -268,6 +293,8 @@ class Watcher:
             self.folder_gone = False
             events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is back"))
         events += self._vanished({e.name for e in entries})
+        self.events.ensure()  # on again after the folder was gone or replaced
+        closed = self.events.closed()
         ready, unsettled, changed_bound = [], [], []
         wall = time.time()
         for e in entries:
@@ -286,12 +313,17 @@ class Watcher:
                 st = e.stat()
             except OSError:  # vanished meanwhile: the next tick says so
                 continue
+            if (big := self._too_large(name, st.st_size)) is not None:
+                events.append(big)
+                continue
             info = self.seen.get(name)
             if info is None or (info.size, info.mtime_ns) != (st.st_size, st.st_mtime_ns):
                 old = wall - st.st_mtime > self.settle_s
                 self.seen[name] = info = _Seen(st.st_size, st.st_mtime_ns,
                                                -math.inf if old else now)
-            settled = now - info.since >= self.settle_s
+            # closed after writing and unchanged since, or unchanged for settle_s
+            settled = (now - info.since >= self.settle_s
+                       or closed.get(name) == (st.st_size, st.st_mtime_ns))
             order = (st.st_mtime_ns, natural_key(name), name)
             if name in self.done:
                 pos = self._position(name)
@@ -329,6 +361,15 @@ class Watcher:
     def _notice(self, kind, name, message, line=None) -> WatchEvent:
         self.notices.append(message)
         return WatchEvent(kind, name, message, line)
+
+    def _too_large(self, name: str, size: int) -> WatchEvent | None:
+        """A file not bound yet and larger than the image reader accepts: set aside
+        without being read (its notice), else None."""
+        if size <= MAX_IMAGE_FILE_BYTES or name in self.done:
+            return None
+        self.set_aside[name] = "too large"
+        return self._notice("ignored", name, f"{name}: {size} bytes, larger than an image file may be "
+                            f"({MAX_IMAGE_FILE_BYTES} bytes); not read, not bound")
 
     def _position(self, name: str) -> int | None:
         return next((p for p, b in self.bound.items() if b.file == name), None)
@@ -603,7 +644,7 @@ class Watcher:
         if nxt is None:
             return None, None
         pos, row = nxt
-        step_mass = self.session.config.protocol.step_mass_kg
+        step_mass = self.session.config.rig.step_mass_kg
         pieces = 0 if row.mass_kg is None else round(row.mass_kg / step_mass)
         pans = "no weights" if pieces == 0 else (
             f"{'+' if row.phase.startswith('positive') else '−'} pans {1000 * row.mass_kg:g} g each "
@@ -611,12 +652,16 @@ class Watcher:
         return (f"{row_text(row)} · {pans} · τ = {self.torques[pos]:+.5f} N·m", self.torques[pos])
 
     def write_page(self, *, finished: bool = False) -> Path:
-        """Write ``OUT_DIR/live.html`` atomically; return its path."""
+        """Write ``OUT_DIR/live.html`` atomically, then its stamp (``live-stamp.js``:
+        a browser showing the page reloads it when the stamp changes); return its path."""
         text, torque = self.next_step_text()
+        version = f"{time.time_ns():x}"  # unique across runs: an open page of a former watch reloads too
         page = live_page(title=str(self.session.folder.name), points=self.live_points(),
                          planned_torques=self.torques, next_step=text, next_torque_nm=torque,
-                         messages=self.notices, finished=finished)
-        return atomic_write_text(self.out / LIVE_PAGE_NAME, page, durable=False)
+                         messages=self.notices, finished=finished, version=version)
+        path = atomic_write_text(self.out / LIVE_PAGE_NAME, page, durable=False)
+        atomic_write_text(self.out / LIVE_STAMP_NAME, stamp_script(version), durable=False)
+        return path
 
 
 @dataclass(frozen=True)
@@ -653,7 +698,7 @@ def printable(text: str) -> str:
 
 def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float = 0.5,
                   settle_s: float = 1.0, give_up_s: float = 10.0, finish=None,
-                  stop=None, echo=None) -> WatchResult:
+                  stop=None, echo=None, events: str = "auto") -> WatchResult:
     """Follow a session while it is shot; end with `finish` (the report).
 
     Parameters
@@ -665,8 +710,9 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
     out_dir : path-like, optional
         Output folder (``SESSION_DIR/results``).
     poll_s : float
-        Seconds between looks at the folder.
-    settle_s, give_up_s : float
+        Longest time between looks at the folder (a filesystem event makes the next
+        look come at once).
+    settle_s, give_up_s, events
         See :class:`Watcher`.
     finish : callable, optional
         Called at the end, when a photograph was bound, with the session folder and
@@ -690,8 +736,10 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
     echo = echo or default_echo
     interrupted = False
     with Watcher(session_dir, camera_dir=camera_dir, out_dir=out_dir, settle_s=settle_s,
-                 give_up_s=give_up_s) as watcher:
-        echo(WatchEvent("start", "", f"watching {watcher.camera} for {len(watcher.rows)} planned "
+                 give_up_s=give_up_s, events=events) as watcher:
+        how = ("filesystem events" if not watcher.events.why_polling
+               else f"polling every {poll_s:g} s: {watcher.events.why_polling}")
+        echo(WatchEvent("start", "", f"watching {watcher.camera} ({how}) for {len(watcher.rows)} planned "
                                      f"images; live page: {watcher.out / LIVE_PAGE_NAME} (Ctrl-C to stop)"))
         watcher.write_page()
         try:
@@ -700,10 +748,7 @@ def watch_session(session_dir, *, camera_dir=None, out_dir=None, poll_s: float =
                     echo(event)
                 if watcher.complete:
                     break
-                if stop is not None:
-                    stop.wait(poll_s)
-                else:
-                    time.sleep(poll_s)
+                watcher.wait(poll_s)  # returns at once when a file is closed
         except KeyboardInterrupt:
             interrupted = True
             echo(WatchEvent("stopped", "", "stopped; run the same command again to resume"))

@@ -14,7 +14,8 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.backlash` — the dead zone;
 - :mod:`.meshing` — meshing pairs, wrap angle, Ks calibration, linearity check;
 - :mod:`.analysis` — :func:`analyze_stiffness_curve`, the whole chain;
-- :mod:`.plots`, :mod:`.report` — figures and the session-report section.
+- :mod:`.section` — the session report's stiffness section (its figures are drawn by
+  :mod:`vision_torsion.report.stiffness_figures`, the report layer).
 
 Records with known truth are made by :mod:`vision_torsion.synthetic.encoder`.
 """
@@ -22,8 +23,6 @@ Records with known truth are made by :mod:`vision_torsion.synthetic.encoder`.
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-# (so that reading a record does not load matplotlib for the plots)
-_LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "plots", "records", "report",
-         "rig", "steps")
+_LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "records", "rig", "section", "steps")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -108,21 +108,16 @@ def capture_script(scene: Scene, spec, session_dir, *, seed: int = 0, forgotten=
     from ..analysis.models import bilinear_response
     from ..session.plan import plan_session
 
-    plan = plan_session(session_dir, max_torque_nm=spec.max_torque_nm, step_mass_kg=spec.step_mass_kg,
-                        arm_radius_m=spec.arm_radius_m, orientations_deg=spec.orientations_deg,
-                        cycles=spec.cycles, gravity_m_per_s2=spec.gravity_m_per_s2,
-                        mass_tolerance_kg=spec.mass_tolerance_kg, polarity=scene.markers.polarity,
-                        angle_sign=spec.angle_sign)
-    rows = plan.rows
-    torque = np.array([_SIGN[r["phase"]] * couple_torque_nm(float(r["mass_kg"]), gravity_m_per_s2=spec.gravity_m_per_s2,
-                                                             arm_radius_m=spec.arm_radius_m) for r in rows])
+    plan = plan_session(spec.session_config(polarity=scene.markers.polarity), session_dir)
+    rows, rig = plan.rows, plan.config.rig
+    torque = np.array([_SIGN[r["phase"]] * couple_torque_nm(float(r["mass_kg"]), gravity_m_per_s2=rig.gravity_m_per_s2,
+                                                             arm_radius_m=rig.arm_radius_m) for r in rows])
     actual = torque.copy()
     if forgotten is not None:
         unloading = rows[forgotten]["phase"].endswith("unloading")
         sign = _SIGN[rows[forgotten]["phase"]]
         # one piece forgotten on one pan of the pair: half the step
-        actual[forgotten] += sign * (1 if unloading else -1) * couple_torque_nm(
-            spec.step_mass_kg, gravity_m_per_s2=spec.gravity_m_per_s2, arm_radius_m=spec.arm_radius_m) / 2
+        actual[forgotten] += sign * (1 if unloading else -1) * rig.step_torque_nm / 2
     angles = np.zeros(len(rows))
     orient = np.array([float(r["orientation_deg"]) for r in rows])
     for o in dict.fromkeys(orient):

@@ -33,7 +33,6 @@ import pandas as pd
 
 from ..errors import SceneError
 from ..fileio import write_csv, write_json
-from ..measurements import couple_torque_nm
 from ..progress import track
 from ..textfiles import read_toml
 from .folders import truth_row, write_rendered
@@ -65,6 +64,27 @@ class SessionSpec:
     orientation_variation: float = 0.0
     cycle_variation: float = 0.0
     angle_sign: int = 1
+
+    def session_config(self, *, polarity: str = "dark", steps: int | None = None, header: dict | None = None,
+                       catalogue=None):
+        """The :class:`~vision_torsion.session.config.SessionConfig` of this session's rig
+        and protocol (:func:`~vision_torsion.session.plan.plan_config`): markers of
+        `polarity`; `steps` per phase instead of the spec's maximum torque; the
+        test's identity and catalogue as :func:`~vision_torsion.session.plan.plan_config`
+        takes them.
+
+        Raises
+        ------
+        SessionError
+            An invalid rig or protocol (named as its session.toml key).
+        """
+        from ..session.plan import plan_config
+
+        return plan_config(
+            max_torque_nm=None if steps is not None else self.max_torque_nm, steps=steps,
+            step_mass_kg=self.step_mass_kg, arm_radius_m=self.arm_radius_m, orientations_deg=self.orientations_deg,
+            cycles=self.cycles, gravity_m_per_s2=self.gravity_m_per_s2, mass_tolerance_kg=self.mass_tolerance_kg,
+            polarity=polarity, angle_sign=self.angle_sign, header=header, catalogue=catalogue)
 
 
 def _spec_from_dict(table: dict, where: str) -> SessionSpec:
@@ -223,51 +243,22 @@ def write_session_folder(
     SessionError
         Invalid rig or protocol, or the folder already holds a session.
     """
-    from ..session.config import config_from_dict
     from ..session.plan import plan_rows, plan_session
 
     out = Path(out_dir)
     suffix = ".jpg" if scene.noise.jpeg_quality else ".png"
+    # planned by its whole number of steps (the spec's maximum snapped down, as documented):
+    # planning by max_torque_nm would warn a demo user that 0.36 N·m is not whole steps
+    rig = spec.session_config(polarity=scene.markers.polarity).rig
+    n = max(int(np.floor(spec.max_torque_nm / rig.step_torque_nm + 1e-9)), 1)
+    config = spec.session_config(polarity=scene.markers.polarity, steps=n, header=header, catalogue=catalogue)
     # the rows the plan will hold, so the rotations are checked against the frame
     # before anything is written
-    config = config_from_dict(
-        {
-            "rig": {
-                "arm_radius_m": spec.arm_radius_m,
-                "gravity_m_per_s2": spec.gravity_m_per_s2,
-                "mass_tolerance_kg": spec.mass_tolerance_kg,
-            },
-            "protocol": {
-                "orientations_deg": list(spec.orientations_deg),
-                "max_torque_nm": spec.max_torque_nm,
-                "step_mass_kg": spec.step_mass_kg,
-                "cycles": spec.cycles,
-            },
-        },
-        source=str(out),
-    )
-    step_nm = couple_torque_nm(spec.step_mass_kg, gravity_m_per_s2=spec.gravity_m_per_s2,
-                               arm_radius_m=spec.arm_radius_m)
-    n = int(np.floor(spec.max_torque_nm / step_nm + 1e-9))
-    truth, params = session_truth(spec, plan_rows(config, max(n, 1), suffix=suffix), seed=seed)
+    truth, params = session_truth(spec, plan_rows(config, n, suffix=suffix), seed=seed)
     disk_angles = spec.angle_sign * truth["true_angle_deg"].to_numpy()
     for a in (disk_angles.min(), disk_angles.max()):
         check_markers_in_frame(scene, float(a), where=scene.name)
-    # planned by its whole number of steps (the spec's maximum snapped down, as documented):
-    # planning by max_torque_nm would warn a demo user that 0.36 N·m is not whole steps
-    plan = plan_session(
-        out, image_suffix=suffix, overwrite=overwrite, steps=max(n, 1),
-        step_mass_kg=spec.step_mass_kg,
-        arm_radius_m=spec.arm_radius_m,
-        orientations_deg=spec.orientations_deg,
-        cycles=spec.cycles,
-        gravity_m_per_s2=spec.gravity_m_per_s2,
-        mass_tolerance_kg=spec.mass_tolerance_kg,
-        polarity=scene.markers.polarity,
-        angle_sign=spec.angle_sign,
-        header=header,
-        catalogue=catalogue,
-    )
+    plan = plan_session(config, out, image_suffix=suffix, overwrite=overwrite)
     if list(plan.rows) != truth[list(plan.rows[0])].to_dict("records"):  # pragma: no cover - a planning change
         raise SceneError("the session plan changed between checking and writing")
     rows = []

@@ -1,5 +1,8 @@
-"""Figures of a stiffness result: torque-angle with fit and dead zone, K(T) with its
-band, n(T).
+"""Figures of a stiffness result (:mod:`vision_torsion.stiffness`): torque-angle with
+fit and dead zone, K(T) with its band, n(T), and the camera rig's step stiffness.
+
+The stiffness layer computes; this module of the report layer draws (the session
+report's stiffness section, :func:`section_figures`, and ``vision-torsion stiffness``).
 
 Figures are built with :class:`matplotlib.figure.Figure` directly, never
 ``pyplot``, so no global backend or figure registry is touched (safe in threads, no
@@ -12,9 +15,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..plotting import save_figure
-
-__all__ = ["plot_torque_angle", "plot_stiffness", "plot_meshing", "plot_step_stiffness", "save_figure"]
+__all__ = ["plot_torque_angle", "plot_stiffness", "plot_meshing", "plot_step_stiffness", "section_figures"]
 
 #: Resolution of the saved figures (dots per inch).
 _DPI = 120
@@ -40,6 +41,7 @@ def plot_torque_angle(result) -> Figure:
     Parameters
     ----------
     result : StiffnessResult
+        A record's analysis (:func:`~vision_torsion.stiffness.analyze_stiffness_curve`).
 
     Returns
     -------
@@ -73,6 +75,7 @@ def plot_stiffness(result) -> Figure:
     Parameters
     ----------
     result : StiffnessResult
+        With at least one fitted branch (``result.curves``).
 
     Returns
     -------
@@ -141,10 +144,10 @@ def plot_step_stiffness(steps, summary) -> Figure:
     Parameters
     ----------
     steps : pandas.DataFrame
-        :func:`~.steps.step_stiffness` (every loop: small grey-edged points; flagged
+        :func:`~vision_torsion.stiffness.steps.step_stiffness` (every loop: small grey-edged points; flagged
         steps as crosses).
     summary : pandas.DataFrame
-        :func:`~.steps.summarise_steps` (mean over loops with ±2σ error bars).
+        :func:`~vision_torsion.stiffness.steps.summarise_steps` (mean over loops with ±2σ error bars).
 
     Returns
     -------
@@ -168,3 +171,34 @@ def plot_step_stiffness(steps, summary) -> Figure:
     ax.axvline(0.0, color="0.5", lw=0.6)
     ax.legend(loc="best", fontsize="small", title="crosses: flagged steps")
     return fig
+
+
+def section_figures(section) -> dict:
+    """The figures of a session report's stiffness section, by name.
+
+    Parameters
+    ----------
+    section : vision_torsion.stiffness.section.StiffnessSection
+
+    Returns
+    -------
+    dict of str to matplotlib.figure.Figure
+        ``step_stiffness``; with a smooth fit also ``torque_angle``, ``stiffness``
+        (when a branch was fitted) and ``meshing_pairs`` (with Ks).
+
+    Examples
+    --------
+    >>> from vision_torsion.stiffness import stiffness_section
+    >>> from vision_torsion.synthetic.encoder import synthetic_measurements
+    >>> sorted(section_figures(stiffness_section(synthetic_measurements(steps=10))))
+    ['step_stiffness']
+    """
+    figures = {"step_stiffness": plot_step_stiffness(section.steps, section.summary)}
+    result = section.result
+    if result is not None:
+        figures["torque_angle"] = plot_torque_angle(result)
+        if result.curves:
+            figures["stiffness"] = plot_stiffness(result)
+        if result.meshing is not None:
+            figures["meshing_pairs"] = plot_meshing(result)
+    return figures

@@ -6,7 +6,8 @@ The section gives the stiffness of every load step, Δτ/Δθ, within each loop
 (:func:`~.steps.step_stiffness`), compared over loops at equal step
 (:func:`~.steps.summarise_steps`). Loops are never pooled into one curve, and no
 smooth fit is made unless one is asked for (then one per loop, whose failures are
-notes, not a failed section).
+notes, not a failed section). The report layer draws its figures
+(:func:`vision_torsion.report.stiffness_figures.section_figures`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import pandas as pd
 from ..errors import AnalysisError
 from ..measurements import read_measurements
 from .analysis import StiffnessResult, analyze_stiffness_curve, as_record
-from .plots import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
 from .rig import RigConstants
 from .steps import step_stiffness, summarise_steps
 
@@ -27,7 +27,7 @@ __all__ = ["StiffnessSection", "stiffness_section"]
 
 @dataclass(frozen=True)
 class StiffnessSection:
-    """Step stiffness, optional per-loop curves, figures and a markdown summary.
+    """Step stiffness, optional per-loop curves and a markdown summary.
 
     Attributes
     ----------
@@ -37,9 +37,6 @@ class StiffnessSection:
         Per phase and step over the loops (:func:`~.steps.summarise_steps`).
     result : StiffnessResult or None
         Per-loop smooth curves, when a fit method was asked for.
-    figures : dict of str to matplotlib.figure.Figure
-        ``step_stiffness``; with a fit also ``torque_angle``, ``stiffness`` and
-        (with Ks) ``meshing_pairs``.
     markdown : str
         A short summary.
     """
@@ -47,7 +44,6 @@ class StiffnessSection:
     steps: pd.DataFrame = field(repr=False)
     summary: pd.DataFrame = field(repr=False)
     result: StiffnessResult | None
-    figures: dict = field(repr=False)
     markdown: str
 
 
@@ -102,8 +98,8 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
     --------
     >>> from vision_torsion.synthetic.encoder import synthetic_measurements
     >>> section = stiffness_section(synthetic_measurements(steps=10))
-    >>> sorted(section.figures), len(section.steps)
-    (['step_stiffness'], 40)
+    >>> section.result is None, len(section.steps)
+    (True, 40)
     """
     frame = read_measurements(measurements, columns=("orientation_deg", "cycle", "phase", "step",
                                                      "torque_nm", "angle_deg", "status"))
@@ -112,14 +108,8 @@ def stiffness_section(measurements, *, rig: RigConstants | None = None, order: i
         raise AnalysisError("no two consecutive load steps of one phase were measured: "
                             "no step stiffness can be computed")
     summary = summarise_steps(steps)
-    figures = {"step_stiffness": plot_step_stiffness(steps, summary)}
     result = None
     if method is not None:
         result = analyze_stiffness_curve(as_record(frame), rig=rig, order=order, method=method)
-        figures["torque_angle"] = plot_torque_angle(result)
-        if result.curves:
-            figures["stiffness"] = plot_stiffness(result)
-        if result.meshing is not None:
-            figures["meshing_pairs"] = plot_meshing(result)
-    return StiffnessSection(steps=steps, summary=summary, result=result, figures=figures,
+    return StiffnessSection(steps=steps, summary=summary, result=result,
                             markdown=_summary_text(steps, summary, result))
