@@ -22,11 +22,20 @@ discorpy_dot_pattern_06_full   DiamondLightSource/discorpy   data/dot_pattern_06
 ucl_circles_right3_full        SciKit-Surgery/               tests/data/calib-ucl-circles/
                                scikit-surgeryimage           13_22_20/calib.right.images.3.png
 ucl_circles_right0_full        (the same)                    .../calib.right.images.0.png
+discorpy_dot_pattern_01_full   DiamondLightSource/discorpy   data/dot_pattern_01.jpg
+discorpy_gopro8_dot_pattern    DiamondLightSource/discorpy   data/fisheye/GoPro8_dot_pattern.jpg
 ============================== ============================ ==================================
+
+The last two are sets of another kind, with no crop committed: a dense grid of 6600
+dots whose light falls to a third towards a vignetted border (``dot_pattern_01``), and
+a colour photograph by a different camera (a GoPro HERO8's fisheye lens, 4000x3000
+JPEG): uneven light, strong distortion, dots foreshortened to ellipses near the
+border, heavy JPEG compression.
 
 Where the bytes come from, first found first:
 
-- ``--repo DIR``: a clone or a bare mirror of a repository holding the commit (the
+- ``--repo DIR``: a clone or a bare mirror (such as the search library's
+  ``fetch github:DiamondLightSource/discorpy`` snapshot, ``.../repo``) of a repository holding the commit (the
   file is read with ``git show COMMIT:PATH``; which repository is which is told by
   the commit it holds); repeat for the second repository;
 - ``--from FOLDER``: files downloaded by hand, each under its own name in the
@@ -92,6 +101,10 @@ ORIGINALS = (
     Original("ucl_circles_right3_full.png", *UCL, f"{UCL_FRAMES}.3.png", "7bc736facf724fa8e54f8a043b850b9033d5bfa7",
              Crop("ucl_circles_right3.png", 390, 760, 300, 400)),
     Original("ucl_circles_right0_full.png", *UCL, f"{UCL_FRAMES}.0.png", "96857564424a0d8a641a7b15803e98199061c374"),
+    Original("discorpy_dot_pattern_01_full.jpg", *DISCORPY, "data/dot_pattern_01.jpg",
+             "0170241b5aec583f8c90f69f980cd39020439048"),
+    Original("discorpy_gopro8_dot_pattern.jpg", *DISCORPY, "data/fisheye/GoPro8_dot_pattern.jpg",
+             "5bf1ee3fd2c36380475d217b4657c7159297071d"),
 )
 
 

@@ -17,12 +17,12 @@ from vision_torsion.analysis import analyze_session
 from vision_torsion.analysis.catalogue import fit_catalogue_breaks
 from vision_torsion.analysis.metrics import chord_area, chord_error, loop_energy
 from vision_torsion.analysis.models import bilinear_response
-from vision_torsion.analysis.session import TORQUE_NOT_MODELLED
+from vision_torsion.analysis.session_analysis import TORQUE_NOT_MODELLED
 from vision_torsion.cli import main
 from vision_torsion.errors import AnalysisError
 from vision_torsion.report.analyze import analyze_table, rig_from_options
 from vision_torsion.synthetic import simulate_measurements
-from vision_torsion.synthetic.tables import torque_levels
+from vision_torsion.synthetic.measurement_tables import torque_levels
 
 TRUTH = dict(k_u=4.4, k_l=0.3, tau_c=0.15)
 STEP_NM = 2 * 0.02 * 9.81 * 0.05

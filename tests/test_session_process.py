@@ -290,7 +290,7 @@ def _set_correction(folder, name):
 def test_plane_correction_is_applied_to_the_angles(session, core):
     """A correction that stretches x by 1.5 turns a direction a (from the x axis) into
     atan2(sin a, 1.5 cos a); the angles are differences of such directions."""
-    from vision_torsion.calibration.correction import PlaneCorrection
+    from vision_torsion.correction import PlaneCorrection
 
     folder, plan, truth = session
     PlaneCorrection(homography=np.diag([1.5, 1.0, 1.0])).save(folder / "plane.toml")
@@ -364,3 +364,21 @@ def test_reuse_freed_memory_keeps_an_images_blocks_for_the_next():
     if faults("default") < 20 * 340 / 2:  # e.g. transparent huge pages always on: few faults anyway
         pytest.skip("this system's allocator and kernel do not fault on every page of each image")
     assert faults("reuse") < 20 * 340 / 20
+
+
+def test_saturated_fraction_counts_pixels_at_full_scale():
+    """The fraction of pixels at the image's full scale, whatever the bit depth; an image
+    whose maximum is below full scale is exactly 0 (decided by its maximum alone)."""
+    from vision_torsion.images import GreyImage
+    from vision_torsion.session.worker import saturated_fraction
+
+    rng = np.random.default_rng(30)
+    eight = rng.integers(0, 255, size=(40, 50), dtype=np.uint8)  # 0..254: nothing at 255
+    assert saturated_fraction(GreyImage(eight, "a.png", 8)) == 0.0
+    eight[3, 4] = eight[7, 1] = eight[39, 49] = 255
+    assert saturated_fraction(GreyImage(eight, "a.png", 8)) == 3 / eight.size
+    twelve = rng.integers(0, 4095, size=(30, 20), dtype=np.uint16)
+    assert saturated_fraction(GreyImage(twelve, "b.png", 12)) == 0.0
+    twelve[0, 0] = 4095
+    assert saturated_fraction(GreyImage(twelve, "b.png", 12)) == 1 / twelve.size
+    assert saturated_fraction(GreyImage(np.full((8, 8), 255.0, np.float32), "c.png", 8)) == 1.0

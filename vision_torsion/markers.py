@@ -18,7 +18,8 @@ x to the right, y downwards.
 
 Failure modes (reported per marker in the ``status`` column, with a ``message``):
 ``border`` (cut by the image border), ``too_small``, ``too_large``, ``not_round``,
-``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
+``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
+hidden or cut by an edge), ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
 from __future__ import annotations
@@ -57,6 +58,9 @@ __all__ = [
     "MARKER_COLUMNS",
     "candidate_extent",
     "candidate_patch",
+    "crowded_patch",
+    "CROWDED_MESSAGE",
+    "edge_asymmetry_px",
     "excluding_neighbours",
     "near_candidates",
     "neighbour_reach",
@@ -213,14 +217,20 @@ def candidate_extent(r0, edge_width):
     return np.maximum(1.15 * r0 + 8.0, patch_extent(r0, edge_width) + 1.0)
 
 
-def _start(patch: MarkerPatch, blob: Blob):
+def _start(patch: MarkerPatch, blob: Blob, *, crowded: bool = False):
     """Centre, radius and the two grey levels from a thresholded intensity centroid
-    in full resolution: (x, y, r) in px and (outside, inside) in DN."""
+    in full resolution: (x, y, r) in px and (outside, inside) in DN. `crowded` (a
+    :func:`crowded_patch`): the outside level from the pixels of the marker's side of
+    the gaps, from 1 px beyond its coarse edge on (the outer ring lies on the
+    neighbours' sides)."""
     r0 = blob.radius
     d2 = patch.squared_distance(blob.x, blob.y)
     r_in = 1.15 * r0 + 3  # generous: the coarse radius is good to about a pixel
     beyond = d2 > r_in**2
-    if patch.excluded is not None:
+    if crowded and patch.excluded is not None:
+        outside = patch.values[~patch.excluded & (d2 > (r0 + 1.0) ** 2) & (d2 < (r_in + 4.0) ** 2)]
+        beyond |= patch.excluded
+    elif patch.excluded is not None:
         beyond |= patch.excluded  # a neighbour's pixels: left out like the background
         outside = patch.values[beyond & ~patch.excluded & (d2 < (r_in + 4.0) ** 2)]
     else:
@@ -395,6 +405,30 @@ def _exclude_neighbours(patch: MarkerPatch, neighbours, edge_width, own=None) ->
     return excluding_neighbours([patch], np.zeros(len(nb), np.int64), nb, edge_width, owns)[0]
 
 
+def crowded_patch(patch: MarkerPatch, neighbours, edge_width, own) -> MarkerPatch:
+    """`patch` with the pixels of `neighbours` ((k, 3) coarse circles x, y, r in px)
+    flagged as excluded, each neighbour on its own side only: of the pixels within
+    its reach (:func:`neighbour_reach`), those nearer to its coarse edge than to the
+    marker's `own` (x, y, r in px).
+
+    The mask of a dense grid: where the gap between dots is narrower than the
+    neighbours' margins (a hexagonal grid of 8 px dots 3 px apart), the whole-margin
+    mask of :func:`excluding_neighbours` covers the marker's own edge and every
+    background pixel, and its fit has nothing to start from. Here the gap is split
+    along its middle. The neighbours' blurred edges reach into the marker's half of
+    the gap; in a regular grid they do so alike on every side, and the centre, by
+    symmetry, stays where it is. Used only where the whole-margin mask left too
+    little to fit (:func:`find_marker_list`), so a marker with room around it is
+    fitted as before. A candidate whose coarse circle holds the marker's centre is
+    no neighbour (the region the marker was found in)."""
+    nb = np.asarray(neighbours, dtype=np.float64).reshape(-1, 3)
+    nb = nb[np.hypot(nb[:, 0] - own[0], nb[:, 1] - own[1]) >= nb[:, 2]]
+    if len(nb) == 0:
+        return MarkerPatch(patch.values, patch.shape, patch.x0, patch.y0)
+    excluded = _large_neighbour_cover(patch, nb, edge_width, own)
+    return MarkerPatch(patch.values, patch.shape, patch.x0, patch.y0, excluded if excluded.any() else None)
+
+
 def _prepared(image, blob: Blob, edge_width, neighbours):
     """The patch of pixels a marker's fit uses (neighbours' pixels flagged) and the
     fit's start from it (:func:`_start`).
@@ -473,21 +507,25 @@ def fit_marker(
         (k, 3) coarse circles (x, y, radius in px) of other candidates close enough
         to reach into this marker's ring: their pixels are left out of the
         default fit (``fit="pixels"``; dense dot grids). The edge-point fits use
-        a narrower band and ignore it.
+        a narrower band and ignore it. A default fit that fails among them is made
+        once more with the gaps to them split (:func:`crowded_patch`).
 
     Returns
     -------
     Marker
         Status ``ok`` with the centre and its covariance, or ``fit_failed`` /
-        ``low_contrast`` with the reason.
+        ``low_contrast`` / ``not_round`` / ``occluded`` with the reason.
     """
+    if fit == "pixels":
+        marker = _fit_pixels(image, blob, edge_width, neighbours)
+        if marker.status == "fit_failed" and neighbours is not None and len(neighbours):
+            # a dense grid: the neighbours' whole margins left too little; split the gaps
+            crowded = _fit_pixels(image, blob, edge_width, neighbours, crowded=True)
+            if crowded.ok:
+                return crowded
+        return marker
     try:
-        patch, (cx, cy, r, levels) = _prepared(image, blob, edge_width, neighbours if fit == "pixels" else None)
-        if fit == "pixels":
-            return _whole(
-                _pixels_marker(fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)),
-                image.shape,
-            )
+        patch, (cx, cy, r, levels) = _prepared(image, blob, edge_width, None)
         # the edge-point fits' modules only when asked for: the default fit (and the
         # start-up of every command that measures) does without them (~6 ms)
         from .circlefit import fit_circle_algebraic, fit_circle_geometric, fit_ellipse
@@ -543,6 +581,23 @@ def fit_marker(
     )
 
 
+def _fit_pixels(image, blob: Blob, edge_width, neighbours, *, crowded=False) -> Marker:
+    """The pixel-model fit of one candidate, its neighbours' pixels left out with
+    their whole margins (:func:`excluding_neighbours`) or, `crowded`, each on its
+    own side of the gap (:func:`crowded_patch`)."""
+    try:
+        if crowded:
+            patch = crowded_patch(candidate_patch(image, blob, edge_width), neighbours, edge_width,
+                                  (blob.x, blob.y, blob.radius))
+            cx, cy, r, levels = _start(patch, blob, crowded=True)
+        else:
+            patch, (cx, cy, r, levels) = _prepared(image, blob, edge_width, neighbours)
+        fitted = fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)
+    except FitError as exc:
+        return _failed(blob, exc)
+    return _whole(_pixels_marker(fitted, crowded=crowded, patch=patch), image.shape)
+
+
 def _whole(marker: Marker, shape) -> Marker:
     """`marker`, or status ``border`` when its fitted disc is not whole in the image."""
     if marker.ok and not disc_inside(shape, marker.x_px, marker.y_px, marker.radius_px):
@@ -588,8 +643,14 @@ _OBLIQUE_MIN_AXIS_RATIO = 0.5
 #: ellipse closer than their noise allows. Round dots' edge points lie within about
 #: twice their noise figure of their circle (photographed grids: 95th percentile
 #: 2.0-2.6), and so do small, blurred ellipses of their ellipse; a teardrop or a
-#: rectangle leaves 12-47 times it.
-_OBLIQUE_NOISE_TIMES = 2.0
+#: rectangle leaves 12-47 times it. The figure counts the pixels' noise as
+#: independent; a JPEG's 8x8 blocks and a colour camera's demosaicing make it
+#: correlated over several pixels along the edge, which its sectors do not average
+#: away: the GoPro fisheye's small, blurred dots (r 5-8 px, edge width 3-4 px,
+#: foreshortened to 0.65-0.8 near the frame's border) lie 2.5-4 times their figure
+#: from their ellipse. Hence four times; a small noisy teardrop that passes is
+#: caught by its asymmetry (:func:`_occluded`).
+_OBLIQUE_NOISE_TIMES = 4.0
 
 
 def _oblique(f: DiscFit):
@@ -616,6 +677,83 @@ def _oblique(f: DiscFit):
     return ratio, rms
 
 
+#: A marker's edge is asymmetric about its centre (part of it hidden behind an
+#: occluder, or cut by an edge) when the third radial harmonic of its per-sector edge
+#: points about the fitted centre exceeds this share of the radius plus
+#: :data:`_ASYMMETRY_NOISE_TIMES` times their noise figure. Any ellipse (a disc seen
+#: at any angle, blurred) has no odd harmonic about its centre; a disc with a chord
+#: cut off has, and the disc model's centre moves by about twice its amplitude
+#: (rendered: 1.7-2.1 times; 0.5-1.5 px for an occluder over 2-4 px of a 10 px dot's
+#: edge). The photographed dots of the benchmark's sets lie within 1 % of R
+#: (discorpy), within the limit with its noise term on the UCL laparoscope frames
+#: (2.8 % of R = 15 px) and above it on 2 of 400 of the GoPro fisheye's small,
+#: blurred JPEG dots.
+_ASYMMETRY_SHARE = 0.02
+_ASYMMETRY_NOISE_TIMES = 3.0
+
+
+def edge_asymmetry_px(f: DiscFit) -> float:
+    """Amplitude (px) of the third radial harmonic of the pixel fit's per-sector edge
+    points about its centre: their radial distances fitted by a Fourier series to
+    the third harmonic in their direction (sectors an occluder took are missing, so
+    the harmonics are fitted together, not read off one by one). Zero for a circle
+    or any ellipse centred there; 0 for fewer than 7 edge points."""
+    dx, dy = f.edge_x_px - f.x_px, f.edge_y_px - f.y_px
+    if dx.size < 7:
+        return 0.0
+    r = np.hypot(dx, dy)
+    z = (dx + 1j * dy) / np.where(r > 0, r, 1.0)
+    z2 = z * z
+    z3 = z2 * z
+    design = np.stack([np.ones_like(r), z.real, z.imag, z2.real, z2.imag, z3.real, z3.imag], axis=1)
+    coef = np.linalg.lstsq(design, r, rcond=None)[0]
+    return float(np.hypot(coef[5], coef[6]))
+
+
+def _neighbour_at_edge(f: DiscFit, patch: MarkerPatch | None) -> bool:
+    """True when pixels of a neighbour left out of `patch` lie within the fit's edge
+    zone (3s + 1 px beyond its radius): the edge points on that side sense the
+    neighbour's blurred edge (two dots 1 px apart: 0.3 px of third harmonic, each
+    fitted to 0.05 px)."""
+    if patch is None or patch.excluded is None:
+        return False
+    reach = f.radius_px + 3.0 * f.edge_width_px + 1.0
+    d2 = patch.squared_distance(f.x_px, f.y_px)
+    return bool(np.any(patch.excluded & (d2 < reach * reach)))
+
+
+def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
+    """Status ``occluded`` for a fit whose edge is asymmetric about its centre
+    (:data:`_ASYMMETRY_SHARE`), else None; not judged beside a neighbour
+    (:func:`_neighbour_at_edge`, `patch` the fit's pixels).
+
+    Not for a fit that cut a region as dark (bright) as the marker from its ring
+    (``steep_cut``, flagged on its own): its edge points sense that region (0.3-0.9
+    px of third harmonic for a dot touching a dark surround, whose pixel fit is good
+    to 0.1 px), so the harmonic cannot tell a hidden part from a cut surround."""
+    if f.steep_cut:
+        return None
+    limit = _ASYMMETRY_SHARE * f.radius_px + _ASYMMETRY_NOISE_TIMES * f.edge_noise_px
+    # the harmonic is part of the edge points' RMS distance from the circle (a/√2 of
+    # it on evenly spread sectors; 1.5x for missing ones): most fits need not look
+    if not 1.5 * np.sqrt(2.0) * f.residual_rms_px > limit:
+        return None
+    if _neighbour_at_edge(f, patch):
+        return None
+    a3 = edge_asymmetry_px(f)
+    if not a3 > limit:
+        return None
+    return Marker(
+        x_px=f.x_px,
+        y_px=f.y_px,
+        radius_px=f.radius_px,
+        status="occluded",
+        message=(f"the edge is not symmetric about the centre (third harmonic {a3:.2f} px, allowed "
+                 f"{limit:.2f} px): part of the marker is hidden or cut by an edge, and its centre may be "
+                 f"off by about {2 * a3:.1f} px"),
+    )
+
+
 #: The message of an ``ok`` marker whose ring held a surround as dark as itself
 #: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`): the centre is flagged, not
 #: withheld, as such a marker may be the only one there is.
@@ -625,21 +763,41 @@ STEEP_CUT_MESSAGE = (
 )
 
 
-def _pixels_marker(f: DiscFit) -> Marker:
+#: The message of an ``ok`` marker fitted with its neighbours' gaps split
+#: (:func:`crowded_patch`): their blurred edges share its background ring.
+CROWDED_MESSAGE = (
+    "fitted among close neighbours: the gaps to them were split along their middle, and their "
+    "blurred edges share its background"
+)
+
+
+def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | None = None) -> Marker:
     """A :class:`Marker` from the pixel-model fit (``fit="pixels"``): ``not_round``
     when its edge is neither a circle nor an ellipse (a disc seen obliquely,
-    :func:`_oblique`; then ``ok``, with the ellipse's residual and a message)."""
+    :func:`_oblique`; then ``ok``, with the ellipse's residual and a message);
+    ``occluded`` when the circle or ellipse is asymmetric about its centre
+    (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
+    out of `patch` reach its edge zone); `crowded`: fitted with
+    :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
     circ = f.circularity
     rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
+    oblique = None
     if circ < min_circularity(f.radius_px):
         oblique = _oblique(f)
         if oblique is None:
             return _not_round(f.x_px, f.y_px, f.radius_px, circ)
+    # a circle or an ellipse so far; one with a chord hidden or cut is neither
+    occluded = None if crowded else _occluded(f, patch)
+    if occluded is not None:
+        return occluded
+    if oblique is not None:
         ratio, rms = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
                    f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
     if f.steep_cut:
         message = "; ".join(m for m in (message, STEEP_CUT_MESSAGE) if m)
+    if crowded:
+        message = "; ".join(m for m in (message, CROWDED_MESSAGE) if m)
     return Marker(
         x_px=f.x_px,
         y_px=f.y_px,
@@ -826,18 +984,29 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
     """Every candidate judged and fitted with the pixel model, the fits vectorised
     across markers (:func:`~vision_torsion.pixelfit.fit_discs`).
 
-    The first (largest) candidate fitted alone gives every other fit its starting
-    edge width, as one marker passes its width on to the next in the one-by-one
-    loop of :func:`find_marker_list` (the optics are the same for all).
+    One candidate fitted alone gives every other fit its starting edge width and
+    the reach of its neighbours' masks (:func:`neighbour_reach`), as one marker
+    passes its width on to the next in the one-by-one loop of
+    :func:`find_marker_list` (the optics are the same for all): the largest, unless
+    it is an odd one out (not ``ok``, or an edge width over half the median
+    candidate's radius: an out-of-focus blob beside a dot grid, fitted ``ok`` with
+    an edge width of 32 px, made every dot's background ring vanish under its
+    neighbours' masks); then the one of median radius. Every fit then finds its own
+    width.
     """
     markers: list[Marker | None] = [_judge(b, img.shape, *radius_range, "pixels") for b in blobs]
     width = 1.2
     todo = [i for i, m in enumerate(markers) if m is None]
+    circles = _maskable(circles, [m is not None and not is_coarse_disc(b) for b, m in zip(blobs, markers)])
     if todo:
-        i = todo.pop(0)
-        markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
-        if markers[i].ok:
-            width = markers[i].edge_width_px
+        # blobs come largest first: the middle one of those to fit has the median radius
+        middle = todo[len(todo) // 2]
+        for i in dict.fromkeys((todo[0], middle)):
+            todo.remove(i)
+            markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
+            if markers[i].ok and markers[i].edge_width_px <= 0.5 * blobs[middle].radius:
+                width = markers[i].edge_width_px
+                break
     patches, starts, fitted = [], [], []
     for i, prepared in zip(todo, _prepared_all(img, [blobs[i] for i in todo], circles, todo, width)):
         if isinstance(prepared, FitError):
@@ -847,6 +1016,56 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
         patches.append(patch)
         starts.append((cx, cy, r, B, F))
         fitted.append(i)
-    for i, fit in zip(fitted, fit_discs(patches, starts, edge_width=width)):
-        markers[i] = _failed(blobs[i], fit) if isinstance(fit, FitError) else _whole(_pixels_marker(fit), img.shape)
+    for i, patch, fit in zip(fitted, patches, fit_discs(patches, starts, edge_width=width)):
+        markers[i] = (_failed(blobs[i], fit) if isinstance(fit, FitError)
+                      else _whole(_pixels_marker(fit, patch=patch), img.shape))
+    _refit_crowded(img, blobs, circles, markers, width)
     return markers
+
+
+def _maskable(circles: np.ndarray, no_disc) -> np.ndarray:
+    """`circles` (rows of x, y, r in px) with those of the candidates flagged in
+    `no_disc` (rejected before any fit, and of no disc's coarse shape:
+    :func:`~vision_torsion.detect.is_coarse_disc`) placed nowhere (NaN centres):
+    never a neighbour whose pixels are left out of a marker's fit. The coarse circle
+    of such a region (a vignetted border's dark band cut by the frame, axis ratio
+    0.1, r 446 px on a 2560x2160 photo) runs through the grid far from its pixels:
+    the dots on that circle lost half their ring to it and came out 0.2-0.3 px off.
+    The discs found inside such a region are candidates of their own; a region as
+    dark as a marker that reaches into its ring is cut by the fit itself
+    (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`)."""
+    flags = np.asarray(no_disc, bool)
+    if not flags.any():
+        return circles
+    out = circles.copy()
+    out[flags, :2] = np.nan
+    return out
+
+
+def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float) -> None:
+    """The candidates of `markers` whose fit failed and which have neighbours, fitted
+    again with the gaps to them split (:func:`crowded_patch`), together; a marker
+    is replaced only by an ``ok`` one (in place)."""
+    failed = np.array([i for i, m in enumerate(markers) if m.status == "fit_failed"], dtype=np.int64)
+    if failed.size == 0:
+        return
+    near = near_candidates(circles, failed, width)
+    patches, starts, fitted = [], [], []
+    for k, i in enumerate(failed.tolist()):
+        if not near[k].any():
+            continue
+        blob = blobs[i]
+        try:
+            patch = crowded_patch(candidate_patch(img, blob, width), circles[near[k]], width,
+                                  (blob.x, blob.y, blob.radius))
+            cx, cy, r, (B, F) = _start(patch, blob, crowded=True)
+        except FitError:
+            continue
+        patches.append(patch)
+        starts.append((cx, cy, r, B, F))
+        fitted.append(i)
+    for i, fit in zip(fitted, fit_discs(patches, starts, edge_width=width)):
+        if not isinstance(fit, FitError):
+            marker = _whole(_pixels_marker(fit, crowded=True), img.shape)
+            if marker.ok:
+                markers[i] = marker

@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 __all__ = ["residual_flags", "SUSPECT_RESIDUAL_RATIO", "SUSPECT"]
 
 #: A marker residual this many times the sequence's typical one makes its image suspect.
@@ -53,6 +51,15 @@ def _steep_cut(pair) -> str:
     return ""
 
 
+def _median(values: list[float]) -> float:
+    """The middle value, or the mean of the two middle ones: numpy's and statistics'
+    median to the bit, without their imports (statistics pulls in fractions and
+    decimal; numpy's median, numpy.ma: 3-10 ms of every process run)."""
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    return float(ordered[mid]) if len(ordered) % 2 else (ordered[mid - 1] + ordered[mid]) / 2
+
+
 def residual_flags(pairs) -> list[str]:
     """Per pair: "" or why its image is suspect (see the module docstring).
 
@@ -74,10 +81,7 @@ def residual_flags(pairs) -> list[str]:
     levels = [sum(r) / 2 for r in residuals if r is not None]
     if len(levels) < 3:
         return steep
-    # numpy's median, the same value as statistics.median (the middle one, or the
-    # mean of the two): importing statistics (fractions, decimal) cost every
-    # process run 3 ms of start-up
-    typical = float(np.median(levels))
+    typical = _median(levels)
     flags = []
     for r, surround in zip(residuals, steep):
         if surround or r is None or not max(r) > SUSPECT_RESIDUAL_RATIO * typical:

@@ -3,7 +3,7 @@
 A figure family (:mod:`.phase_figures`, :mod:`.loop_figures`, :mod:`.catalogue_figures`,
 :mod:`.model_figures`) adds its figures of one loop to a :class:`FigureRows` — a value
 with its uncertainty parts, its flag, the coverage factor of its ``u95`` — or fails
-them with the reason; :mod:`.session` joins the families' rows into
+them with the reason; :mod:`.session_analysis` joins the families' rows into
 :data:`FIGURE_COLUMNS` and their issues into one list.
 """
 

@@ -197,6 +197,10 @@ def saturated_fraction(image: GreyImage) -> float:
     result, so ``watch``, ``bind`` and ``process`` judge saturation from the same
     number whichever measured it (:func:`~.shots.image_warnings`)."""
     data = image.data
+    # the maximum first (one vectorised pass, no temporary array): most images have
+    # no pixel at full scale, and counting them took seven times as long
+    if data.max() < image.full_scale:
+        return 0.0
     return float(np.count_nonzero(data >= image.full_scale)) / data.size
 
 
