@@ -51,7 +51,7 @@ __all__ = [
 #: Significance of the third segment when the breaks are fitted.
 TWO_BREAK_ALPHA = 0.01
 #: Two-sided significance at which a fitted break's neighbouring compliances must differ, before the
-#: Bonferroni correction over the placements searched (:func:`fit_catalogue_breaks`).
+#: Bonferroni correction over the two-break placements searched (:func:`fit_catalogue_breaks`).
 BREAK_SLOPE_ALPHA = 0.05
 
 
@@ -530,9 +530,9 @@ def _break_slope_z(fit) -> np.ndarray:
     c = np.asarray(fit["coef"], float)[2:]
     cov = np.asarray(fit["coef_cov"], float)[2:, 2:]
     d = np.diff(c)
-    var = np.diag(cov)[1:] + np.diag(cov)[:-1] - 2.0 * np.diag(cov, 1)
-    with np.errstate(divide="ignore"):
-        return np.abs(d) / np.sqrt(np.maximum(var, 0.0))
+    sd = np.sqrt(np.maximum(np.diag(cov)[1:] + np.diag(cov)[:-1] - 2.0 * np.diag(cov, 1), 0.0))
+    # exact data (σ = 0): any change of slope is a break, none is not
+    return np.divide(np.abs(d), sd, out=np.where(d == 0, 0.0, np.inf), where=sd > 0)
 
 
 def fit_catalogue_breaks(
@@ -564,10 +564,10 @@ def fit_catalogue_breaks(
     ``χ²₂`` at :data:`TWO_BREAK_ALPHA` *and* the compliances either side of each break
     differ by more than ``z`` σ (their difference's σ from ``coef_cov``, the breaks
     held, every torque correlation included), ``z`` the two-sided
-    :data:`BREAK_SLOPE_ALPHA` point Bonferroni-corrected over the ``P`` single-break
-    placements of the grid (``z = Φ⁻¹(1 − α/2P)``, 2.96 for 16): the break is put
-    where the contrast is largest, so its contrast is the largest of ``P`` and is
-    tested as such. The ``χ²`` test alone is searched over every
+    :data:`BREAK_SLOPE_ALPHA` point Bonferroni-corrected over the ``N`` two-break
+    placements of the grid (``z = Φ⁻¹(1 − α/2N)``, 3.53 for the 120 pairs of 19
+    levels): the breaks are put where the fit gains most, so a break's contrast is
+    the largest of ``N`` and is tested as such. The ``χ²`` test alone is searched over every
     placement of two breaks, so its false-alarm rate exceeds its nominal 1 %, and a
     false alarm typically puts a break where nothing changes (e.g. inside the soft
     zone, K1 ≈ K2): the stiffnesses are then labelled one segment off, K2 being the
@@ -648,7 +648,8 @@ def fit_catalogue_breaks(
     two = r2 is not None and (r1 is None or delta > crit)
     data = dict(branch=sign, angle_std_rad=sa, torque_std_nm=st, torque_sources=torque_sources,
                 gate_sources=gate_sources)
-    z_crit = float(special.ndtri(1.0 - BREAK_SLOPE_ALPHA / (2.0 * max(mids.size - 2, 1))))
+    n_pairs = max((mids.size - 2) * (mids.size - 3) // 2, 1)  # the two-break placements of the grid
+    z_crit = float(special.ndtri(1.0 - BREAK_SLOPE_ALPHA / (2.0 * n_pairs)))
     criterion = (f"two breaks kept when they lower χ² by more than {crit:.3g} (χ²₂ at {TWO_BREAK_ALPHA:g}) and "
                  f"the compliances either side of each differ by more than {z_crit:.3g} σ")
     out = fit_fixed_breaks(tau, th, breaks_nm=b2 if two else b1, **data)
