@@ -57,7 +57,8 @@ from .load import Session, load_session, unlisted_images
 from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
-__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
+__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
+           "code_fingerprint"]
 
 logger = logging.getLogger(__name__)
 
@@ -136,7 +137,7 @@ class ProcessResult:
 _DOWNSTREAM = ("session", "cli", "analysis", "stiffness", "report", "synthetic")
 
 
-def _code_fingerprint() -> str:
+def code_fingerprint() -> str:
     """Digest of the measuring code's source (every module outside `_DOWNSTREAM`).
 
     A version number is not bumped for every change to the measuring code, so the
@@ -159,16 +160,23 @@ def _settings_key(settings: MeasureSettings, measure=measure_pair) -> str:
     d = settings.to_dict()
     if d.get("correction"):
         d["correction"] = digest(Path(d["correction"]).read_bytes())
-    key = {"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT}
+    key = {"settings": d, "code": code_fingerprint(), "cache": _CACHE_FORMAT}
     if measure is not measure_pair:
         key["measure"] = f"{getattr(measure, '__module__', '')}.{getattr(measure, '__qualname__', repr(measure))}"
     return json.dumps(key, sort_keys=True)
 
 
-def _measuring(session: Session, measure):
-    """(measuring function, cache key's settings part, cache entry check) of a session:
-    `measure` and the two-marker key, or for an N-marker target (``[target]``) every
-    marker found (:mod:`.targetrows`) under a key that holds the target."""
+def session_measuring(session: Session, measure):
+    """How the images of `session` are measured, shared by ``process``, ``bind`` and
+    ``watch`` so that one cache key gives one result whichever measured first.
+
+    Returns
+    -------
+    (callable, str, callable)
+        The measuring function (`measure`, or for an N-marker target, ``[target]``,
+        every marker found: :mod:`.targetrows`), the settings part of the cache key
+        (the target's layout included), and the check a cache entry must pass.
+    """
     if session.config.target is None:
         return measure, _settings_key(session.settings, measure), _valid_entry
     from .targetrows import measure_target_markers, target_settings_key, valid_target_entry
@@ -489,7 +497,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     # a bad correction file is unusable input: say so before measuring anything
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
-    measure, key, check = _measuring(session, measure)
+    measure, key, check = session_measuring(session, measure)
     cache_dir = out / CACHE_DIRNAME
     cached, logs = read_cache(cache_dir, check=check)
     run = CacheLog.new_run()
