@@ -1,31 +1,32 @@
 """Capture mistakes caught at the rig: detections and false alarms of ``watch`` and
-``bind`` over simulated sessions of different gears (issue 28).
+``bind`` over simulated sessions of different gears and both target types (issue 28).
 
-    python benchmarks/bench_capture.py [--seeds N] [--steps K]
+    python benchmarks/bench_capture.py [--seeds N] [--steps K] [--targets ...] [--target-seeds M]
 
 Every session is one orientation of a gear photographed by the scripted camera
-(:func:`vision_torsion.synthetic.camera.capture_script`, the 320×240 two-marker
-scene of the rig tests, 4 weight steps per phase by default: 18 photographs), with
-one capture mistake at a row drawn from the seed, or none. Gears: the paper's
-bilinear model at three switching torques, a three-segment spring (stiffening
-twice) with a friction offset between the loading directions, and a Masing gear
-(a softening skeleton curve, every branch the skeleton doubled from its reversal).
-Mistakes: a missed shot, an extra shot, a weight piece forgotten, two shots
-swapped, a camera bump of 1 px, one of 3 px and 0.05°, a blurred photograph, a
-wrong angle_sign; and clean sessions.
+(:func:`vision_torsion.synthetic.scripted_camera.capture_script`, a 320×240 scene, 4 weight
+steps per phase by default: 18 photographs), with one capture mistake at a row drawn
+from the seed, or none. Gears: the paper's bilinear model at three switching torques,
+a three-segment spring behind friction and a Masing gear
+(:mod:`vision_torsion.synthetic.gears`). Mistakes: a missed shot, an extra shot, a
+weight piece forgotten, two shots swapped, a camera bump of 1 px, one of 3 px and
+0.05°, a blurred photograph, a wrong angle_sign; and clean sessions. Targets: two
+markers, and the N-marker ring16 (session.toml ``[target]``) drawn in the same frame.
 
 Each session is watched as its photographs arrive (``Watcher``, one tick per
 photograph) and then bound (``bind_session``). Counted:
 
-- watch detected: a warning names the mistake's photograph or the one after it,
-  with the right diagnosis (a pattern of its message), by the time the
-  photograph after it is in;
-- bind detected: its fix or diagnosis names it (the same patterns);
-- false alarms: warnings of watch on photographs other than the mistake's and
-  the one after it, and warnings withdrawn (an undecided step at the end of a
-  branch is withdrawn when the same step elsewhere in the loop shows the gear's
-  own kink); "standing": those photographs still warned about at the end; on
-  clean sessions, anything bind says at all.
+- watch found: a warning on the mistake's photograph or the one after it, said by
+  the time the photograph after it is in, with the right diagnosis and its fix
+  naming the right file and line (``--skip FILE``, ``--missing LINE``, ``--swap A B``,
+  ``--skip FILE --missing LINE`` for a forgotten piece; shoot again for a bump or a
+  blur; ``set angle_sign``);
+- bind found: its fix or diagnosis says the same (the same patterns);
+- watch false: warnings on other photographs, plus warnings withdrawn; "standing":
+  the photographs still warned about at the end; bind false: on clean sessions,
+  anything bind says at all;
+- photographs measured by watch and by bind, and whether ``process`` refuses the
+  session (an N-marker target: ``target_not_processed``).
 
 Results go to benchmarks/results/capture.json.
 """
@@ -33,7 +34,6 @@ Results go to benchmarks/results/capture.json.
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import sys
 import tempfile
@@ -48,18 +48,27 @@ sys.path.insert(0, str(HERE.parent))
 from common import write_result  # noqa: E402 (the script's folder is on sys.path)
 
 from vision_torsion.analysis.models import bilinear_response  # noqa: E402
+from vision_torsion.errors import SessionError  # noqa: E402
 from vision_torsion.session.bind import bind_session  # noqa: E402
+from vision_torsion.session.plan import plan_session  # noqa: E402
+from vision_torsion.session.process import process_session  # noqa: E402
 from vision_torsion.session.watch import Watcher  # noqa: E402
 from vision_torsion.synthetic import Scene  # noqa: E402
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script  # noqa: E402
+from vision_torsion.synthetic.gears import masing_response, three_segment_response  # noqa: E402
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec  # noqa: E402
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script  # noqa: E402
 from vision_torsion.synthetic.session import SessionSpec  # noqa: E402
+from vision_torsion.synthetic.target_scenes import target_scene  # noqa: E402
 
 SCENE = Scene(image=ImageSpec(320, 240),
               disk=DiskSpec(center_x=160.3, center_y=120.4, background_level=200.0),
               markers=MarkerSpec(radius_px=10.0, distance_px=90.0, positions_deg=(10.0, 190.0)),
               name="tiny")
 STEP_NM = 2 * 0.02 * 9.81 * 0.05
+#: The two target types: two markers (the scene above), and the N-marker ring16
+#: (16 dots on an 80 mm circle, drawn at 2.4 px/mm in the same frame).
+TWO = "two markers"
+SCENES = {TWO: SCENE, "ring16": target_scene("ring16", px_per_mm=2.4, base=SCENE)}
 
 
 def bilinear(tau_c):
@@ -68,62 +77,52 @@ def bilinear(tau_c):
 
 def three_segment(tau):
     """A spring stiffening at 0.02 and 0.05 N·m (1.0, 2.5, 6 N·m/rad) behind 0.004 N·m
-    of friction: after a reversal the torque must move 2 × 0.004 N·m before the
-    spring follows (a play operator on the torque)."""
-    tau = np.asarray(tau, float)
-    breaks, k, play = (0.02, 0.05), (1.0, 2.5, 6.0), 0.004
-
-    def spring(t):
-        a = abs(t)
-        th = min(a, breaks[0]) / k[0] + max(min(a, breaks[1]) - breaks[0], 0) / k[1] + max(a - breaks[1], 0) / k[2]
-        return math.copysign(th, t)
-
-    out, felt = [], 0.0
-    for t in tau:
-        felt = min(max(felt, t - play), t + play)
-        out.append(spring(felt))
-    return np.asarray(out) - out[0]
+    of friction (:func:`~vision_torsion.synthetic.gears.three_segment_response`)."""
+    return three_segment_response(tau)
 
 
 def masing(tau):
-    """Masing's rule on the skeleton θ = τ/k_hi + (τ0/k_lo − τ0/k_hi)·tanh(τ/τ0)
-    (k_lo = 0.8 at zero, k_hi = 5 N·m/rad, τ0 = 0.03 N·m): each branch is the
-    skeleton scaled by two from its reversal point."""
-    tau = np.asarray(tau, float)
-    k_lo, k_hi, t0 = 0.8, 5.0, 0.03
-
-    def skeleton(t):
-        return t / k_hi + (t0 / k_lo - t0 / k_hi) * math.tanh(t / t0)
-
-    out = [0.0]
-    rev_t, rev_th, direction = 0.0, 0.0, 0.0
-    for i in range(1, len(tau)):
-        d = np.sign(tau[i] - tau[i - 1])
-        if d and d != direction:
-            if direction:
-                rev_t, rev_th = tau[i - 1], out[-1]
-            direction = d
-        scale = 1.0 if rev_t == 0.0 and rev_th == 0.0 else 2.0
-        out.append(rev_th + scale * skeleton((tau[i] - rev_t) / scale))
-    return np.asarray(out)
+    """Masing's rule on a stiffening skeleton (0.8 N·m/rad at zero, 5 far from it,
+    τ0 = 0.03 N·m; :func:`~vision_torsion.synthetic.gears.masing_response`)."""
+    return masing_response(tau)
 
 
 GEARS = {"bilinear τc=0.03": bilinear(0.03), "bilinear τc=0.05": bilinear(0.05),
          "bilinear τc=0.15": bilinear(0.15), "three-segment": three_segment, "Masing": masing}
 
-# mistake -> (options(row) for capture_script, the rows of the photographs it is seen on
-# (offsets into the capture order from the mistake's), watch's diagnosis, bind's)
+# mistake -> (options(row) for capture_script, watch's diagnosis and fix, bind's): each
+# a function of (row, the camera's file names, the capture position of the mistake's
+# photograph) giving a pattern, so that the fix must name the right file and line
+# (CSV line = row + 2)
+def _file(names, at):
+    return re.escape(names[at])
+
+
+def _MOVED(r, n, at):
+    return r"camera or the target moved.*shoot this orientation again"
+
+
+def _DROPPED(r, n, at):
+    return rf"a weight piece forgotten.*--skip {_file(n, at)} --missing {r + 2}\b"
+
+
 MISTAKES = {
-    "missed shot": (lambda r: {"missed": r}, r"a missed shot", r"--missing \d+"),
-    "extra shot": (lambda r: {"extra_after": r}, r"no movement", r"--skip IMG_\d+\.png"),
-    "forgotten weight": (lambda r: {"forgotten": r}, r"a weight piece forgotten", r"a weight piece forgotten"),
-    "two shots swapped": (lambda r: {"swapped": r}, r"look swapped", r"--swap IMG_\d+\.png IMG_\d+\.png"),
-    "bump 1 px": (lambda r: {"bumped": (r, 1.0, 0.0, 0.0)}, r"camera or the target moved",
-                  r"camera or the target moved"),
-    "bump 3 px + 0.05°": (lambda r: {"bumped": (r, 0.0, 3.0, 0.05)}, r"camera or the target moved",
-                          r"camera or the target moved"),
-    "blur": (lambda r: {"blurred": r}, r"blurred", r"blurred"),
-    "wrong angle_sign": (lambda r: {}, r"angle_sign is inverted", r"angle_sign is inverted"),
+    "missed shot": (lambda r: {"missed": r},
+                    lambda r, n, at: rf"a missed shot.*--missing {r + 2}\b",
+                    lambda r, n, at: rf"--missing {r + 2}\b"),
+    "extra shot": (lambda r: {"extra_after": r},
+                   lambda r, n, at: rf"an extra shot.*--skip {_file(n, at)}",
+                   lambda r, n, at: rf"--skip {_file(n, at)}"),
+    "forgotten weight": (lambda r: {"forgotten": r}, _DROPPED, _DROPPED),
+    "two shots swapped": (lambda r: {"swapped": r},
+                          lambda r, n, at: rf"look swapped.*--swap {_file(n, at - 1)} {_file(n, at)}",
+                          lambda r, n, at: rf"--swap {_file(n, at - 1)} {_file(n, at)}"),
+    "bump 1 px": (lambda r: {"bumped": (r, 1.0, 0.0, 0.0)}, _MOVED, _MOVED),
+    "bump 3 px + 0.05°": (lambda r: {"bumped": (r, 0.0, 3.0, 0.05)}, _MOVED, _MOVED),
+    "blur": (lambda r: {"blurred": r}, lambda r, n, at: r"blurred.*shoot it again",
+             lambda r, n, at: rf"{_file(n, at)} .*blurred.*shoot it again"),
+    "wrong angle_sign": (lambda r: {}, lambda r, n, at: r"angle_sign is inverted.*set angle_sign = \+1",
+                         lambda r, n, at: r"angle_sign is inverted.*set angle_sign = \+1"),
     "clean": (lambda r: {}, None, None),
 }
 
@@ -152,17 +151,29 @@ def first_photo(kind: str, row: int, shots) -> int:
     return next(k for k, s in enumerate(shots) if s.row == row)
 
 
-def one_session(gear: str, kind: str, seed: int, steps: int) -> dict:
+def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) -> dict:
     rng = np.random.default_rng(seed)
     spec = SessionSpec(max_torque_nm=steps * STEP_NM, orientations_deg=(0.0,))
     options, said, fixed = MISTAKES[kind]
+    scene = SCENES[target]
     with tempfile.TemporaryDirectory() as tmp:
         session, camera = Path(tmp) / "s", Path(tmp) / "cam"
-        plan, _ = capture_script(SCENE, spec, Path(tmp) / "plan", seed=seed)
+        plan, _ = capture_script(scene, spec, Path(tmp) / "plan", seed=seed)
         sign = {"ref": 0, "pos": 1, "neg": -1}
         torques = [sign[r["phase"][:3]] * 2 * float(r["mass_kg"]) * 9.81 * 0.05 for r in plan.rows]
         row = mistake_row(kind, rng, torques)
-        plan, shots = capture_script(SCENE, spec, session, seed=seed, response=GEARS[gear], **options(row))
+        plan, shots = capture_script(scene, spec, session, seed=seed, response=GEARS[gear], **options(row))
+        refused = None
+        if target != TWO:  # the same plan, with the N-marker target in session.toml
+            plan_session(session, max_torque_nm=spec.max_torque_nm, step_mass_kg=spec.step_mass_kg,
+                         arm_radius_m=spec.arm_radius_m, orientations_deg=spec.orientations_deg,
+                         cycles=spec.cycles, gravity_m_per_s2=spec.gravity_m_per_s2,
+                         mass_tolerance_kg=spec.mass_tolerance_kg, polarity=scene.markers.polarity,
+                         angle_sign=spec.angle_sign, overwrite=True, target=target)
+            try:
+                process_session(session, out_dir=Path(tmp) / "processed")
+            except SessionError as exc:
+                refused = exc.reason
         if kind == "wrong angle_sign":
             toml = session / "session.toml"
             toml.write_text(toml.read_text().replace("angle_sign = 1", "angle_sign = -1"))
@@ -182,12 +193,18 @@ def one_session(gear: str, kind: str, seed: int, steps: int) -> dict:
                     last[id(e)] = name
         res = bind_session(session, camera, write=False)
     warned = [e for e in events if e.kind == "warning"]
+    measured = sum(1 for e in events if e.kind == "shot" and "θ=—" not in e.message)
+    unmeasured = [d.split(": not measured: ", 1)[1] for d in res.diagnoses if ": not measured: " in d]
+    why = re.sub(r"^IMG_\d+\.png: ", "", unmeasured[0]) if unmeasured else None
     withdrawn = sum(e.kind == "retracted" for e in events)
     gone = {e.file for e in events if e.kind == "retracted"}
     bind_text = [f.message for f in res.fixes] + list(res.diagnoses) + list(res.remaining)
     if res.command:
         bind_text.append(res.command)
-    out = {"gear": gear, "mistake": kind, "seed": seed, "row": row, "withdrawn": withdrawn,
+    out = {"gear": gear, "target": target, "mistake": kind, "seed": seed, "row": row, "withdrawn": withdrawn,
+           "photos": len(names), "watch_measured": measured, "bind_measured": res.n_files - len(unmeasured),
+           "not_measured_because": why,
+           "process_refused": refused,
            "watch_said": [e.message for e in warned], "bind_said": bind_text + list(res.warnings)}
     if said is None:
         out.update(watch_detected=None, bind_detected=None, watch_false=len(warned) + withdrawn,
@@ -196,6 +213,7 @@ def one_session(gear: str, kind: str, seed: int, steps: int) -> dict:
         return out
     at = first_photo(kind, row, shots)
     near = set(names[at:at + 2]) | ({names[at - 1]} if kind == "two shots swapped" else set())
+    said, fixed = said(row, names, at), fixed(row, names, at)
     out["watch_detected"] = any(e.file in near and re.search(said, e.message)
                                 and names.index(last[id(e)]) <= at + 1 for e in warned)
     out["bind_detected"] = any(re.search(fixed, t) for t in bind_text)
@@ -205,33 +223,57 @@ def one_session(gear: str, kind: str, seed: int, steps: int) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, default=1, help="sessions per gear and mistake")
-    ap.add_argument("--steps", type=int, default=4, help="weight steps per phase")
-    args = ap.parse_args(argv)
-    t0 = time.perf_counter()
-    rows = []
-    for gear in GEARS:
-        for j, kind in enumerate(MISTAKES):
-            for s in range(args.seeds):
-                rows.append(one_session(gear, kind, 1000 * s + 17 * j + len(gear), args.steps))
-    print(f"{len(rows)} sessions ({len(GEARS)} gears × {len(MISTAKES)} cases × {args.seeds}), "
-          f"{2 + 4 * args.steps} photographs each, {time.perf_counter() - t0:.0f} s\n")
+def table(rows) -> None:
     print(f"{'mistake':<20} {'sessions':>8} {'watch found':>11} {'bind found':>10} "
           f"{'watch false':>11} {'standing':>8} {'bind false':>10}")
     for kind in MISTAKES:
         sel = [r for r in rows if r["mistake"] == kind]
+        if not sel:
+            continue
         found_w = "—" if kind == "clean" else f"{sum(r['watch_detected'] for r in sel)}/{len(sel)}"
         found_b = "—" if kind == "clean" else f"{sum(r['bind_detected'] for r in sel)}/{len(sel)}"
         print(f"{kind:<20} {len(sel):>8} {found_w:>11} {found_b:>10} {sum(r['watch_false'] for r in sel):>11} "
               f"{sum(r['watch_standing'] for r in sel):>8} {sum(r['bind_false'] for r in sel):>10}")
-    missed = [r for r in rows if r["mistake"] != "clean" and not (r["watch_detected"] and r["bind_detected"])]
-    for r in missed:
-        print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} (seed {r['seed']}): "
-              f"watch {r['watch_detected']}, bind {r['bind_detected']}")
+    photos = sum(r["photos"] for r in rows)
+    refused = sorted({str(r["process_refused"]) for r in rows if r["process_refused"]})
+    print(f"photographs measured: watch {sum(r['watch_measured'] for r in rows)}/{photos}, "
+          f"bind {sum(r['bind_measured'] for r in rows)}/{photos}"
+          + (f"; process refuses the session ({', '.join(refused)})" if refused else ""))
+    if not any(r["watch_measured"] for r in rows):
+        why = sorted({r["not_measured_because"] for r in rows if r["not_measured_because"]})
+        print(f"  nothing measured by watch; bind: {'; '.join(why)}")
+        return
+    for r in rows:
+        if r["mistake"] != "clean" and not (r["watch_detected"] and r["bind_detected"]):
+            print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} (seed {r['seed']}): "
+                  f"watch {r['watch_detected']}, bind {r['bind_detected']}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=1, help="sessions per gear and mistake")
+    ap.add_argument("--steps", type=int, default=4, help="weight steps per phase")
+    ap.add_argument("--targets", default=",".join(SCENES), help=f"target types, comma-separated ({', '.join(SCENES)})")
+    ap.add_argument("--target-seeds", type=int, default=1, help="sessions per gear and mistake of the N-marker target")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    rows = []
+    targets = [t.strip() for t in args.targets.split(",") if t.strip()]
+    for target in targets:
+        seeds = args.seeds if target == TWO else args.target_seeds
+        for g, gear in enumerate(GEARS):
+            for j, kind in enumerate(MISTAKES):
+                for s in range(seeds):
+                    rows.append(one_session(gear, kind, 1000 * s + 17 * j + 101 * g, args.steps, target))
+    print(f"{len(rows)} sessions ({len(GEARS)} gears × {len(MISTAKES)} cases × seeds, targets: "
+          f"{', '.join(targets)}), {2 + 4 * args.steps} photographs each, {time.perf_counter() - t0:.0f} s")
+    for target in targets:
+        sel = [r for r in rows if r["target"] == target]
+        print(f"\n{target}: {len(sel)} sessions")
+        table(sel)
     kept = [{k: v for k, v in r.items() if not k.endswith("_said")} for r in rows]  # messages hold temp paths
-    write_result(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds})
+    write_result(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds,
+                                                      "target_seeds": args.target_seeds, "targets": targets})
     return 0
 
 

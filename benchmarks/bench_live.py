@@ -35,7 +35,7 @@ import numpy as np  # noqa: E402
 
 from vision_torsion.session.watch import Watcher  # noqa: E402
 from vision_torsion.synthetic import load_scene  # noqa: E402
-from vision_torsion.synthetic.camera import capture_script  # noqa: E402
+from vision_torsion.synthetic.scripted_camera import capture_script  # noqa: E402
 from vision_torsion.synthetic.session import SessionSpec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -68,7 +68,7 @@ def write_photos(source: Path, camera: Path, seed: int) -> None:
 def render(tmp: Path, n: int) -> tuple[Path, Path]:
     """Plan the session and render its photographs on the demo's scene; (session, sources)."""
     from vision_torsion.report.session_report import demo_scene
-    from vision_torsion.synthetic.camera import capture_script
+    from vision_torsion.synthetic.scripted_camera import capture_script
     from vision_torsion.synthetic.session import SessionSpec
 
     scene, _ = demo_scene()

@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+import vision_torsion
+import vision_torsion.cli
+
 PACKAGE = Path(__file__).resolve().parents[1] / "vision_torsion"
 
 # (level, group, module prefixes): a module may import modules of a lower level, and
@@ -137,10 +140,28 @@ def test_the_check_sees_a_wrong_import(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("module, expected", [
     ("vision_torsion.markers", (2, "markers")),
-    ("vision_torsion.calibration.correction", (5, "calibration")),
+    ("vision_torsion.calibration.anchoring", (5, "calibration")),
     ("vision_torsion.correction", (4, "angle")),
     ("vision_torsion", (12, "face")),
     ("vision_torsion.__version__", (0, "foundation")),
 ])
 def test_longest_prefix_decides_the_layer(module, expected):
     assert layer_of(module) == expected
+
+
+def test_module_names_are_unique_except_a_commands_parser():
+    """Two modules of one file name are allowed only as `cli/<command>.py` beside the
+    module doing the command's work; everything else is named for what it holds."""
+    root = Path(vision_torsion.__file__).parent
+    by_name: dict[str, list[Path]] = {}
+    for path in root.rglob("*.py"):
+        if path.name != "__init__.py" and "__pycache__" not in path.parts:
+            by_name.setdefault(path.name, []).append(path.relative_to(root))
+    repeated = {name: paths for name, paths in by_name.items()
+                if len([p for p in paths if p.parts[0] != "cli"]) > 1}
+    assert not repeated, f"module file names repeated outside cli/: {repeated}"
+    commands = set(vision_torsion.cli.COMMAND_MODULES)
+    for name, paths in by_name.items():
+        for path in paths:
+            if path.parts[0] == "cli" and len(paths) > 1:
+                assert path.stem in commands, f"cli/{path.name} repeats a module name but is no command's parser"

@@ -12,8 +12,9 @@ import pandas as pd
 import pytest
 
 from vision_torsion.angle import rotation_angle
-from vision_torsion.calibration import PlaneCorrection, check_accuracy, load_spec, read_reference_table
+from vision_torsion.calibration import check_accuracy, load_spec, read_reference_table
 from vision_torsion.cli import main
+from vision_torsion.correction import PlaneCorrection
 from vision_torsion.errors import ReferenceTableError
 from vision_torsion.fileio import RECORD_NAME
 from vision_torsion.measure import measure_folder

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from vision_torsion.angle import pair_angle
-from vision_torsion.calibration.correction import PlaneCorrection, load_correction, normalised
+from vision_torsion.calibration.anchoring import normalised
+from vision_torsion.correction import PlaneCorrection, load_correction
 from vision_torsion.errors import CalibrationError
 from vision_torsion.markers import Marker
 from vision_torsion.pair import PairMeasurement

@@ -8,7 +8,7 @@ import pytest
 
 from vision_torsion.angle import line_direction_deg
 from vision_torsion.calibration import calibrate_from_target
-from vision_torsion.calibration.correction import PlaneCorrection
+from vision_torsion.correction import PlaneCorrection
 from vision_torsion.errors import CalibrationError
 
 # disk plane -> image: a few degrees of tilt, a slight shear and an offset

@@ -575,7 +575,7 @@ def test_ready_scenes_and_specs_are_named(capsys, tmp_path):
 
 @pytest.mark.parametrize("name", ["binding.json", "correction.json"])
 def test_json_inputs_with_a_bom_or_another_encoding(tmp_path, name):
-    from vision_torsion.calibration.correction import load_correction
+    from vision_torsion.correction import load_correction
     from vision_torsion.errors import CalibrationError, SessionError
     from vision_torsion.session.binding import load_binding
 

@@ -30,7 +30,7 @@ from vision_torsion.session.plan import MAX_PLAN_IMAGES, plan_config, plan_sessi
 from vision_torsion.session.plausibility import MAX_STEPS_PER_PHASE
 from vision_torsion.stiffness.records import read_record
 from vision_torsion.stiffness.rig import RigConstants, load_rig
-from vision_torsion.synthetic.tables import simulate_measurements
+from vision_torsion.synthetic.measurement_tables import simulate_measurements
 
 
 def run(capsys, *argv):

@@ -2,7 +2,7 @@
 weight; ``bind`` finds them and proposes the fix; after binding, measurements.csv is
 the same as the same photographs' under the planned names.
 
-The session: the synthetic renderer (:mod:`vision_torsion.synthetic.camera`) on a
+The session: the synthetic renderer (:mod:`vision_torsion.synthetic.scripted_camera`) on a
 small 320×240 scene, two orientations of four steps per phase (36 rows), the
 paper's bilinear model (k_u = 4.4, k_l = 0.3 N·m/rad, τ_c = 0.15 N·m): steps of
 0.255° on the stiff branch and 3.75° on the soft one, angle noise ~0.001°.
@@ -16,8 +16,8 @@ from vision_torsion.cli import main
 from vision_torsion.session import process_session
 from vision_torsion.session.bind import bind_session
 from vision_torsion.synthetic import Scene
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.session import SessionSpec
 
 SCENE = Scene(image=ImageSpec(320, 240),
@@ -54,19 +54,17 @@ def test_bind_finds_the_extra_and_the_missed_shot_and_the_forgotten_weight(scrip
     res = bind_session(session, camera)
     assert res.n_files == res.n_rows == 36  # the count fits: only the angles tell
     assert [(f.kind, f.file, f.line) for f in res.fixes] == [
-        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27)]
-    assert res.command.endswith("--by time --skip IMG_0009.png --missing 27")
-    assert len(res.remaining) == 1 and res.remaining[0].startswith(
-        "IMG_0004.png (line 5: orientation 0, cycle 1, positive_unloading, step 2): step out "
-        "of line") and "forgotten" in res.remaining[0]
+        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27), ("drop", "IMG_0004.png", 5)]
+    assert res.command.endswith("--by time --skip IMG_0009.png --skip IMG_0004.png --missing 27 --missing 5")
+    assert res.remaining == ()
     assert not res.ok
-    # apply the fix from the command line
+    # apply the binding fixes from the command line, keeping the photograph of the wrong load
     assert main(["bind", str(session), str(camera), "--skip", "IMG_0009.png",
-                 "--missing", "27"]) == 1  # still 1: the forgotten weight is listed
+                 "--missing", "27"]) == 1  # still 1: the forgotten weight is listed, with its fix
     out, err = capsys.readouterr()
-    assert "proposed fix" not in out
+    assert "proposed fix: IMG_0004.png (line 5: orientation 0, cycle 1, positive_unloading, step 2) shows" in out
     assert "step does not fit: IMG_0004.png (line 5: orientation 0, cycle 1, positive_unloading" in err
-    assert "a weight piece forgotten on a pan?" in err
+    assert "a weight piece forgotten on a pan (or taken off too early)" in err
     bound = process_session(session, jobs=1)
     # the same photographs under the planned names
     named = copy_session(root, "named")
@@ -159,9 +157,13 @@ def test_watch_flags_each_mistake_on_the_image_where_it_happens(script):
         first.setdefault(e.file, e.message)
     # nothing before the forgotten weight; then each mistake on its own image
     assert min(first) == "IMG_0004.png"
-    assert "a weight piece forgotten on a pan?" in first["IMG_0004.png"]
+    assert "a weight piece forgotten on a pan (or taken off too early); fix: " in first["IMG_0004.png"]
+    assert first["IMG_0004.png"].endswith("--skip IMG_0004.png --missing 5")
     assert "no movement" in first["IMG_0009.png"]
-    assert "(a missed shot, or an extra weight piece?" in first["IMG_0027.png"]
+    assert first["IMG_0009.png"].endswith("--skip IMG_0004.png --missing 5 --skip IMG_0009.png")  # all so far
+    assert "two planned steps in one: a missed shot (this photograph shows the next row's load); fix: " in \
+        first["IMG_0027.png"]  # line 27: IMG_0027.png is bound to line 28, a row late after the extra shot
+    assert first["IMG_0027.png"].endswith("--skip IMG_0004.png --missing 5 --skip IMG_0009.png --missing 27")
     # every warning comes with the image's own event or the next image's (a step out
     # of line waits for the next to tell a mistake from the gear's stiffness switching)
     shots_so_far = []
@@ -173,13 +175,13 @@ def test_watch_flags_each_mistake_on_the_image_where_it_happens(script):
     assert not [e for e in events if e.kind == "retracted"]  # nothing said and withdrawn
     # decided by the next image: the page never says "the next step will tell"
     (kept,) = [p for p in w.live_points() if p.file == "IMG_0004.png"]
-    assert "forgotten on a pan?)" in kept.warnings[0] and "next step will tell" not in kept.warnings[0]
+    assert "forgotten on a pan (or taken" in kept.warnings[0] and "next step will tell" not in kept.warnings[0]
     page = (session / "results" / "live.html").read_text()
     assert "IMG_0027.png" in page and "Every planned image is in." in page
     # bind afterwards proposes the fix; the camera folder was never written
     res = bind_session(session, camera, write=False)
     assert [(f.kind, f.file, f.line) for f in res.fixes] == [
-        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27)]
+        ("skip", "IMG_0009.png", 10), ("missing", "IMG_0027.png", 27), ("drop", "IMG_0004.png", 5)]
 
 
 def test_watch_in_real_time_and_resume(script, tmp_path):

@@ -10,8 +10,8 @@ from vision_torsion.errors import SessionError
 from vision_torsion.session import process_session
 from vision_torsion.session.bind import bind_session
 from vision_torsion.synthetic import Scene
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.session import SessionSpec
 
 # 480×360 with 16 px markers: large enough for measure_pair's coarse first look

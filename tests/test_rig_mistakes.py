@@ -11,13 +11,17 @@ negative unloading, 14-17 positive loading; CSV line = row + 2.
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from vision_torsion.analysis.models import bilinear_response
 from vision_torsion.session.bind import bind_session
+from vision_torsion.session.steps import StepPoint, check_steps
 from vision_torsion.session.watch import Watcher
 from vision_torsion.synthetic import Scene
-from vision_torsion.synthetic.camera import ScriptedCamera, capture_script
+from vision_torsion.synthetic.gears import masing_response, three_segment_response
 from vision_torsion.synthetic.scene import DiskSpec, ImageSpec, MarkerSpec
+from vision_torsion.synthetic.scripted_camera import ScriptedCamera, capture_script
 from vision_torsion.synthetic.session import SessionSpec
 
 SCENE = Scene(image=ImageSpec(320, 240),
@@ -29,12 +33,17 @@ SPEC = SessionSpec(max_torque_nm=0.07848, orientations_deg=(0.0,))
 # mistake -> (capture_script options, the file warned first, what watch says of it
 # (a pattern), the bind fix or diagnosis (a pattern))
 CASES = {
-    "missed shot": ({"missed": 8}, ("IMG_0009.png", "IMG_0010.png"), r"a missed shot",
-                    r"--missing 10\b"),
-    "extra shot": ({"extra_after": 11}, ("IMG_0013.png",), r"no movement.*an extra shot",
+    "missed shot": ({"missed": 8}, ("IMG_0009.png", "IMG_0010.png"),
+                    r"a missed shot.*; fix: vision-torsion bind \S+ \S+ --missing 10$", r"--missing 10\b"),
+    "extra shot": ({"extra_after": 11}, ("IMG_0013.png",),
+                   r"no movement.*an extra shot.*; fix: vision-torsion bind \S+ \S+ --skip IMG_0013\.png$",
                    r"--skip IMG_0013\.png"),
     "forgotten weight": ({"forgotten": 3}, ("IMG_0004.png", "IMG_0005.png"),
-                         r"a weight piece forgotten on a pan", r"a weight piece forgotten"),
+                         r"a weight piece forgotten on a pan.*; fix: vision-torsion bind \S+ \S+ --skip "
+                         r"IMG_0004\.png --missing 5$",
+                         r"IMG_0004\.png \(line 5: .* a weight piece forgotten on a pan.*; leave it out and the "
+                         r"row without a photograph \(--skip IMG_0004\.png --missing 5\): its load cannot be set "
+                         r"again without leaving the loop's path"),
     "swapped shots": ({"swapped": 11}, ("IMG_0012.png", "IMG_0013.png"),
                       r"IMG_0012\.png and IMG_0013\.png look swapped.*--swap IMG_0012\.png IMG_0013\.png",
                       r"--swap IMG_0012\.png IMG_0013\.png"),
@@ -130,3 +139,105 @@ def test_clean_sessions_give_no_warning_at_all(tmp_path, seed):
     assert not [e for e in events if e.kind in ("warning", "retracted")]
     res = bind_session(session, camera, write=False)
     assert res.ok and not res.fixes and not res.diagnoses
+
+
+# -- gears with kinks: the step checks on the angles alone (no images) -----------------
+
+STEP_NM = 2 * 0.02 * 9.81 * 0.05
+KINKED = {
+    "bilinear τc=0.03": lambda t: bilinear_response(t, k_u=4.4, k_l=0.3, tau_c=0.03),
+    "bilinear τc=0.05": lambda t: bilinear_response(t, k_u=4.4, k_l=0.3, tau_c=0.05),
+    "three-segment": three_segment_response,
+    "Masing": masing_response,
+}
+# one orientation as planned: the reference, +4 pieces, down to -4, back up to +4 (rows 0-17)
+PLANNED = np.array([0, 4, 3, 2, 1, 0, -1, -2, -3, -4, -3, -2, -1, 0, 1, 2, 3, 4]) * STEP_NM
+
+
+def sequence(gear, *, actual=None, seed=3):
+    """StepPoints of the planned rows; the angles of the gear under `actual` torques
+    (the planned ones by default), with 0.0005° of noise (1σ)."""
+    rng = np.random.default_rng(seed)
+    th = np.degrees(KINKED[gear](PLANNED if actual is None else actual))
+    th = th - th[0] + rng.normal(0, 0.0005, th.size)
+    return [StepPoint(float(t), float(a), 0.0005) for t, a in zip(PLANNED, th)]
+
+
+def missed(points, i):
+    """The points with row `i`'s photograph missing: each later one bound a row early."""
+    return [StepPoint(PLANNED[j], p.angle_deg, p.angle_std_deg) for j, p in enumerate(points[:i] + points[i + 1:])]
+
+
+def live(points):
+    """What watch is told as the images arrive: the warnings of each newest sequence."""
+    said = []
+    for n in range(2, len(points) + 1):
+        for w in check_steps(points[:n], step_torque_nm=STEP_NM, open_end=n < len(points), hindsight=False):
+            if (w.index, w.kind) not in [(x.index, x.kind) for x, _ in said]:
+                said.append((w, n - 1))
+    return said
+
+
+@pytest.mark.parametrize("gear", list(KINKED))
+def test_a_kinked_gear_gives_no_warning_live_or_closed(gear):
+    points = sequence(gear)
+    assert live(points) == []
+    assert check_steps(points, step_torque_nm=STEP_NM) == []
+
+
+@pytest.mark.parametrize("gear", ["three-segment", "Masing", "bilinear τc=0.05"])
+def test_a_forgotten_piece_is_told_from_a_kink_by_the_same_step_elsewhere(gear):
+    i = 15  # positive loading, +2 pieces: one short (half a step)
+    actual = PLANNED.copy()
+    actual[i] -= STEP_NM / 2
+    said = live(sequence(gear, actual=actual))
+    assert [(w.index, w.kind, when) for w, when in said] == [(i, "small_step", i + 1)]  # at the next image
+    assert re.search(r"the same step elsewhere in the loop [+-]\d\.\d{4}° and the next step makes up for "
+                     r"it: a weight piece forgotten on a pan \(or taken off too early\)$", said[0][0].message)
+
+
+@pytest.mark.parametrize("gear", ["three-segment", "Masing", "bilinear τc=0.03"])
+def test_a_missed_shot_is_two_planned_steps_elsewhere_in_the_loop(gear):
+    i = 15  # row 15 not photographed: the files from it on are a row early
+    shifted = missed(sequence(gear), i)
+    said = live(shifted)
+    assert [(w.index, w.kind, when) for w, when in said] == [(i, "large_step", i + 1)]
+    assert re.search(r"the same step elsewhere in the loop [+-]\d\.\d{4}°, two planned steps in one: a missed "
+                     r"shot \(this photograph shows the next row's load\)$", said[0][0].message)
+    assert [(w.index, w.kind) for w in check_steps(shifted, step_torque_nm=STEP_NM)] == [(i, "large_step")]
+
+
+def test_a_missed_shot_before_the_turning_load_shows_as_the_load_turning_back_a_row_early():
+    i = 8  # row 8 (-3 pieces) not photographed: row 9 (-4, the turning load) shows the way back
+    said = live(missed(sequence("Masing"), i))
+    assert [(w.index, w.kind, when) for w, when in said] == [(i, "large_step", i + 1)]
+    assert re.search(r"and the next photograph already turns back as the load does one row later: a missed "
+                     r"shot \(this photograph shows the next row's load\)$", said[0][0].message)
+
+
+@pytest.mark.parametrize("gear", list(KINKED))
+def test_after_an_extra_shot_the_rest_is_checked_a_row_later(gear):
+    i = 3  # a second photograph of row 3's load: every later file a row late
+    points = sequence(gear)
+    extra = StepPoint(PLANNED[i + 1], points[i].angle_deg + 0.0003, 0.0005)
+    bound = points[:i + 1] + [extra] + [StepPoint(PLANNED[j + 1], p.angle_deg, p.angle_std_deg)
+                                        for j, p in enumerate(points[i + 1:-1], start=i + 1)]
+    assert [(w.index, w.kind) for w in check_steps(bound, step_torque_nm=STEP_NM)] == [(i + 1, "no_movement")]
+    assert [(w.index, w.kind) for w, _ in live(bound)] == [(i + 1, "no_movement")]
+
+
+def test_bind_finds_a_missed_shot_the_soft_zone_hid_by_the_load_turning_back_a_row_early(tmp_path):
+    # bilinear gear, τc = 0.05 N·m (2.5 steps): row 6 (-1 piece, in the soft zone) not
+    # photographed. Its double step looks like a wider soft zone; the load turns back
+    # a row early (IMG_0010.png). Marking line 8 or line 9 as missed both leave no
+    # misfit; line 8 is the one whose steps are the loop's own elsewhere (step_misfit)
+    gear = KINKED["bilinear τc=0.05"]
+    session, camera, n = shoot(tmp_path, {"missed": 6, "response": gear})
+    res = bind_session(session, camera, write=False)
+    (fix,) = res.fixes
+    assert (fix.kind, fix.file, fix.line) == ("missing", "IMG_0007.png", 8)
+    assert re.match(r"line 8: orientation 0, cycle 1, negative_loading, step 1 looks missed: the files from "
+                    r"IMG_0007\.png on show the load of the row after theirs \(the gear's own change of "
+                    r"stiffness hid the double step; IMG_0010\.png shows wrong direction: .*\); mark the row "
+                    r"as not photographed \(--missing 8\) so that IMG_0007\.png binds to line 9$", fix.message)
+    assert res.command.endswith("--missing 8") and not res.remaining

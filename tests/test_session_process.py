@@ -290,7 +290,7 @@ def _set_correction(folder, name):
 def test_plane_correction_is_applied_to_the_angles(session, core):
     """A correction that stretches x by 1.5 turns a direction a (from the x axis) into
     atan2(sin a, 1.5 cos a); the angles are differences of such directions."""
-    from vision_torsion.calibration.correction import PlaneCorrection
+    from vision_torsion.correction import PlaneCorrection
 
     folder, plan, truth = session
     PlaneCorrection(homography=np.diag([1.5, 1.0, 1.0])).save(folder / "plane.toml")

@@ -5,7 +5,7 @@ import os
 import pytest
 
 from vision_torsion.calibration.accuracy import load_spec
-from vision_torsion.calibration.correction import load_correction
+from vision_torsion.correction import load_correction
 from vision_torsion.errors import (
     CalibrationError,
     ReferenceTableError,

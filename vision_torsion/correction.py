@@ -19,7 +19,7 @@ homography, and a lens adds radial distortion. :class:`PlaneCorrection` undoes b
 Coordinates in and out are (x, y) pixels, origin at the centre of the top-left pixel,
 y downwards. The disk plane is fixed only up to a similarity (a similarity does not
 change angles); calibrations normalise it with
-:func:`vision_torsion.calibration.correction.normalised` so that the correction is
+:func:`vision_torsion.calibration.anchoring.normalised` so that the correction is
 close to the identity near the target (same scale, no turn).
 
 Centre covariances are propagated to first order: Σ' = J Σ Jᵀ with J the 2x2

@@ -10,7 +10,7 @@ Modules, one job each:
 - :mod:`.uncertainty` — error model and propagation (first order, Monte Carlo);
 - :mod:`.loops` — validation of ``measurements.csv`` and loop assembly;
 - :mod:`.summary` — per-orientation and session summaries, orientation test;
-- :mod:`.session` — :func:`analyze_session`, a short orchestrator over the figure
+- :mod:`.session_analysis` — :func:`analyze_session`, a short orchestrator over the figure
   families below;
 - :mod:`.parameters` — :class:`AnalysisOptions`, the analysis' options, checked once;
 - :mod:`.rows` — the figure rows and issues every family returns;
@@ -27,6 +27,6 @@ Modules, one job each:
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "parameters", "preisach", "session", "summary")
+_LAZY = ("catalogue", "fitcheck", "loops", "metrics", "models", "parameters", "preisach", "session_analysis", "summary")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -2,7 +2,7 @@
 the torque levels, loop closure and creep, and points far off their loop's model.
 
 Each check returns plain values (and :class:`.session.Issue` rows are made from
-them by :mod:`.session`); none of them changes the data.
+them by :mod:`.session_analysis`); none of them changes the data.
 
 - **Angle sign** (:func:`angle_sign_inverted`, :func:`angle_sign_by_run`): the
   angle must rise with the torque. The least-squares slope of angle on torque is

@@ -1,7 +1,7 @@
 """Is a fit good enough to show? The lack-of-fit gate, and the stiffness of a phase
 whose stiffness switches.
 
-Every slope and model fit of :mod:`.session` goes through :func:`lack_of_fit`
+Every slope and model fit of :mod:`.session_analysis` goes through :func:`lack_of_fit`
 before it is reported: its residuals are compared with the noise the table implies,
 
 ``σ_eff,i² = σθ,i² + (dθ/dτ)ᵢ²·στ,i²``
@@ -13,7 +13,7 @@ fit the parameters that are not at zero). The fit is **rejected** when
 ``P(χ²_dof ≥ χ²) < LACK_OF_FIT_ALPHA`` (0.001: with some 40 fits per session, about
 one session in 25 has one false rejection, and a rejection is never silent).
 
-What happens to a rejected figure is decided per figure in :mod:`.session`
+What happens to a rejected figure is decided per figure in :mod:`.session_analysis`
 (documented there): a straight-line phase stiffness is **withheld** (it has no
 meaning when the stiffness switches; the two stiffnesses below/above the switch and
 the secant take its place); model parameters are **flagged** and their uncertainty

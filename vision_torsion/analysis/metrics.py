@@ -24,7 +24,7 @@ Definitions (formulas)
 - **Loop energy** (paper): ``W = ∮ τ dθ`` of the continuous loop, J (positive for a
   dissipating loop). :func:`loop_energy` is the closed polygon descending run →
   ascending run → back to the start (trapezoids); its chords cut the loop's curvature,
-  so :mod:`.session` takes off the area they add on each branch (:func:`chord_area`,
+  so :mod:`.session_analysis` takes off the area they add on each branch (:func:`chord_area`,
   with the bound of that estimate in the budget). Lost motion between levels is
   corrected likewise for the interpolation (:func:`chord_error`).
 - **Loss factor** ``η = W / (2π·U)`` with ``U = ½·τ_a·θ_a`` the peak elastic energy
@@ -187,7 +187,7 @@ def phase_secants(tau_desc, th_desc, tau_asc, th_asc, *, top_nm, bottom_nm, tol=
     """The secant of each of the four phases, N·m/rad, from the runs: ``{k_<phase>_secant: value}``.
 
     Over each phase's ends (+Tmax → 0, 0 → −Tmax, −Tmax → 0, 0 → +Tmax): the phase
-    secant of :mod:`.session`, evaluated on the runs so that a Monte Carlo of the
+    secant of :mod:`.session_analysis`, evaluated on the runs so that a Monte Carlo of the
     loop carries the torque errors of the ends with their correlations and the loop's
     amplitude. The bottom tip is the descending run's last image, which also starts
     the ascending branch; ``top_nm``/``bottom_nm`` are the nominal tips.

@@ -7,7 +7,7 @@ disk frame with the rotation centre at the origin, marker j of image i is at
 ``D_ij = R(θ_i) a_j`` (R a rotation, a_j the marker's fixed offset from the centre).
 The camera sees the plane through a homography G and, optionally, radial distortion
 (k1 about a centre c with focal length f, as in
-:class:`~vision_torsion.calibration.correction.PlaneCorrection`)::
+:class:`~vision_torsion.correction.PlaneCorrection`)::
 
     p_ij = distort(G · D_ij) + noise,   noise ~ N(0, Σ_ij)
 
@@ -20,7 +20,7 @@ L_ij⁻¹ (p_ij - model) with Σ_ij = L Lᵀ are minimised by
 centroid and spread (so the fit stays well conditioned at large pixel coordinates).
 The correction saved is G⁻¹ (after undistortion), followed by the similarity that
 makes it look like the identity at the rotation centre
-(:func:`~vision_torsion.calibration.correction.normalised`).
+(:func:`~vision_torsion.calibration.anchoring.normalised`).
 
 Start: both markers lie on one circle (a diametric target), imaged as an ellipse.
 An ellipse fit to all centres gives the affine solution (ellipse centre = rotation
@@ -66,10 +66,11 @@ from scipy.optimize import least_squares
 from ..angle import sequence_angles
 from ..batch import measure_each
 from ..circlefit import fit_ellipse
+from ..correction import PlaneCorrection
 from ..errors import CalibrationError, FitError
 from ..pair import PairMeasurement, measure_pair
 from ..settings import MeasureSettings
-from .correction import PlaneCorrection, normalised
+from .anchoring import normalised
 
 __all__ = ["calibrate_plane", "MIN_SWEEP_DEG", "MIN_IMAGES"]
 

@@ -6,7 +6,7 @@ by ``cornerSubPix``, or ``findCirclesGrid``); with three or more views
 ``calibrateCamera`` estimates the first radial distortion coefficient k1 (principal
 point fixed at the image centre, square pixels, no tangential terms, k2 = k3 = 0:
 the few views of a lab set-up do not determine more, and k1 is the model of
-:class:`~vision_torsion.calibration.correction.PlaneCorrection`). The plane
+:class:`~vision_torsion.correction.PlaneCorrection`). The plane
 homography comes from the view chosen by ``plane_image`` (the target lying on the
 disk): its undistorted pattern points are mapped onto the pattern's own metric grid
 with ``findHomography`` (plain least squares over all points).
@@ -23,10 +23,11 @@ import logging
 import cv2
 import numpy as np
 
+from ..correction import PlaneCorrection
 from ..errors import CalibrationError
 from ..images import as_grey_array
 from ..validate import check_number
-from .correction import PlaneCorrection, normalised
+from .anchoring import normalised
 
 __all__ = ["calibrate_from_target", "PATTERNS", "find_pattern"]
 

@@ -2,7 +2,7 @@
 life test and summarised for a batch.
 
 - :mod:`.store` — :class:`CampaignDB`, the database itself (SQLite; records immutable);
-- :mod:`.records` — one report folder read as a record (:func:`read_report`);
+- :mod:`.folder_record` — one report folder read as a record (:func:`read_report`);
 - :mod:`.views` — :func:`add_reports`, :func:`list_reports`, :func:`compare_serials`,
   :func:`figure_trend`, :func:`export_campaign` (what the commands ask);
 - :mod:`.page` — :func:`write_campaign_report`, the batch page with control charts,
@@ -13,6 +13,6 @@ life test and summarised for a batch.
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("page", "records", "stats", "store", "views")
+_LAZY = ("page", "folder_record", "stats", "store", "views")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

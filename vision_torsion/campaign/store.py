@@ -30,7 +30,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from ..errors import CampaignError
-from .records import FigureRecord, ReportRecord
+from .folder_record import FigureRecord, ReportRecord
 
 __all__ = ["CampaignDB", "AddResult", "SCHEMA_VERSION", "APPLICATION_ID"]
 

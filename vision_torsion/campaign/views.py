@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import CampaignError
-from .records import read_report
+from .folder_record import read_report
 from .stats import difference, fit_trend
 from .store import AddResult, CampaignDB
 

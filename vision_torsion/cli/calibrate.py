@@ -66,7 +66,7 @@ def _destination(args):
     """OUT_DIR/NAME, its suffix checked and the folder writable, before any work."""
     from pathlib import Path
 
-    from ..calibration.correction import check_suffix
+    from ..correction import check_suffix
     from ..errors import CalibrationError
     from ..fileio import check_output_dir
 

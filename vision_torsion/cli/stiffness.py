@@ -65,8 +65,8 @@ def run(args) -> int:
     from ..plotting import save_figure
     from ..report.stiffness_figures import plot_meshing, plot_step_stiffness, plot_stiffness, plot_torque_angle
     from ..stiffness.analysis import analyze_stiffness_curve
+    from ..stiffness.per_step import step_stiffness, summarise_steps
     from ..stiffness.rig import load_rig
-    from ..stiffness.steps import step_stiffness, summarise_steps
 
     rig = load_rig(args.rig) if args.rig else None
     out = Path(args.out_dir) if args.out_dir else default_output_dir(args.data)

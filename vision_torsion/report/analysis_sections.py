@@ -80,7 +80,7 @@ def budget_section(analysis):
     if flags:
         text += '<p class="note">Session means shown with a flag:</p><ul class="note">' + "".join(flags) + "</ul>"
     if any(s.get("output_side") for s in analysis.summary.values()):
-        from ..analysis.session import OUTPUT_SIDE_CAVEAT
+        from ..analysis.session_analysis import OUTPUT_SIDE_CAVEAT
 
         text += f'<p class="note">{html.escape(OUTPUT_SIDE_CAVEAT)}</p>'
     return "Uncertainty budget of the headline figures", text + _table(frame, left=("figure", "unit"))

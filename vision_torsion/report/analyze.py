@@ -14,7 +14,7 @@ metadata (its ``[test]``) are shown in the report and written into summary.json.
 The torque-error model must be declared: a ``session.toml`` (its ``[rig]``), or the
 rig's constants as explicit options (``rig_options``: piece tolerance, pieces per
 step, g, r; :func:`rig_from_options`). Without either, every figure is flagged
-"torque uncertainty not modelled" (:data:`vision_torsion.analysis.session.TORQUE_NOT_MODELLED`).
+"torque uncertainty not modelled" (:data:`vision_torsion.analysis.session_analysis.TORQUE_NOT_MODELLED`).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class AnalyzeResult:
     n_issues, n_withheld, n_flagged : int
         Issues listed, figures withheld (null with a reason) and flagged.
     withheld_by_kind : dict
-        Withheld figures by :data:`~vision_torsion.analysis.session.ISSUE_KINDS`
+        Withheld figures by :data:`~vision_torsion.analysis.session_analysis.ISSUE_KINDS`
         (``rejected``, ``not_applicable``, ``not_computable``); see :func:`withheld_by_kind`.
     angle_sign_advice : str
         What to set when the angle falls as the torque rises (:func:`angle_sign_advice`),

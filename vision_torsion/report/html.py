@@ -208,7 +208,7 @@ def _flag_counts(analysis, issues: pd.DataFrame, n_failed: int) -> str:
     return f'<p class="{css}">Flags: {", ".join(items)}; details after the results.</p>'
 
 
-#: How the report names each kind of issue (:data:`vision_torsion.analysis.session.ISSUE_KINDS`).
+#: How the report names each kind of issue (:data:`vision_torsion.analysis.session_analysis.ISSUE_KINDS`).
 _ISSUE_WORDS = {
     "rejected": "does not fit its data",
     "not_applicable": "not applicable to these data",

@@ -144,10 +144,10 @@ def plot_step_stiffness(steps, summary) -> Figure:
     Parameters
     ----------
     steps : pandas.DataFrame
-        :func:`~vision_torsion.stiffness.steps.step_stiffness` (every loop: small grey-edged points; flagged
+        :func:`~vision_torsion.stiffness.per_step.step_stiffness` (every loop: small grey-edged points; flagged
         steps as crosses).
     summary : pandas.DataFrame
-        :func:`~vision_torsion.stiffness.steps.summarise_steps` (mean over loops with ±2σ error bars).
+        :func:`~vision_torsion.stiffness.per_step.summarise_steps` (mean over loops with ±2σ error bars).
 
     Returns
     -------

@@ -18,9 +18,13 @@ missed shot, so the row is marked as not photographed. A fix is proposed, naming
 the file and the row, with the command line that applies it, when it removes that
 misfit and leaves fewer misfits in the whole session; then the next misfit, and so
 on. Two photographs taken the other way round are found the same way (exchanging
-them, ``swap``, makes their steps fit). Misfits no re-binding explains (a step
-half as large as its neighbours: a weight piece forgotten on a pan) are listed
-with the file and the row.
+them, ``swap``, makes their steps fit). A photograph of a wrong load (a weight
+piece forgotten on a pan: its step half as large as expected, the next making up
+for it) is left out with its row marked as not photographed (``drop``: both at
+once, so that no other file moves). Of the fixes that leave as few misfits, the
+one whose steps are the loop's own elsewhere (:func:`~.steps.step_misfit`; a step
+off by 2× weighs as one misfit) is proposed. Misfits no re-binding explains are
+listed with the file and the row.
 
 Besides the steps, what the photographs themselves show is diagnosed, one line
 each: an ``angle_sign`` inverted (the first loaded image of most orientations
@@ -47,7 +51,7 @@ from ..measurements import output_folder
 from .binding import BINDING_NAME, Binding, write_binding
 from .camera import list_camera_files
 from .load import Session, load_session
-from .steps import StepPoint, check_steps, gear_kinks
+from .steps import StepPoint, check_steps, gear_kinks, step_misfit
 
 __all__ = ["BindResult", "Fix", "bind_session", "row_text", "step_warnings"]
 
@@ -63,7 +67,8 @@ class Fix:
     ----------
     kind : str
         "skip" (leave the camera file out: an extra shot), "missing" (the row was
-        not photographed: a missed shot) or "swap" (this file and the next one were
+        not photographed: a missed shot), "drop" (both: a photograph of a wrong
+        load, a weight piece forgotten) or "swap" (this file and the next one were
         taken the other way round).
     file : str
         The camera file (the extra shot, or the first file after the gap).
@@ -365,6 +370,10 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         bound, left = _assign(rows, files, set(sk), set(mi), sw)
         return bound, left, step_warnings(session, bound, pairs, sign=sign)
 
+    def misfit(bound):  # of two fixes that leave as few misfits, the one whose steps fit best
+        return sum(step_misfit(points, step_torque_nm=_step_torque(session))
+                   for _, points in _sequences(session, bound, pairs, sign))
+
     bound, leftovers, warns = evaluate(skip, missing, swap)
     fixes, cur_skip, cur_missing, cur_swap = [], list(skip), list(missing), list(swap)
     cur = (bound, warns)
@@ -382,6 +391,15 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
                 candidates.append(("skip", f, row, None, warning))  # an extra shot: the same load again
             if warning.kind in ("large_step", "wrong_direction"):
                 candidates.append(("missing", f, row, None, warning))  # a missed shot: two steps in one
+                # or missed earlier in the branch, where the gear's own kinks hid the
+                # double step: every file since is a row early, and the turn of the
+                # load comes a row too soon
+                for d in range(1, len(b)):
+                    if not _one_branch(session, b, pos - d, pos) or b[pos - d][1] is None:
+                        break
+                    candidates.append(("missing", b[pos - d][1], b[pos - d][0], b[pos], warning))
+            if warning.kind == "small_step" and warning.decided:  # a piece forgotten: its load is wrong
+                candidates.append(("drop", f, row, None, warning))
             for d in (1, -1, 2, -2, 3, -3):  # two photographs taken the other way round
                 other = b[pos + d] if 0 <= pos + d < len(b) else None
                 if (warning.kind in ("large_step", "wrong_direction") and other is not None
@@ -390,30 +408,37 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
                     candidates.append(("swap", f, row, other, warning))
         best = None
         for kind, file, r, other, warning in candidates:
-            sk = cur_skip + [file.name] if kind == "skip" else cur_skip
-            mi = cur_missing + [r.line] if kind == "missing" else cur_missing
+            sk = cur_skip + [file.name] if kind in ("skip", "drop") else cur_skip
+            mi = cur_missing + [r.line] if kind in ("missing", "drop") else cur_missing
             sw = cur_swap + [(file.name, other[1].name)] if kind == "swap" else cur_swap
             nb, _, nw = evaluate(sk, mi, sw)
             still = any(nb[p][1] is file for p, _ in nw)
-            if len(nw) < len(w) and not still and (best is None or len(nw) < len(best[3])):
-                best = (kind, file, r, nw, nb, sk, mi, sw, other, warning)
+            score = len(nw) + misfit(nb) / math.log(2)  # a step off by 2× weighs as a misfit
+            if len(nw) < len(w) and not still and (best is None or score < best[10]):
+                best = (kind, file, r, nw, nb, sk, mi, sw, other, warning, score)
         if best is None:
             unexplained.add(b[todo[0][0]][1].name)
             continue
-        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other, first = best
+        kind, file, r, nw, nb, cur_skip, cur_missing, cur_swap, other, first, _ = best
         if kind == "swap":
             a, b2 = sorted([(r, file), other], key=lambda t: t[0].line)
             msg = (f"{a[1].name} and {b2[1].name} look swapped: {a[1].name} shows the load of line "
                    f"{b2[0].line} and {b2[1].name} that of line {a[0].line} (their angle steps fit the "
                    f"plan the other way round); exchange them (--swap {a[1].name} {b2[1].name})")
+        elif kind == "drop":
+            msg = (f"{file.name} ({row_text(r)}) shows {first.message}; leave it out and the row "
+                   f"without a photograph (--skip {file.name} --missing {r.line}): its load cannot be "
+                   "set again without leaving the loop's path")
         elif kind == "skip":
             msg = (f"{file.name} looks like an extra shot: bound to {row_text(r)}, it shows "
                    f"{first.message}; leave it out (--skip {file.name})")
         else:
             nxt = next((x for x, y in nb if y is file), None)
-            msg = (f"{row_text(r)} looks missed: {file.name}, bound to it, shows {first.message}; "
-                   f"mark the row as not photographed (--missing {r.line}) so that {file.name} "
-                   f"binds to line {nxt.line if nxt else '?'}")
+            shows = (f"{file.name}, bound to it, shows {first.message}" if other is None else
+                     f"the files from {file.name} on show the load of the row after theirs (the gear's own "
+                     f"change of stiffness hid the double step; {other[1].name} shows {first.message})")
+            msg = (f"{row_text(r)} looks missed: {shows}; mark the row as not photographed "
+                   f"(--missing {r.line}) so that {file.name} binds to line {nxt.line if nxt else '?'}")
         fixes.append(Fix(kind, file.name, r.line, msg))
         cur = (nb, nw)
     command = None

@@ -10,49 +10,90 @@ torque step Δτ the plan says was made between them:
   uncertainty) for a planned torque step: an extra shot, or no weight changed;
 - **wrong direction**: Δθ and Δτ of opposite signs (beyond 5 σ_Δ): the wrong pair
   of pans, a wrong ``angle_sign``, or files out of order;
-- **out of line**: the step's compliance ``Δθ/Δτ`` against the previous step's in
-  the same direction of loading (e = that compliance × Δτ): below 0.6 e (a piece
-  forgotten on one pan gives ≈ 0.5 e) or between 1.6 e and 2.6 e (a missed shot or
-  an extra piece gives ≈ 2 e).
+- **out of line**: the step is not what the gear does there. What the gear does
+  is known from the **same step elsewhere in the loop** (the same planned torque
+  magnitudes, moving away from zero or back towards it alike: the other side of
+  the loop, an earlier cycle) when that one fitted: out of line beyond 8 % of it.
+  Before the loop has shown it (the first half-loop), the previous step of the
+  branch is the reference, carried on by the branch's trend (e = its compliance ×
+  the ratio of the last two steps' when that is within 2×, else 1, × Δτ; a step
+  over a row without a photograph is no reference): out of line below 0.87 e or
+  between 1.6 e and 2.6 e (for the last step of a closed sequence, which no next
+  step decides, below 0.6 e: a gear drifts along a branch by less).
 
-An out-of-line step can also be the gear itself: in the paper's bilinear model the
-compliance jumps by k_u/k_l ≈ 15 where the load passes zero (soft) and back where
-it passes ±τ_c (stiff), and a jump that falls inside a step gives any ratio in
-between. The step after tells them apart, by its compliance against this step's:
-after a forgotten piece the next step makes up for it (≈ 1.5 e after ≈ 0.5 e: 3×,
-kept as a mistake when ≥ 1.8×), after a missed shot the next goes on as before (≈ e
-after ≈ 2 e: 0.5×, kept when ≤ 0.7×), after a switch the next goes on at the new
-compliance (≈ 1×); comparing with this step rather than with the step before keeps
-a gear whose compliance drifts along the branch (a Masing loop) apart from a
-mistake. At the end of a branch (the load reverses next) no step can tell: such a
-warning is undecided, and it is the gear's when the same step elsewhere in the
-loop (or in another cycle or orientation) shows it too (:func:`gear_kinks`). A
-live sequence's newest step has no next step yet: ``watch`` waits for the next
-image (``open_end``). A mistake's
-ratio (0.5, 2 or 0) is far from 1 by many times the scatter of the ratio (σ_Δ/Δθ ≈
-0.3 % for the paper's 0.25° steps at 0.0005° noise). A flagged step, and the step
-after it, are not used as the reference of the next, so one mistake gives one
-warning, on the image where it happened. Checked only across one or two planned
-weight steps (not across the unphotographed pre-load or the return to zero before a
-closing image) and only between images of one orientation. These are warnings for
-the person at the rig, not a statistical test; the false-alarm rate on the paper's
-loops is tested (tests/test_rig_bind_inputs.py); ``bind`` tries fixes against them (:mod:`.bind`).
+An out-of-line step is decided with the step after it, by which explains both:
+
+- the gear's own change of stiffness (the switch, a kink: the paper's bilinear
+  compliance jumps by k_u/k_l ≈ 15 where the load passes zero and back at ±τ_c,
+  and a jump inside a step gives any ratio between): no warning, and the new
+  compliance is taken;
+- a weight piece forgotten (one piece short while loading, one too many while
+  unloading: half a step): the step falls short and the next makes up for it
+  (against the same steps elsewhere: the next step's excess is this one's
+  shortfall within 30 %; against the previous step: the next step's compliance ≥
+  1.8× this one's, a dip no single kink makes). At the end of a branch the first
+  step back tells: it starts half a step early;
+- a missed shot (two planned steps in one: every later file shows the load of the
+  row after its own): the step's excess over the same step elsewhere in the loop
+  is the next planned step there (within 30 %), and the next photograph shows the
+  step after that one (within 20 %; against the
+  previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one). Before a turning load
+  the next photograph already turns back, by as much as the first step back from a
+  turning load elsewhere in the loop (unlike this branch's step reversed: two
+  photographs taken the other way round, which ``watch`` and ``bind`` find by
+  exchanging them).
+
+A mistake's signature (0.5, 2 or 0 of a step) is far from the gear's by many times
+the scatter of a step ratio (σ_Δ/Δθ ≈ 0.3 % for 0.25° steps at 0.0005° noise), and
+a gear's compliance along a branch rises to one peak (where the felt torque passes
+zero) and falls after it: it has no dip, and no single step that its neighbours'
+sum explains. After an extra or a missed shot is decided, the steps after it are
+checked as bound with its fix (the files a row late or early), so one mistake gives
+one warning, on the image where it happened; a flagged step, and the step after it,
+are not used as a reference. A live sequence's newest step has no next step yet:
+``watch`` waits for the next image (``open_end``), and judges from the images so
+far only (``hindsight=False``), so that a verdict once said stays. A closed
+sequence (``bind``) compares each step with the same step anywhere in the loop,
+later ones included. Only the last step of a closed sequence cannot be decided: it
+is warned about, undecided, and it is the gear's when the same step elsewhere (in
+another orientation) shows it too (:func:`gear_kinks`). Checked only across one or
+two planned weight steps (not across the unphotographed pre-load or the return to
+zero before a closing image) and only between images of one orientation. In the
+first half-loop of a session the loop has not shown its steps yet: a mistake where
+the gear's stiffness changes by more than the mistake's signature (a missed shot
+inside a soft zone, a piece forgotten on a kinked step) looks like the gear there,
+and shows later (the load turning back a row early; against the same step in the
+second half, in ``bind``). These are warnings for the person at the rig, not a
+statistical test; the false-alarm rate on the paper's loops is tested
+(tests/test_rig_bind_inputs.py), and the kinked gears of
+:mod:`vision_torsion.synthetic.gears` in tests/test_rig_mistakes.py and
+benchmarks/bench_capture.py; ``bind`` tries fixes against them (:mod:`.bind`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
-__all__ = ["StepPoint", "StepWarning", "check_steps", "first_load_inverted", "gear_kinks", "WARNING_KINDS"]
+__all__ = ["StepPoint", "StepWarning", "check_steps", "step_misfit", "first_load_inverted", "gear_kinks",
+           "WARNING_KINDS"]
 
 #: Kinds of step warning.
 WARNING_KINDS = ("no_movement", "wrong_direction", "small_step", "large_step")
 _STILL_SIGMAS = 5.0
-_SMALL = 0.6
+_SMALL = 0.87
+_ALONE = 0.6
+_TREND = 2.0
 _LARGE = (1.6, 2.6)
 _RECOVERY = 1.8
 _GOES_ON = 0.7
+_SAME_TOL = 1.4
+_SAME_FIT = 1.08
+_FORGOTTEN = 1 / _SAME_FIT
+_MADE_UP = 0.3
+_SUM_TOL = 1.2
+_EARLY = 1.15
 
 
 @dataclass(frozen=True)
@@ -108,7 +149,8 @@ class StepWarning:
     torque_span_nm: tuple = ()
 
 
-def check_steps(points, *, step_torque_nm: float, open_end: bool = False) -> list[StepWarning]:
+def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
+                hindsight: bool | None = None) -> list[StepWarning]:
     """Warnings for the steps of one orientation's image sequence (module docstring).
 
     Parameters
@@ -119,92 +161,318 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False) -> lis
         Torque of one planned weight step, ``2 m g r`` (N·m).
     open_end : bool
         The sequence goes on (a live one): an out-of-line newest step, which only
-        the next step can confirm, is not reported yet (``watch`` reports it at the
-        next image, or never when the next goes on at the new stiffness: an
-        expected change of stiffness is not a mistake). False: it is reported,
-        saying the next step would tell.
+        the next step can decide, is not reported yet (``watch`` reports it at the
+        next image, or never when the next shows the gear's own change of
+        stiffness: an expected change of stiffness is not a mistake). False: it is
+        reported, saying the next step would tell.
+    hindsight : bool, optional
+        Compare each step with the same step elsewhere in the loop, later images
+        included (a closed sequence, ``bind``: the default when not `open_end`).
+        False: only with the images before it and the next one, so that each
+        verdict stays as it was said as the sequence grows (``watch``).
 
     Returns
     -------
     list of StepWarning
-        In sequence order; at most one per image. An out-of-line step is confirmed
-        by the step after it: kept when the next step makes up for it (a forgotten
-        piece: the next step's compliance ≥ 1.8× this one's) or goes on as before (a
-        missed shot: ≤ 0.7×); else it was the gear's stiffness switching, no
-        warning, and the new compliance is taken. One at the end of a branch or of
-        the sequence cannot be confirmed: it is warned about, undecided
-        (:attr:`StepWarning.decided`), unless `open_end`.
+        In sequence order; at most one per image. An out-of-line step is decided
+        with the step after it (module docstring): a forgotten piece when the next
+        step makes up for it, a missed shot when the two planned steps fit it,
+        else the gear's own change of stiffness (no warning; the new compliance is
+        taken). Only the last step of a closed sequence cannot be decided: it is
+        warned about, undecided (:attr:`StepWarning.decided`).
     """
-    steps = []  # (index, d_tau, d_theta, sigma, torques) between consecutive images with an angle
-    prev = None
+    hindsight = not open_end if hindsight is None else hindsight
+    points, origin = list(points), list(range(len(points)))
+    out: list[StepWarning] = []
+    done = 0  # warnings before this position of `points` are said already
+    while True:
+        found = [w for w in _scan(points, step_torque_nm, open_end, None if hindsight else {})[0]
+                 if w.index >= done]
+        shift = next((w for w in found if w.kind in ("no_movement", "large_step") and w.decided), None)
+        out += [dataclasses.replace(w, index=origin[w.index]) for w in found
+                if shift is None or w.index <= shift.index]
+        if shift is None:
+            return out
+        # the files after it are a row late (an extra shot) or a row early (a missed
+        # shot): the rest is checked as bound with the fix, one mistake, one warning
+        i, n = shift.index, len(points)
+        if shift.kind == "no_movement":
+            points = points[:i] + [StepPoint(points[j - 1].torque_nm, points[j].angle_deg, points[j].angle_std_deg)
+                                   for j in range(i + 1, n)]
+            origin, done = origin[:i] + origin[i + 1:], i
+        else:  # the last file shows the load of a row after the last: left out
+            points = points[:i] + [StepPoint(points[j + 1].torque_nm, points[j].angle_deg, points[j].angle_std_deg)
+                                   for j in range(i, n - 1)]
+            origin, done = origin[:n - 1], i + 1
+
+
+def _scan(points, step_torque_nm, open_end, prior=None):
+    """check_steps on `points` as bound (no re-binding after a mistake): the
+    warnings, and the compliance of the steps that fitted by place in the loop.
+    A closed sequence is looked at twice: the second time every step has the same
+    step elsewhere in the loop, later ones included, to compare with."""
+    steps = _steps(points)
+    if prior is None:
+        prior = _scan(points, step_torque_nm, open_end, prior={})[1]
+    state = _State(step_torque_nm, prior)
+    out: list[StepWarning] = []
+    for k, s in enumerate(steps):
+        if not state.single(s.d_tau):
+            state.new_branch(None)  # the pre-load, a return to zero
+            continue
+        direction = 1.0 if s.d_tau > 0 else -1.0
+        if state.direction != direction:
+            state.new_branch(direction)  # the load reversed: a new branch
+        nxt = steps[k + 1] if k + 1 < len(steps) and state.single(steps[k + 1].d_tau) else None
+        if k + 1 == len(steps) and open_end and state.out_of_line(s):
+            state.after_warning = False
+            continue  # undecided until the next image: neither a warning nor a reference
+        warn = _judge(s, nxt, state, last=k + 1 == len(steps))
+        if warn is None:
+            state.accept(s)
+        else:
+            out.append(warn)
+            state.after_warning = True
+            state.flagged.add(s.index)
+            state.shifted = state.shifted or (warn.decided and warn.kind in ("no_movement", "large_step"))
+            if not warn.decided and not state.shifted:  # the last step: the gear, maybe; the second look decides it
+                state.seen.setdefault(state.place(s.span), {})[s.index] = s.compliance
+    return out, state.seen
+
+
+def _steps(points) -> list:
+    """The steps between consecutive images with an angle (:class:`_Step`)."""
+    steps, prev = [], None
     for i, p in enumerate(points):
         if p.angle_deg is None or not math.isfinite(p.angle_deg):
             continue
         if prev is not None:
             q = points[prev]
-            steps.append((i, p.torque_nm - q.torque_nm, p.angle_deg - q.angle_deg,
-                          math.hypot(p.angle_std_deg, q.angle_std_deg), (q.torque_nm, p.torque_nm)))
+            steps.append(_Step(i, p.torque_nm - q.torque_nm, p.angle_deg - q.angle_deg,
+                               math.hypot(p.angle_std_deg, q.angle_std_deg), (q.torque_nm, p.torque_nm)))
         prev = i
+    return steps
 
-    def single(d_tau):
-        return 0.5 < abs(d_tau) / step_torque_nm < 2.5
 
-    out: list[StepWarning] = []
-    compliance = None  # (deg per N·m, sign of Δτ) of the last step that fitted
-    after_warning = False
-    for k, (i, d_tau, d_theta, sigma, span) in enumerate(steps):
-        if not single(d_tau):
-            compliance, after_warning = None, False  # the pre-load, a return to zero
-            continue
-        direction = 1.0 if d_tau > 0 else -1.0
-        if compliance is not None and compliance[1] != direction:
-            compliance = None  # the load reversed: a new branch
-        expected = compliance[0] * d_tau if compliance is not None else math.nan
-        ratio = d_theta / expected if compliance is not None and expected != 0 else math.nan
-        warn, hedge = None, False
-        if abs(d_theta) < _STILL_SIGMAS * sigma:
-            warn = ("no_movement", f"no movement: Δangle {d_theta:+.4f}° for a planned torque step "
-                                   f"of {d_tau:+.5f} N·m (an extra shot of the same load, or no "
-                                   "weight changed?)")
-        elif d_theta * d_tau < 0:
-            warn = ("wrong_direction", f"wrong direction: Δangle {d_theta:+.4f}° for a planned "
-                                       f"torque step of {d_tau:+.5f} N·m (the wrong pans loaded, "
-                                       "files out of order, or a wrong angle_sign?)")
-        elif compliance is not None and (ratio < _SMALL or _LARGE[0] < ratio < _LARGE[1]):
-            small = ratio < _SMALL
-            nxt = steps[k + 1] if k + 1 < len(steps) else None
-            hedge = not (nxt is not None and single(nxt[1]) and nxt[1] * d_tau > 0)
-            if nxt is None and open_end:
-                after_warning = False
-                continue  # undecided until the next image: neither a warning nor a reference
-            if not hedge:
-                follow = (nxt[2] / nxt[1]) / (d_theta / d_tau)  # the next step's compliance / this one's
-                confirmed = follow >= _RECOVERY if small else follow <= _GOES_ON
-            else:
-                confirmed = True
-            tell = ("the next step will tell" if nxt is None else
-                    "the same step elsewhere in the loop will tell")
-            if confirmed and small:
-                warn = ("small_step", f"step out of line: Δangle {d_theta:+.4f}° is {ratio:.2f}× "
-                                      f"the previous step's {expected:+.4f}° (a weight piece "
-                                      "forgotten on a pan?"
-                                      + (f" or the gear stiffening: {tell}" if hedge else "")
-                                      + ")")
-            elif confirmed:
-                warn = ("large_step", f"step out of line: Δangle {d_theta:+.4f}° is {ratio:.2f}× "
-                                      f"the previous step's {expected:+.4f}° (a missed shot, or an "
-                                      "extra weight piece?"
-                                      + (f" or the gear softening: {tell}" if hedge else "")
-                                      + ")")
-        if warn is None:
-            if not after_warning:  # the step after a mistake makes up for it: no reference
-                compliance = (d_theta / d_tau, direction)
-            after_warning = False
-        else:
-            out.append(StepWarning(i, warn[0], d_theta, d_tau, ratio, warn[1], decided=not hedge,
-                                   torque_span_nm=span))
-            after_warning = True
-    return out
+@dataclass(frozen=True)
+class _Step:
+    index: int
+    d_tau: float
+    d_theta: float
+    sigma: float
+    span: tuple
+
+    @property
+    def compliance(self) -> float:
+        return self.d_theta / self.d_tau
+
+
+class _State:
+    """What the steps so far say of the gear: the compliance of the last step that
+    fitted in this branch (local), and of every step that fitted, by its place in
+    the loop (:func:`_place`: the same step elsewhere in the loop)."""
+
+    def __init__(self, step_torque_nm, prior=None):
+        self.step = step_torque_nm
+        self.local = None  # compliance (deg/N·m) of the last step of this branch that fitted
+        self.before = None  # and of the one that fitted before it (the branch's trend)
+        self.direction = None
+        self.seen: dict = {}  # place in the loop -> {step's image index: compliance} of steps that fitted
+        self.prior = prior or {}  # the same, from a first look at a closed sequence
+        self.flagged: set = set()  # image indices of the steps warned about
+        self.shifted = False  # an extra or missed shot decided: the later files are bound a row off
+        self.after_warning = False  # the step after a mistake makes up for it: no reference
+
+    def single(self, d_tau) -> bool:
+        return 0.5 < abs(d_tau) / self.step < 2.5
+
+    def new_branch(self, direction) -> None:
+        self.local, self.before, self.direction, self.after_warning = None, None, direction, False
+
+    def place(self, span):
+        a, b = (round(abs(t) / self.step, 3) for t in span)
+        return min(a, b), max(a, b), b > a
+
+    def at(self, place, index):
+        """Compliance of the step at `place` in the loop nearest before image `index`
+        that fitted (in a closed sequence, else the nearest after it), or None."""
+        found = dict(self.prior.get(place, {}))
+        found.update(self.seen.get(place, {}))
+        found = {i: c for i, c in found.items() if i != index and i not in self.flagged}
+        before = [i for i in found if i < index]
+        pick = max(before) if before else min(found, default=None)
+        return None if pick is None else found[pick]
+
+    def same_step(self, s, span=None):
+        """The expected angle step of `s` (or of the step over `span`, N·m, after
+        it) from the same step elsewhere in the loop, the sum of the same single
+        steps over a gap of two (None when not seen)."""
+        a, b = span or s.span
+        n = round(abs(b - a) / self.step)
+        if n not in (1, 2):
+            return None
+        d = (b - a) / n
+        cs = [self.at(self.place((a + j * d, a + (j + 1) * d)), s.index) for j in range(n)]
+        return None if None in cs else sum(cs) * d
+
+    def expected(self, s):
+        """(expected angle step, from the same step elsewhere?) or (None, False)."""
+        e = self.same_step(s)
+        if e is not None:
+            return e, True
+        if self.local is None:
+            return None, False
+        # the branch's trend goes on (a gear stiffening or softening along it by less than 2× a
+        # step); after a kink (a jump beyond that) the new compliance holds
+        trend = 1.0 if self.before is None else self.local / self.before
+        trend = trend if 1 / _TREND <= trend <= _TREND else 1.0
+        return self.local * trend * s.d_tau, False
+
+    def out_of_line(self, s) -> bool:
+        e, same = self.expected(s)
+        if e is None or abs(s.d_theta) < _STILL_SIGMAS * s.sigma or s.d_theta * s.d_tau < 0:
+            return False
+        r = s.d_theta / e
+        return abs(math.log(r)) > math.log(_SAME_FIT) if same else (r < _SMALL or _LARGE[0] < r < _LARGE[1])
+
+    def accept(self, s) -> None:
+        if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:
+            self.before = self.local = None  # across a gap (a row without a photograph): no reference
+        elif not self.after_warning:
+            self.before, self.local = self.local, s.compliance
+            if not self.shifted:  # (check_steps looks at the rest again, bound with the fix)
+                self.seen.setdefault(self.place(s.span), {})[s.index] = s.compliance
+        self.after_warning = False
+
+
+def _judge(s, nxt, state, *, last) -> StepWarning | None:
+    """The warning of step `s` (None: it fits), decided with the step after it."""
+    if abs(s.d_theta) < _STILL_SIGMAS * s.sigma:
+        return _warning(s, "no_movement", math.nan,
+                        f"no movement: Δangle {s.d_theta:+.4f}° for a planned torque step of "
+                        f"{s.d_tau:+.5f} N·m (an extra shot of the same load, or no weight changed?)")
+    if s.d_theta * s.d_tau < 0:
+        return _warning(s, "wrong_direction", math.nan,
+                        f"wrong direction: Δangle {s.d_theta:+.4f}° for a planned torque step of "
+                        f"{s.d_tau:+.5f} N·m (the wrong pans loaded, files out of order, or a "
+                        "wrong angle_sign?)")
+    if state.after_warning:
+        return None
+    e, same = state.expected(s)
+    if e is not None and nxt is not None and _row_early(s, nxt, state, e):
+        return _warning(s, "large_step", s.d_theta / e,
+                        f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× the expected "
+                        f"{e:+.4f}° and the next photograph already turns back as the load does one row "
+                        "later: a missed shot (this photograph shows the next row's load)")
+    if not state.out_of_line(s):
+        return None
+    ratio = s.d_theta / e
+    what = "the same step elsewhere in the loop" if same else "the previous step's"
+    said = f"step out of line: Δangle {s.d_theta:+.4f}° is {ratio:.2f}× {what} {e:+.4f}°"
+    if nxt is None and last:  # the end of the sequence: nothing can tell
+        if not same and _ALONE <= ratio <= _LARGE[0]:  # a gear's drift along a branch looks the same
+            return None
+        small = ratio < 1
+        return _warning(s, "small_step" if small else "large_step", ratio, said + (
+            " (a weight piece forgotten on a pan? or the gear stiffening: the next step will tell)" if small
+            else " (a missed shot, or an extra weight piece? or the gear softening: the next step will tell)"),
+            decided=False)
+    kind = _decide(s, nxt, state, e, same)
+    if kind == "small_step":
+        return _warning(s, kind, ratio, said + " and the next step makes up for it: a weight piece "
+                                               "forgotten on a pan (or taken off too early)")
+    if kind == "large_step":
+        return _warning(s, kind, ratio, said + ", two planned steps in one: a missed shot (this "
+                                               "photograph shows the next row's load)")
+    return None
+
+
+def _decide(s, nxt, state, e, same) -> str | None:
+    """"small_step" (a forgotten piece), "large_step" (a missed shot) or None (the
+    gear's own change of stiffness) for the out-of-line step `s`, from `nxt`."""
+    if nxt is None:  # across the pre-load or a return to zero: nothing can tell
+        return None
+    ratio = s.d_theta / e
+    if nxt.d_tau * s.d_tau < 0:  # the end of a branch: the first step back tells
+        back = state.same_step(nxt)
+        if back is None or ratio > 1 or nxt.d_theta * nxt.d_tau <= 0:
+            return None
+        # a piece forgotten at the turning load: the way back starts half a step early
+        return "small_step" if nxt.d_theta / back < 1 / _SAME_TOL else None
+    if nxt.d_theta * nxt.d_tau <= 0:  # no movement or back: an extra shot or a swap there
+        return None
+    e_next = state.same_step(nxt) if same else None
+    if e_next is not None:  # which explains both steps: a piece forgotten, a missed shot, or the gear
+        sign = 1.0 if s.d_tau > 0 else -1.0
+        short = sign * (e - s.d_theta)  # the angle this step fell short of the same step elsewhere
+        if ratio < _FORGOTTEN:  # a forgotten piece: the next step makes up for what this one lacks
+            made_up = sign * (nxt.d_theta - e_next)
+            return "small_step" if abs(made_up - short) < _MADE_UP * short else None
+        # a missed shot: this step holds the next planned one too, and the next photograph
+        # shows the load of the row after its own
+        after = state.same_step(s, (nxt.span[1], nxt.span[1] + nxt.d_tau))
+        if after is None or abs(math.log(nxt.d_theta / after)) > math.log(_SUM_TOL):
+            return None
+        return "large_step" if abs(-short - sign * e_next) < _MADE_UP * -short else None
+    follow = nxt.compliance / s.compliance
+    if ratio < _SMALL:
+        return "small_step" if follow >= _RECOVERY else None
+    return "large_step" if _LARGE[0] < ratio < _LARGE[1] and follow <= _GOES_ON else None
+
+
+def _row_early(s, nxt, state, e) -> bool:
+    """Step `s` larger than expected and the next photograph turning back while the
+    plan goes on: both a row early (a missed shot before the turning load), when
+    the turn back is as large as the first step back from a turning load seen
+    elsewhere in the loop, and unlike this branch's own step reversed (two
+    photographs taken the other way round)."""
+    if not (nxt.d_tau * s.d_tau > 0 and nxt.d_theta * nxt.d_tau < 0
+            and abs(nxt.d_theta) >= _STILL_SIGMAS * nxt.sigma and s.d_theta / e > _EARLY):
+        return False
+    turn = nxt.span[1]
+    back = state.at(state.place((turn, turn - nxt.d_tau)), nxt.index)
+    if back is None:
+        return False
+    missed = abs(math.log(nxt.d_theta / (back * -nxt.d_tau)))
+    swap_e, _ = state.expected(nxt)
+    swapped = abs(math.log(-nxt.d_theta / swap_e)) if swap_e is not None and swap_e != 0 else math.inf
+    return missed < math.log(_SAME_TOL) and missed < swapped
+
+
+def _warning(s, kind, ratio, message, *, decided=True) -> StepWarning:
+    return StepWarning(s.index, kind, s.d_theta, s.d_tau, ratio, message, decided=decided, torque_span_nm=s.span)
+
+
+def step_misfit(points, *, step_torque_nm: float) -> float:
+    """How far a closed sequence's steps are from the same steps elsewhere in its loop.
+
+    Two bindings of one session that leave no step warning each (a missed shot
+    marked at either of two rows of a soft zone, say) are told apart by this: the
+    right one puts every photograph at its own load, so each step is what the gear
+    does there elsewhere in the loop.
+
+    Parameters
+    ----------
+    points : sequence of StepPoint
+        The images of one orientation in capture order (as for :func:`check_steps`).
+    step_torque_nm : float
+        Torque of one planned weight step (N·m).
+
+    Returns
+    -------
+    float
+        The sum over the steps (of one or two planned weight steps) with a same
+        step elsewhere of ``|ln(Δθ / expected Δθ)|`` (0 for a perfectly
+        repeating loop; dimensionless).
+    """
+    seen = _scan(points, step_torque_nm, False, prior={})[1]
+    state = _State(step_torque_nm, seen)
+    total = 0.0
+    for s in _steps(points):
+        e = state.same_step(s) if state.single(s.d_tau) else None
+        if e and s.d_theta * e > 0:
+            total += abs(math.log(s.d_theta / e))
+    return total
 
 
 def first_load_inverted(points) -> int | None:

@@ -483,9 +483,14 @@ class Watcher:
         for orientation in dict.fromkeys(x.row.orientation_deg for x in self.bound.values()):
             steps += self._analyse(orientation, derived)
         kinks = gear_kinks([w for _, w in steps])  # the gear's own, seen twice: not mistakes
-        for n, (p, w) in enumerate(steps):
+        options: list[str] = []  # every fix so far, in capture order: one bind command applies them all
+        for n, (p, w) in sorted(enumerate(steps), key=lambda t: self.order.index(t[1][0])):
             if n not in kinks:
-                derived[p].insert(0, w.message)
+                # the files after an extra shot are a row late, after a missed shot a row early
+                shift = options.count("--missing") - options.count("--skip")
+                new = self.step_fix(p, w, shift)
+                options += new
+                derived[p].insert(0, w.message + ("; " + self.bind_fix(*options) if new else ""))
         if self.sign_decided in derived:
             derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
         for p, x in self.bound.items():
@@ -542,11 +547,12 @@ class Watcher:
                 points = self._points(ok)
         open_end = any(row.orientation_deg == orientation and i not in self.bound
                        and row.line not in self.missing for i, row in enumerate(self.rows))
-        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+        # verdicts from the images so far and the next only: a warning once said stays
+        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
         if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
             self._try_swap(ok, points, warns, open_end)
             points = self._points(ok)
-            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end)
+            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
         for p in ok:
             if p in self.swapped:
                 derived[p].append(self.swapped[p][1])
@@ -587,20 +593,39 @@ class Watcher:
             return  # across a reversal of the load: a swap cannot be told from the gear there
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
-        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end)
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
         fa, fb = self.bound[a].file, self.bound[b].file
-        if self.camera_mode:
-            fix = ("fix: " + shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera),
-                                         "--swap", fa, fb]))
-        else:
-            fix = f"fix: exchange the names of {fa} and {fb}"
+        fix = (self.bind_fix("--swap", fa, fb) if self.camera_mode
+               else f"fix: exchange the names of {fa} and {fb}")
         text = (f"{fa} and {fb} look swapped: {fa} shows the load of line {self.bound[b].row.line} "
                 f"and {fb} that of line {self.bound[a].row.line} (their angle steps fit the plan the "
                 f"other way round); {fix}")
         self.swapped[a] = (b, text)
         self.swapped[b] = (a, text)
+
+    def bind_fix(self, *options: str) -> str:
+        """"fix: " and the ``vision-torsion bind`` command line with `options`."""
+        return "fix: " + shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera),
+                                     *options])
+
+    def step_fix(self, pos: int, warning, shift: int = 0) -> list[str]:
+        """The ``bind`` options fixing a step warning on the photograph bound at
+        `pos`; none when the step says no mistake for sure or the files carry their
+        rows' names (nothing to re-bind). An extra shot is left out; a missed
+        shot's row is marked as not photographed, so that the files from this one
+        on bind one row later; a photograph with a piece forgotten is left out and
+        its row marked as not photographed (its load cannot be set again without
+        leaving the loop's path). The row is the one the photograph shows with the
+        fixes before it applied: `shift` rows after the one it is bound to."""
+        if not self.camera_mode or not warning.decided:
+            return []
+        x = self.bound[pos]
+        shown = pos + shift
+        line = str(self.rows[shown].line if 0 <= shown < len(self.rows) else x.row.line)
+        return {"no_movement": ["--skip", x.file], "large_step": ["--missing", line],
+                "small_step": ["--skip", x.file, "--missing", line]}.get(warning.kind, [])
 
     def sign_message(self, pos: int) -> str:
         """The one line saying the session's angle_sign is inverted (at `pos`, the

@@ -10,7 +10,7 @@ dead zone, and the effective meshing tooth pairs n(T) = K(T)/Ks with the wrap an
 - :mod:`.filtering` — zero-phase Butterworth low-pass;
 - :mod:`.branches` — loading/unloading branches;
 - :mod:`.curve` — loading-branch fits, the stiffness curve per cycle and its summary;
-- :mod:`.steps` — camera-rig stiffness per load step, Δτ/Δθ, per loop;
+- :mod:`.per_step` — camera-rig stiffness per load step, Δτ/Δθ, per loop;
 - :mod:`.backlash` — the dead zone;
 - :mod:`.meshing` — meshing pairs, wrap angle, Ks calibration, linearity check;
 - :mod:`.analysis` — :func:`analyze_stiffness_curve`, the whole chain;
@@ -23,6 +23,6 @@ Records with known truth are made by :mod:`vision_torsion.synthetic.encoder`.
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "records", "rig", "section", "steps")
+_LAZY = ("analysis", "backlash", "branches", "curve", "filtering", "meshing", "records", "rig", "per_step", "section")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -19,8 +19,8 @@ import pandas as pd
 from ..errors import AnalysisError
 from ..measurements import read_measurements
 from .analysis import StiffnessResult, analyze_stiffness_curve, as_record
+from .per_step import step_stiffness, summarise_steps
 from .rig import RigConstants
-from .steps import step_stiffness, summarise_steps
 
 __all__ = ["StiffnessSection", "stiffness_section"]
 

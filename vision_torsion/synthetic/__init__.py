@@ -8,6 +8,6 @@ known to far better than a thousandth of a pixel.
 from ..lazy import attach
 
 # the modules whose __all__ make up this face, each imported on first use of one of its names
-_LAZY = ("encoder", "geometry", "render", "scene", "tables", "targets")
+_LAZY = ("encoder", "gears", "geometry", "measurement_tables", "render", "scene", "target_scenes")
 
 __getattr__, __dir__ = attach(__name__, _LAZY)

@@ -1,8 +1,8 @@
-"""Normalising a computed plane correction (calibration's side of :mod:`vision_torsion.correction`).
+"""Anchoring a computed plane correction: calibration's side of :mod:`vision_torsion.correction`.
 
-:class:`~vision_torsion.correction.PlaneCorrection` and :func:`~vision_torsion.correction.load_correction`
-live in the core (:mod:`vision_torsion.correction`), beside the settings and the angle
-that apply them; they are re-exported here for the calibration code and its callers.
+:class:`~vision_torsion.correction.PlaneCorrection` lives in the core, beside the
+settings and the angle that apply it; here a computed one is normalised so that it
+looks like the identity at an anchor point.
 """
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..correction import FORMAT_NAME, FORMAT_VERSION, PlaneCorrection, check_suffix, load_correction
+from ..correction import PlaneCorrection
 from ..errors import CalibrationError
 
-__all__ = ["PlaneCorrection", "load_correction", "normalised", "check_suffix", "FORMAT_NAME", "FORMAT_VERSION"]
+__all__ = ["normalised"]
 
 
 def normalised(correction: PlaneCorrection, anchor) -> PlaneCorrection:
