@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 
 from vision_torsion.analysis import analyze_session
+from vision_torsion.analysis.catalogue import fit_catalogue_breaks
 from vision_torsion.analysis.metrics import chord_area, chord_error, loop_energy
 from vision_torsion.analysis.models import bilinear_response
 from vision_torsion.analysis.session_analysis import TORQUE_NOT_MODELLED
@@ -128,6 +129,40 @@ def test_fitted_break_uncertainty_matches_its_scatter(repeated):
         z = np.array([(f.loc[fig, "value"] - truth[fig]) / f.loc[fig, "std"] for f in repeated])
         assert 0.5 <= np.sqrt(np.mean(z**2)) <= 1.6, (fig, z.round(2))
         assert all("bootstrap" in f.loc[fig, "method"] for f in repeated)
+
+
+def _weak_kink_branches(seed, noise_rad):
+    """Both loading branches of a two-segment curve (K1 = 2, K2 = 4.4 N·m/rad, T1 = 0.15 N·m) on the rig's levels."""
+    x = np.arange(19) * STEP_NM / 2
+    h = np.minimum(x, 0.15) / 2.0 + np.maximum(x - 0.15, 0.0) / 4.4
+    rng = np.random.default_rng(seed)
+    return np.concatenate([x, -x]), np.concatenate([h, -h]) + rng.normal(0.0, noise_rad, 2 * x.size)
+
+
+def test_fitted_break_interval_is_read_from_the_draws():
+    """Where the break is resolved the bootstrap's draws are close to normal: their 95 % half-width is
+    1.96·std, known from 200 draws to about ±12 % (the order statistic's scatter); with fewer than 19
+    valid draws no 95 % interval can be read from them and it is NaN."""
+    tau, th = _weak_kink_branches(5, 1e-3)
+    branch = np.repeat([1, -1], tau.size // 2)
+    r = fit_catalogue_breaks(tau, th, branch=branch, angle_std_rad=1e-3, torque_std_nm=0.0, n_draws=200, seed=1)
+    assert r["n_breaks"] == 1
+    for q, sa, st in ((r["u95"][0], r["std_angle"][0], r["std_torque"][0]),
+                      (r["breaks_u95"][0], r["breaks_std_angle"][0], r["breaks_std_torque"][0])):
+        assert 1.6 <= q / math.hypot(sa, st) <= 2.4
+    few = fit_catalogue_breaks(tau, th, branch=branch, angle_std_rad=1e-3, torque_std_nm=0.0, n_draws=15, seed=1)
+    assert math.isnan(few["u95"][0]) and math.isnan(few["breaks_u95"][0])
+    assert np.isfinite(few["std_angle"][0])
+
+
+def test_fitted_breaks_without_an_uncertainty_are_an_error():
+    # a straight line: the break is anywhere, and most bootstrap refits push it off the levels
+    x = np.arange(7) * 0.05
+    tau = np.concatenate([x, -x])
+    th = tau / 2.0 + np.random.default_rng(4).normal(0.0, 1e-3, tau.size)
+    with pytest.raises(AnalysisError, match=r"are not identified: only \d+ % of the bootstrap's refits"):
+        fit_catalogue_breaks(tau, th, branch=np.repeat([1, -1], x.size), angle_std_rad=1e-3, torque_std_nm=0.0,
+                             n_draws=50, seed=4)
 
 
 def test_k1_is_consistent_with_the_bilinear_k_l(repeated):

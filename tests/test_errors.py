@@ -61,3 +61,5 @@ def test_cli_failure_line_follows_the_status_not_the_wording():
         failure_line("a.png", "suspect: worded like one", status="failed") == "failed: a.png: suspect: worded like one"
     )
     assert failure_line("a.png", "a.png: no markers") == "failed: a.png: no markers"
+    assert failure_line("a.png", "no marker at dot(s) 5", status="marker_missing") == \
+        "marker_missing: a.png: no marker at dot(s) 5"

@@ -59,7 +59,7 @@ def test_command_reports_the_bump_and_fails_on_the_rest(folder, tmp_path, capsys
     err = capsys.readouterr().err
     assert code == 1
     assert "img_3.png: img_3.png: the shaft axis moved by" in err
-    assert "failed: img_4.png: the index mark (dot 0)" in err and "img_5.png" in err
+    assert "ambiguous: img_4.png: the index mark (dot 0)" in err and "img_5.png" in err
 
 
 def test_reference_of_another_layout_is_refused(folder, tmp_path):

@@ -13,7 +13,15 @@ import pytest
 
 from vision_torsion.errors import TargetError
 from vision_torsion.markers import find_markers
-from vision_torsion.rigid import fit_rigid, identify_markers, rotation_centre, target_angle, target_angles
+from vision_torsion.rigid import (
+    TargetAngle,
+    axis_motion,
+    fit_rigid,
+    identify_markers,
+    rotation_centre,
+    target_angle,
+    target_angles,
+)
 from vision_torsion.synthetic import Scene, render, target_scene
 from vision_torsion.synthetic.bounds import target_angle_bound_deg
 from vision_torsion.synthetic.geometry import marker_centres_image
@@ -229,3 +237,56 @@ def test_rotation_centre_needs_a_turn(ref):
     with pytest.raises(TargetError, match=r"rotation_centre: no usable image turned by 1° or more") as err:
         rotation_centre(res)
     assert err.value.reason == "too_few_turns"
+
+
+def _axis_sequence(angles_deg, offset_px, jumps, *, sigma_px=0.01, seed=0):
+    """TargetAngles of a target `offset_px` off the shaft turning by `angles_deg`, the
+    axis moved by `jumps` ({image: (dx, dy)}, each image alone), shift noise `sigma_px`."""
+    rng = np.random.default_rng(seed)
+    cov = np.eye(2) * sigma_px**2
+    out = []
+    for k, a in enumerate(angles_deg):
+        t = np.radians(a)
+        R = np.array([[math.cos(t), math.sin(t)], [-math.sin(t), math.cos(t)]])
+        shift = (np.eye(2) - R) @ np.asarray(offset_px) + np.asarray(jumps.get(k, (0.0, 0.0)))
+        shift = shift + (rng.normal(0.0, sigma_px, 2) if k else 0.0)
+        out.append(TargetAngle(a, 1e-3, shift_x_px=shift[0], shift_y_px=shift[1], shift_cov=cov))
+    return out
+
+
+LOOP = [0.0, 4.7, 4.5, 4.2, 2.0, -0.3, -2.5, -4.7, -4.5, -4.2, -2.0, 0.3, 2.5, 4.7]
+
+
+def test_axis_motion_tells_an_eccentric_target_from_a_bump():
+    # 12 px off the shaft: the centre swings by up to 1 px over the loop, and that is no bump
+    m = axis_motion(_axis_sequence(LOOP, (12.0, -5.0), {}))
+    assert m.jumps == () and abs(m.offset_x_px - 12.0) < 0.3 and abs(m.offset_y_px + 5.0) < 0.3
+    assert np.nanmax(np.abs(m.shifts_px)) < 0.05
+
+
+@pytest.mark.parametrize("image", [1, 7, 13])  # the largest turns, either way, and the last image
+def test_axis_motion_finds_a_one_pixel_spike_anywhere(image):
+    m = axis_motion(_axis_sequence(LOOP, (12.0, -5.0), {image: (0.0, 1.0)}))
+    assert m.jumps == ((image, "spike"),)
+    assert np.allclose(m.jump_px[image], (0.0, 1.0), atol=0.05) and m.jump_sigma[image] > 50
+    assert abs(m.shifts_px[image, 1] - 1.0) < 0.05
+
+
+def test_axis_motion_finds_a_camera_that_moved_for_good():
+    moved = {k: (0.7, 0.0) for k in range(6, len(LOOP))}
+    m = axis_motion(_axis_sequence(LOOP, (0.0, 0.0), moved))
+    assert m.jumps == ((6, "step"),) and np.allclose(m.jump_px[6], (0.7, 0.0), atol=0.05)
+    assert np.all(np.abs(m.shifts_px[6:, 0] - 0.7) < 0.05)
+
+
+def test_axis_motion_ignores_jumps_below_the_floor_or_the_noise():
+    assert axis_motion(_axis_sequence(LOOP, (0.0, 0.0), {5: (0.2, 0.0)})).jumps == ()  # 20σ, under 0.25 px
+    noisy = _axis_sequence(LOOP, (0.0, 0.0), {5: (0.3, 0.0)}, sigma_px=0.1)  # 3σ, over 0.25 px
+    assert axis_motion(noisy).jumps == ()
+
+
+def test_axis_motion_of_unusable_images_is_blank():
+    seq = _axis_sequence(LOOP[:3], (0.0, 0.0), {})
+    seq[1] = TargetAngle(math.nan, math.nan, status="ambiguous")
+    m = axis_motion(seq)
+    assert m.jumps == () and np.isnan(m.shifts_px[1]).all() and not np.isnan(m.shifts_px[2]).any()

@@ -1,5 +1,6 @@
 """An N-marker target in session.toml: planned with `plan --target`, read back, validated
-by key, and refused by `process` (which measures the two-marker target only)."""
+by key; `process` of a planned session not shot yet (its images measured:
+test_session_target_process)."""
 
 import pytest
 
@@ -56,9 +57,9 @@ def test_session_target_by_name():
     assert cfg.target.n_markers == 25
 
 
-def test_process_refuses_a_session_of_an_n_marker_target(tmp_path):
+def test_process_of_a_target_session_waits_for_its_images(tmp_path):
     plan_session(plan_config(steps=2, step_mass_kg=0.02, arm_radius_m=0.05, target="ring8"), tmp_path / "s")
-    with pytest.raises(SessionError, match=r"\[target\] names the 8-marker target 'ring8', which `process` does "
-                                           r"not measure yet") as err:
-        process_session(tmp_path / "s", jobs=1)
-    assert err.value.reason == "target_not_processed"
+    res = process_session(tmp_path / "s", jobs=1)
+    assert res.n_pending == res.n_images and res.n_failed == 0
+    assert res.measurements_path.read_text(encoding="utf-8").splitlines()[0].endswith(
+        "message,markers_used,centre_shift_x_px,centre_shift_y_px,centre_shift_x_std_px,centre_shift_y_std_px,bump")

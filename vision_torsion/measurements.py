@@ -45,6 +45,7 @@ __all__ = [
     "MANIFEST_COLUMNS",
     "MANIFEST_OPTIONAL_COLUMNS",
     "RESULT_COLUMNS",
+    "TARGET_RESULT_COLUMNS",
     "MEASUREMENT_COLUMNS",
     "MAX_TABLE_MAGNITUDE",
     "NUMERIC_COLUMNS",
@@ -80,15 +81,23 @@ MANIFEST_OPTIONAL_COLUMNS = ("torque_nm", "torque_std_nm")
 #: Columns ``process`` adds after the manifest's own (replacing its torque columns).
 RESULT_COLUMNS = ("torque_nm", "torque_std_nm", "torque_common_std_nm", "torque_source",
                   "angle_deg", "angle_std_deg", "status", "message")
+#: Columns ``process`` adds after :data:`RESULT_COLUMNS` for a session of an N-marker
+#: target (``[target]`` in session.toml): the markers the angle rests on, the motion of
+#: the shaft axis since the orientation's reference image with the target's
+#: eccentricity removed (px, image x right, y down) and its 1σ, and ``bump`` (1 where
+#: the axis jumped with no rotation: a bumped camera or a loose fixture, else 0).
+TARGET_RESULT_COLUMNS = ("markers_used", "centre_shift_x_px", "centre_shift_y_px", "centre_shift_x_std_px",
+                         "centre_shift_y_std_px", "bump")
 #: Columns every ``measurements.csv`` has and the analysis needs.
 MEASUREMENT_COLUMNS = ("image", "orientation_deg", "cycle", "phase", "step", "mass_kg",
                        "torque_nm", "torque_std_nm", "angle_deg", "angle_std_deg",
                        "status", "message")
 #: Numeric columns (read as float64; a blank cell is NaN).
 NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm",
-                   "torque_std_nm", "torque_common_std_nm", "angle_deg", "angle_std_deg")
-#: Numeric columns that may not be negative (masses and standard uncertainties).
-_NON_NEGATIVE = ("mass_kg", "torque_std_nm", "torque_common_std_nm", "angle_std_deg")
+                   "torque_std_nm", "torque_common_std_nm", "angle_deg", "angle_std_deg") + TARGET_RESULT_COLUMNS
+#: Numeric columns that may not be negative (masses, standard uncertainties, counts).
+_NON_NEGATIVE = ("mass_kg", "torque_std_nm", "torque_common_std_nm", "angle_std_deg", "markers_used",
+                 "centre_shift_x_std_px", "centre_shift_y_std_px", "bump")
 #: Largest magnitude of any number in the table: no torque (N·m), mass (kg), angle
 #: or orientation (degrees), cycle or step of a gear test comes near it; a value
 #: beyond it is a typing or unit slip, refused with its row before any analysis

@@ -55,11 +55,13 @@ __all__ = [
     "MarkerResidual",
     "TargetAngle",
     "RotationCentre",
+    "AxisMotion",
     "identify_markers",
     "fit_rigid",
     "target_angle",
     "target_angles",
     "rotation_centre",
+    "axis_motion",
     "measure_target_folder",
     "IDENTITY_STATUSES",
     "TARGET_COLUMNS",
@@ -148,6 +150,7 @@ def _hypotheses(P, rd, target, radius_tolerance) -> dict:
     len_l = np.hypot(vl[:, 0], vl[:, 1])
     ang_l = np.arctan2(vl[:, 1], vl[:, 0])
     best = {}  # assignment (a marker index or -1 per dot) -> (score, the dots that agree)
+    reach = POSITION_TOLERANCE * target.min_spacing_mm  # a property that compares every pair of dots: once
     for a in seeds:
         for b in np.argsort(dpp[a])[: min(_PARTNERS, len(P) - 1)]:
             vp = P[b] - P[a]
@@ -165,7 +168,7 @@ def _hypotheses(P, rd, target, radius_tolerance) -> dict:
             dist = np.hypot(*(mapped[:, :, None, :] - P[None, None, :, :]).transpose(3, 0, 1, 2))
             near = dist.argmin(axis=2)
             near_d = np.take_along_axis(dist, near[..., None], axis=2)[..., 0]
-            matched = near_d <= POSITION_TOLERANCE * target.min_spacing_mm * sk[:, None]
+            matched = near_d <= reach * sk[:, None]
             agrees = matched & (np.abs(rd[near] - sk[:, None] * rl) <= radius_tolerance * sk[:, None] * rl)
             score = agrees.sum(axis=1)
             for h in np.flatnonzero(score == score.max()):
@@ -257,9 +260,33 @@ def identify_markers(markers, target, *, name: str = "image",
         if mismatched:
             parts.append(f"a marker of the wrong size at dot(s) {', '.join(map(str, mismatched))}")
         message = f"{name}: {'; '.join(parts)} of the target {target.name!r}"
+        why = _unfitted_at(markers, L[list(missing)], missing, scale, turn, shift,
+                           POSITION_TOLERANCE * target.min_spacing_mm)
+        message += f" ({'; '.join(why)})" if why else ""
     return Identification(status=status, message=message, rows=rows, scale_px_per_mm=scale,
                           turn_deg=-math.degrees(turn), axis_x_px=float(axis[0]), axis_y_px=float(axis[1]),
                           missing=tuple(sorted(set(missing) | set(mismatched))), mismatched=mismatched)
+
+
+def _unfitted_at(markers, dots_mm, dots, scale, phi, shift, reach_mm) -> list:
+    """Why a candidate that was not fitted sits where each of `dots` should be: "dot k:
+    a candidate there was not fitted (STATUS: MESSAGE)", for the dots that have one
+    (the layout mapped by the similarity (`scale`, `phi`, `shift`) of the others)."""
+    bad = markers[markers["status"] != "ok"]
+    if not len(bad) or not len(dots):
+        return []
+    c, s = math.cos(phi), math.sin(phi)
+    at = scale * np.column_stack([c * dots_mm[:, 0] - s * dots_mm[:, 1], s * dots_mm[:, 0] + c * dots_mm[:, 1]]) + shift
+    xy = bad[["x_px", "y_px"]].to_numpy(dtype=np.float64)
+    out = []
+    for k, (x, y) in zip(dots, at):
+        d = np.hypot(xy[:, 0] - x, xy[:, 1] - y)
+        j = int(np.argmin(d))
+        if d[j] <= reach_mm * scale:
+            m = bad.iloc[j]
+            detail = f"{m['status']}: {m['message']}" if "message" in bad.columns and m["message"] else m["status"]
+            out.append(f"dot {k}: a candidate there was not fitted ({detail})")
+    return out
 
 
 def _similarity(src, dst):
@@ -516,13 +543,15 @@ def _table(obj, settings, name):
 
 
 def _centres(table, ident):
-    xy = np.full((len(ident.rows), 2), np.nan)
-    cov = np.full((len(ident.rows), 2, 2), np.nan)
-    for k, row in enumerate(ident.rows):
-        if row >= 0:
-            m = table.loc[row]
-            xy[k] = (m["x_px"], m["y_px"])
-            cov[k] = [[m["x_std_px"] ** 2, m["xy_cov_px2"]], [m["xy_cov_px2"], m["y_std_px"] ** 2]]
+    """(n, 2) centres and (n, 2, 2) covariances (px, px²) of the target's dots, NaN for a dot with no marker."""
+    rows = np.asarray(ident.rows, dtype=np.int64)
+    have = rows >= 0
+    m = table.loc[rows[have], ["x_px", "y_px", "x_std_px", "y_std_px", "xy_cov_px2"]].to_numpy(dtype=np.float64)
+    xy = np.full((len(rows), 2), np.nan)
+    cov = np.full((len(rows), 2, 2), np.nan)
+    xy[have] = m[:, :2]
+    cov[have, 0, 0], cov[have, 1, 1] = m[:, 2] ** 2, m[:, 3] ** 2
+    cov[have, 0, 1] = cov[have, 1, 0] = m[:, 4]
     return xy, cov
 
 
@@ -624,13 +653,15 @@ def target_angle(reference, current, *, target, settings: MeasureSettings | None
 
 
 def target_angles(reference, images, *, target, settings: MeasureSettings | None = None,
-                  reject_sigma: float = 5.0, bump_sigma: float = 5.0, bump_px: float = 0.25) -> list:
+                  reject_sigma: float = 5.0, bump_sigma: float = 5.0, bump_px: float = 0.25,
+                  names=None) -> list:
     """:func:`target_angle` for each of `images` against one reference, angles unwrapped.
 
     The identity comes from the layout in every image, so the angles need no
     tracking; they are unwrapped (continuous across ±180°) over the usable ones, in
     the order given. Parameters, Raises as :func:`target_angle`; an image that
-    cannot be read raises.
+    cannot be read raises. `names` (one per image) name the images in the messages
+    (``image 0``, ``image 1``, ... by default).
 
     Returns
     -------
@@ -642,8 +673,8 @@ def target_angles(reference, images, *, target, settings: MeasureSettings | None
     origin = (ident.axis_x_px, ident.axis_y_px)
     out, last = [], 0.0
     for k, img in enumerate(images):
-        res = _measure(ref_xy, ref_cov, origin, img, target, settings, f"image {k}", reject_sigma,
-                       bump_sigma, bump_px)
+        res = _measure(ref_xy, ref_cov, origin, img, target, settings, f"image {k}" if names is None else names[k],
+                       reject_sigma, bump_sigma, bump_px)
         if res.usable:
             a = last + ((res.angle_deg - last + 180.0) % 360.0 - 180.0)
             res = dataclasses.replace(res, angle_deg=a)
@@ -709,6 +740,163 @@ def rotation_centre(results, *, min_turn_deg: float = 1.0) -> RotationCentre:
         if r.usable:
             shifts[k] = np.array([r.shift_x_px, r.shift_y_px]) - (np.eye(2) - _rot(math.radians(r.angle_deg))) @ a
     return RotationCentre(float(a[0]), float(a[1]), cov, shifts, used)
+
+
+@dataclass(frozen=True)
+class AxisMotion:
+    """How the shaft axis moved along a sequence, and where it jumped (:func:`axis_motion`).
+
+    Attributes
+    ----------
+    offset_x_px, offset_y_px : float
+        The target's eccentricity a (the axis minus the target's centre, px); 0 when
+        the sequence turns too little to fit it.
+    shifts_px : numpy.ndarray
+        (n, 2) motion of the axis since the reference, eccentricity removed (px);
+        NaN where the image is not usable.
+    shift_std_px : numpy.ndarray
+        (n, 2) its 1σ (px), the eccentricity's uncertainty included.
+    jumps : tuple of (int, str)
+        (image index, ``"spike"`` or ``"step"``) of every jump found: the axis moved
+        in that image alone and came back (a spike), or moved and stayed (a step).
+    jump_px : numpy.ndarray
+        (n, 2) the fitted jump at each jump's image (px); NaN elsewhere.
+    jump_sigma : numpy.ndarray
+        (n,) its significance, √Δχ² of adding it (NaN elsewhere).
+    """
+
+    offset_x_px: float
+    offset_y_px: float
+    shifts_px: np.ndarray = field(repr=False)
+    shift_std_px: np.ndarray = field(repr=False)
+    jumps: tuple
+    jump_px: np.ndarray = field(repr=False)
+    jump_sigma: np.ndarray = field(repr=False)
+
+
+def _axis_design(thetas, eccentric, jumps):
+    """(2n, p) design of the axis shifts: the eccentricity's (I − R(θ_j)) columns,
+    then a pair of columns per jump (image `k` alone for a spike, from `k` on for a step)."""
+    n = len(thetas)
+    cols = []
+    if eccentric:
+        A = np.stack([np.eye(2) - _rot(t) for t in thetas])  # (n, 2, 2)
+        cols.append(A.reshape(2 * n, 2))
+    for k, kind in jumps:
+        on = (np.arange(n) == k) if kind == "spike" else (np.arange(n) >= k)
+        cols.append(np.kron(on[:, None].astype(float), np.eye(2)))
+    return np.hstack(cols) if cols else np.zeros((2 * n, 0))
+
+
+def _axis_fit(thetas, white, y, eccentric, jumps):
+    """Weighted least squares of the axis shifts: (coefficients, χ², unscaled covariance)."""
+    X = np.einsum("nij,njk->nik", white, _axis_design(thetas, eccentric, jumps).reshape(len(thetas), 2, -1))
+    X = X.reshape(2 * len(thetas), -1)
+    if X.shape[1] == 0:
+        return np.zeros(0), float(y @ y), np.zeros((0, 0))
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ beta
+    return beta, float(r @ r), np.linalg.pinv(X.T @ X)
+
+
+def axis_motion(results, *, bump_sigma: float = 5.0, bump_px: float = 0.25, min_turn_deg: float = 1.0,
+                max_jumps: int = 3) -> AxisMotion:
+    """Where the shaft axis jumped along a sequence of :class:`TargetAngle` (one orientation's images).
+
+    Each usable image's axis shift t_j (its rigid fit against the reference) is
+    modelled, weighted by its covariance, as
+
+        t_j = (I − R(θ_j))·a + Σ_b d_b·[j in b],
+
+    the eccentricity a of the target on the shaft (fitted when the usable images span
+    at least `min_turn_deg`, else 0) plus jumps d_b: a *spike* (image k alone: a
+    camera knocked and back, a bumped fixture springing back) or a *step* (image k
+    and all after it: a camera moved for good). Jumps are added one at a time, the
+    one lowering χ² most first, while the drop exceeds `bump_sigma`² (χ² scaled by
+    χ²/dof of the model with the jump when that is above 1, so shifts noisier than
+    their reported σ raise no false jumps) and the jump exceeds `bump_px` pixels,
+    up to `max_jumps`.
+
+    Parameters
+    ----------
+    results : sequence of TargetAngle
+        In shooting order; the reference image (shift 0) first.
+    bump_sigma, bump_px : float
+        Significance (σ) and size (px) a jump must both exceed.
+    min_turn_deg : float
+        Turn range of the usable images needed to fit the eccentricity.
+    max_jumps : int
+        Most jumps reported.
+
+    Returns
+    -------
+    AxisMotion
+        Image indices are positions in `results`.
+
+    Notes
+    -----
+    The images' shifts are taken as independent; their common part (the reference
+    image's centres) is the same in every one and moves no jump. A jump at the
+    image where the turn is largest is told from the eccentricity by the images
+    turned the other way (a hysteresis loop turns both ways).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> cov = np.eye(2) * 1e-4
+    >>> seq = [TargetAngle(a, 1e-3, shift_x_px=dx, shift_y_px=0.0, shift_cov=cov)
+    ...        for a, dx in [(0, 0.0), (2, 0.001), (1, 1.0), (-1, -0.002), (-2, 0.0)]]
+    >>> m = axis_motion(seq)
+    >>> m.jumps, round(float(m.jump_px[2, 0]), 2)
+    (((2, 'spike'),), 1.0)
+    """
+    n_all = len(results)
+    use = [k for k, r in enumerate(results)
+           if r.usable and math.isfinite(r.shift_x_px) and np.all(np.isfinite(r.shift_cov))]
+    shifts = np.full((n_all, 2), np.nan)
+    stds = np.full((n_all, 2), np.nan)
+    jump_px = np.full((n_all, 2), np.nan)
+    jump_sigma = np.full(n_all, np.nan)
+    if not use:
+        return AxisMotion(0.0, 0.0, shifts, stds, (), jump_px, jump_sigma)
+    thetas = np.radians([results[k].angle_deg for k in use])
+    t = np.array([[results[k].shift_x_px, results[k].shift_y_px] for k in use])
+    covs = np.array([results[k].shift_cov for k in use])
+    white = np.linalg.inv(np.linalg.cholesky(covs))  # L⁻¹ with LLᵀ = C: whitened residuals
+    y = np.einsum("nij,nj->ni", white, t).reshape(-1)
+    eccentric = len(use) > 2 and float(np.ptp(np.degrees(thetas))) >= min_turn_deg
+    jumps, gains = [], []
+    beta, chi2, unscaled = _axis_fit(thetas, white, y, eccentric, jumps)
+    for _ in range(max_jumps):
+        best = None
+        for pos in range(1, len(use)):
+            for kind in ("spike", "step"):
+                if any(p == pos for p, _ in jumps) or (kind == "step" and pos == len(use) - 1):
+                    continue
+                b, c2, cov = _axis_fit(thetas, white, y, eccentric, jumps + [(pos, kind)])
+                dof = y.size - b.size
+                gain = (chi2 - c2) / max(1.0, c2 / dof if dof > 0 else 1.0)
+                if best is None or gain > best[0]:
+                    best = (gain, (pos, kind), b, c2, cov)
+        if best is None or best[0] <= bump_sigma**2 or math.hypot(*best[2][-2:]) <= bump_px:
+            break
+        gains.append(best[0])
+        jumps.append(best[1])
+        _, _, beta, chi2, unscaled = best
+    dof = y.size - beta.size
+    scale = max(1.0, chi2 / dof) if dof > 0 else 1.0
+    a = beta[:2] if eccentric else np.zeros(2)
+    cov_a = unscaled[:2, :2] * scale if eccentric else np.zeros((2, 2))
+    for j, k in enumerate(use):
+        A = np.eye(2) - _rot(thetas[j])
+        shifts[k] = t[j] - A @ a
+        stds[k] = np.sqrt(np.diag(covs[j] + A @ cov_a @ A.T))
+    off = 2 if eccentric else 0
+    for b, ((pos, kind), gain) in enumerate(zip(jumps, gains)):
+        jump_px[use[pos]] = beta[off + 2 * b:off + 2 * b + 2]
+        jump_sigma[use[pos]] = math.sqrt(gain)
+    return AxisMotion(float(a[0]), float(a[1]), shifts, stds, tuple((use[p], kind) for p, kind in jumps),
+                      jump_px, jump_sigma)
 
 
 #: Columns of the angles.csv of an N-marker target (:func:`measure_target_folder`).

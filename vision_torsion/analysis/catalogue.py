@@ -233,6 +233,9 @@ def break_bootstrap(
     dict
         ``std_angle``, ``std_torque``: lists of the 1σ of each K (N·m/rad);
         ``breaks_std_angle``, ``breaks_std_torque``: of each break (N·m);
+        ``u95``, ``breaks_u95``: the half-width of each K's and each break's 95 %
+        interval from the draws of both sources at once (see Notes; NaN when fewer
+        than half the draws are valid or fewer than 19 are);
         ``draws``: the draws per source; ``valid``: the share of draws whose refit
         converged to ordered breaks with positive compliances (the stds are over
         those; NaN when fewer than half did).
@@ -260,6 +263,21 @@ def break_bootstrap(
     levels where the data ask for it. The number of breaks is the fitted model's.
     A draw whose refit leaves a segment with fewer than two measured levels, an
     unordered break or a non-positive compliance is not counted.
+
+    **The interval, not only the std.** Where the break is resolved to well within
+    the spacing of the levels the draws are close to normal and ``k·std`` is their
+    95 % interval. Where it is not, the refit moves the break from one gap between
+    levels to the next, K and T jump with it, and the draws' distribution has
+    heavier tails than a normal one of the same std (and, the estimator being
+    nonlinear, an offset from the fit): ``2·std`` then covers less than 95 %. So the
+    draws are also taken with both sources at once (``θ* = f̂ + σθ·z + f̂'·L·ξ``,
+    the same ``z`` and ``ξ`` as the two parts) and each quantity's 95 % interval is
+    read from them directly, symmetric about the fit (Hall's symmetric bootstrap
+    interval): ``u95 = |q* − q̂|₍ᵣ₎``, the r-th smallest of the D valid draws'
+    distances from the fit with ``r = ⌈0.95·(D + 1)⌉``. A further draw exchangeable
+    with these D lies within the r-th smallest distance with probability
+    ``r/(D + 1) ≥ 95 %`` whatever the distribution, so a finite D does not shorten
+    the interval (D ≥ 19 is needed for r ≤ D).
     """
     tau = np.asarray(torque_nm, float).reshape(-1)
     sign = np.sign(np.asarray(branch, float)).reshape(-1)
@@ -277,6 +295,7 @@ def break_bootstrap(
     rng = np.random.default_rng(seed)
     y_angle = model0[None, :] + rng.standard_normal((n_draws, tau.size)) * sa[None, :]
     y_torque = model0[None, :] + (rng.standard_normal((n_draws, L.shape[1])) @ L.T) * fit["compliance"][None, :]
+    y_both = y_angle + y_torque - model0[None, :]
 
     def design(brk):  # (D, n, m + 3) design and the (D, n, m) derivative mask [x > T_k]
         d = brk.shape[0]
@@ -335,13 +354,24 @@ def break_bootstrap(
             return [float("nan")] * values.shape[1]
         return [float(v) for v in np.std(values[valid], axis=0, ddof=1)]
 
+    def half_widths(values, fitted, valid):
+        d = int(valid.sum())
+        r = math.ceil(0.95 * (d + 1))
+        if d < max(2, valid.size // 2) or r > d:
+            return [float("nan")] * values.shape[1]
+        dist = np.sort(np.abs(values[valid] - np.asarray(fitted, float)[None, :]), axis=0)
+        return [float(v) for v in dist[r - 1]]
+
     k_a, b_a, v_a = refit(y_angle)
     k_t, b_t, v_t = refit(y_torque)
+    k_b, b_b, v_b = refit(y_both)
     return {
         "std_angle": stds(k_a, v_a),
         "std_torque": stds(k_t, v_t),
         "breaks_std_angle": stds(b_a, v_a),
         "breaks_std_torque": stds(b_t, v_t),
+        "u95": half_widths(k_b, 1.0 / coef0[2:], v_b),
+        "breaks_u95": half_widths(b_b, brk0, v_b),
         "draws": int(n_draws),
         "valid": float(min(v_a.mean(), v_t.mean())),
     }
@@ -461,13 +491,16 @@ def fit_catalogue_breaks(
     With ``n_draws > 0`` its ``std_angle``/``std_torque`` are those of
     :func:`break_bootstrap` (``n_draws`` draws per source, ``seed``): the breaks'
     uncertainty included; ``breaks_std_angle``, ``breaks_std_torque`` (N·m),
+    ``u95``, ``breaks_u95`` (the draws' own 95 % half-widths, both sources at once),
     ``draws`` and ``bootstrap_valid`` are added. With ``n_draws = 0`` the
     uncertainties are first order with the breaks held (no break uncertainty).
 
     Raises
     ------
     AnalysisError
-        Fewer than 4 distinct torque magnitudes, or no placement of a break works.
+        Fewer than 4 distinct torque magnitudes, no placement of a break works, or
+        (with ``n_draws > 0``) fewer than half of the bootstrap's refits are valid, so
+        the breaks are not identified and no uncertainty can be given.
     """
     tau = np.asarray(torque_nm, float).reshape(-1)
     th = np.asarray(angle_rad, float).reshape(-1)
@@ -533,11 +566,22 @@ def fit_catalogue_breaks(
         boot = break_bootstrap(
             tau, branch=sign, fit=out, angle_std_rad=sa, torque_sources=src, n_draws=n_draws, seed=seed
         )
+        if not np.all(np.isfinite([*boot["std_angle"], *boot["std_torque"], *boot["breaks_std_angle"],
+                                   *boot["breaks_std_torque"]])):
+            # a figure without its uncertainty is withheld, never shown with a NaN ±
+            raise AnalysisError(
+                f"the fitted break torques {', '.join(f'{b:.4g}' for b in out['breaks_nm'])} N·m are not "
+                f"identified: only {100 * boot['valid']:.0f} % of the bootstrap's refits (at least half needed) "
+                "kept ordered breaks with two measured levels per segment and positive compliances, so the "
+                "uncertainty of K and T cannot be given; give the catalogue T1/T2"
+            )
         out.update(
             std_angle=boot["std_angle"],
             std_torque=boot["std_torque"],
             breaks_std_angle=boot["breaks_std_angle"],
             breaks_std_torque=boot["breaks_std_torque"],
+            u95=boot["u95"],
+            breaks_u95=boot["breaks_u95"],
             draws=boot["draws"],
             bootstrap_valid=boot["valid"],
         )

@@ -1,6 +1,8 @@
 """Figure family: the catalogue's K1, K2, K3 of a loop — with the catalogue's break torques T1, T2
 fixed (linear least squares), or with the breaks fitted (one or two; T1, T2 are then figures too),
-their uncertainty by a parametric bootstrap that refits the breaks (:mod:`.catalogue`).
+their uncertainty by a parametric bootstrap that refits the breaks (:mod:`.catalogue`): the
+shown u95 is the larger of ``k·std`` and the draws' own symmetric 95 % half-width
+(:func:`.catalogue.break_bootstrap`), and breaks the bootstrap cannot refit withhold the family.
 
 The loading branches from zero are fitted: the descending run below zero torque and the
 ascending run above it. A fit that fails its lack-of-fit gate is shown flagged, its
@@ -73,7 +75,8 @@ def catalogue_figures(loop: Loop, options: AnalysisOptions) -> FigureRows:
     draws = res.get("draws")
     for j, (n, u) in enumerate(names):
         if j < len(res["k"]):
-            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk, draws=draws)
+            col.add(n, u, res["k"][j], res["std_angle"][j], res["std_torque"][j], method, check=chk, draws=draws,
+                    interval=res["u95"][j] if "u95" in res else np.nan)
         else:
             col.fail(n, u, f"one break describes the loading branches (two segments: K1, K2); {res['criterion']}",
                      kind="not_applicable")
@@ -81,7 +84,7 @@ def catalogue_figures(loop: Loop, options: AnalysisOptions) -> FigureRows:
         for j, n in enumerate(("t1", "t2")):
             if j < len(res["breaks_nm"]):
                 col.add(n, "nm", res["breaks_nm"][j], res["breaks_std_angle"][j], res["breaks_std_torque"][j],
-                        method, check=chk, draws=draws)
+                        method, check=chk, draws=draws, interval=res["breaks_u95"][j])
             else:
                 col.fail(n, "nm", "one break describes the loading branches (two segments)", kind="not_applicable")
     return col

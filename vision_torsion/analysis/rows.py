@@ -125,6 +125,7 @@ class FigureRows:
         flag="",
         draws=None,
         sampling=0.0,
+        interval=np.nan,
     ):
         """One figure; ``check`` (a rejected :class:`.fitcheck.LackOfFit`) flags it and inflates its u.
 
@@ -135,6 +136,11 @@ class FigureRows:
         rectangular) is in ``std``, and ``u95`` is at least ``k·std_rest + half`` (a
         bias known only to lie within the bound is added linearly to the rest's
         interval: on a kinked loop the truth sits at the bound's edge).
+        ``interval``: half-width of the figure's 95 % interval read from the draws of
+        its own distribution (a bootstrap's, :func:`.catalogue.break_bootstrap`):
+        ``u95`` is at least it (times any inflation), where that distribution has
+        heavier tails than the normal one ``k·std`` assumes; ``coverage_factor`` is
+        then ``u95/std``.
         """
         infl, red = 1.0, np.nan
         if check is not None and check.testable:
@@ -175,6 +181,8 @@ class FigureRows:
         if sampling > 0 and np.isfinite(std) and std > 0:
             u95 = max(row["u95"], row["coverage_factor"] * std_rest + sampling)
             row.update(u95=u95, coverage_factor=u95 / std)
+        if np.isfinite(interval) and interval * infl > row["u95"] and np.isfinite(std) and std > 0:
+            row.update(u95=interval * infl, coverage_factor=interval * infl / std)
         for k in SOURCE_KINDS:
             row[f"std_{k}"] = float((parts or {}).get(k, 0.0 if parts is not None else np.nan))
         self.rows.append(row)

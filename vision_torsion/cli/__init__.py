@@ -137,10 +137,12 @@ def failure_line(image: str, message: str, *, status: str = "failed") -> str:
     """One line for a failed item, naming the image once (most messages already do).
 
     A ``suspect`` item (measured, but not good data: :mod:`vision_torsion.quality`)
-    is not called failed; the status decides, not the message's wording."""
+    is not called failed, and an N-marker target's (``marker_missing``, ``ambiguous``,
+    ``layout_mismatch``) is called by its status; the status decides, not the
+    message's wording."""
     if status == "suspect":
         return f"{image}: {message}"
-    return f"failed: {message}" if image in message else f"failed: {image}: {message}"
+    return f"{status}: {message}" if image in message else f"{status}: {image}: {message}"
 
 
 def _configure_logging(args) -> None:

@@ -28,6 +28,9 @@ def register(sub) -> None:
                         "(without it that session is reused and only what changed is measured); also "
                         "write into a non-empty OUT_DIR that is not a demo folder, replacing files "
                         "vision-torsion did not write")
+    p.add_argument("--target", metavar="NAME|FILE",
+                   help="an N-marker target in place of the two markers: a ready target's name (ring16, ring8, "
+                        "grid5) or a target file; every image is measured from all its dots")
     add_jobs_option(p)
     add_common_options(p)
     p.set_defaults(func=run)
@@ -37,6 +40,7 @@ def run(args) -> int:
     from ..report.session_report import run_demo
     from .report import print_summary
 
-    rep = run_demo(args.out_dir, seed=args.seed, jobs=args.jobs, progress=progress_enabled(args), force=args.force)
+    rep = run_demo(args.out_dir, seed=args.seed, jobs=args.jobs, progress=progress_enabled(args), force=args.force,
+                   target=args.target)
     print_summary(rep)
     return 1 if rep.n_failed else 0

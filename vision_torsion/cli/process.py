@@ -40,9 +40,8 @@ def run(args) -> int:
     reuse_freed_memory()  # this process measures and ends: its page faults were 0.3 s of a demo run
     result = process_session(args.session_dir, out_dir=args.out_dir, jobs=args.jobs,
                              progress=progress_enabled(args))
-    for image, message in result.failures:
-        print(failure_line(image, message, status="suspect" if image in result.suspect else "failed"),
-              file=sys.stderr)
+    for (image, message), status in zip(result.failures, result.failure_statuses):
+        print(failure_line(image, message, status=status), file=sys.stderr)
     print_pending(result, quiet=args.quiet)
     print(f"{result.measurements_path}: {result.n_ok} ok, {result.n_failed} failed, "
           f"{result.n_pending} pending of {result.n_images} images ({result.n_measured} "

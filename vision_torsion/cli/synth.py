@@ -48,6 +48,10 @@ def register(sub) -> None:
         help="scene TOML file with a [session] table, or a ready scene's name: paper_session",
     )
     s.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    s.add_argument("--target", metavar="NAME|FILE",
+                   help="an N-marker target in place of the scene's two markers: a ready target's name (ring16, "
+                        "ring8, grid5) or a target file; the dot farthest from the shaft at the scene's marker "
+                        "distance")
     add_force_option(s, "OUT_DIR")
     add_common_options(s)
     s.set_defaults(func=run_session)
@@ -78,7 +82,8 @@ def run_session(args) -> int:
     check_output_dir(args.out_dir)  # writable, with space, before rendering
     scene, spec = load_session_scene(args.scene)
     out = write_session_folder(
-        scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args), overwrite=args.force
+        scene, spec, args.out_dir, seed=args.seed, progress=progress_enabled(args), overwrite=args.force,
+        target=args.target,
     )
     print(f"wrote session folder {out}")
     return 0

@@ -18,6 +18,7 @@ import pandas as pd
 from ..errors import OutputError
 from ..fileio import atomic_write_text, check_replaceable, is_ours, write_csv
 from ..measurements import output_folder
+from ..targets import Target, load_target
 from . import ReportFiles
 
 __all__ = ["SessionReport", "report_session", "run_demo", "demo_scene"]
@@ -278,7 +279,7 @@ def demo_scene():
 
 def run_demo(
     out_dir="vision-torsion-demo", *, seed: int = 0, jobs: int | None = None, progress: bool = False,
-    force: bool = False,
+    force: bool = False, target=None,
 ) -> SessionReport:
     """Render the paper-like synthetic session, process it and write its report.
 
@@ -298,6 +299,11 @@ def run_demo(
     force : bool
         Render the session again even when one with the same seed is there, and
         write into a folder this tool did not make a demo in.
+    target : Target, str or os.PathLike, optional
+        An N-marker target (a ready target's name such as ``"ring16"``, a target
+        file) in place of the two markers
+        (:func:`~vision_torsion.synthetic.session.write_session_folder`); a session
+        rendered with another target, or none, is rendered again.
 
     Returns
     -------
@@ -309,6 +315,8 @@ def run_demo(
         ``reason="not_ours"``: `out_dir` exists, is not empty, and holds no demo
         record of this tool's own (:data:`DEMO_STAMP`, proven by the folder's record,
         :mod:`vision_torsion.fileio`), and `force` is false. Nothing is written.
+    TargetError
+        `target` cannot be read.
     """
     from ..synthetic.session import write_session_folder
 
@@ -319,17 +327,21 @@ def run_demo(
                           f"demo there (no {DEMO_STAMP} of its own); choose a new folder, or give --force "
                           "to write the demo into it (files of the same names are replaced)",
                           reason="not_ours")
-    rendered = _demo_seed(stamp) if (session_dir / "truth.csv").is_file() else None
+    wanted = {"seed": seed}
+    if target is not None:  # the layout itself, so another target of the same name is rendered anew
+        target = load_target(target) if not isinstance(target, Target) else target
+        wanted = json.loads(json.dumps({"seed": seed, "target": {"name": target.name, **dict(target.spec)}}))
+    rendered = _demo_record(stamp) if (session_dir / "truth.csv").is_file() else None
     # truth.csv is written last: without it an earlier demo was interrupted
-    if force or rendered != seed:
+    if force or rendered != wanted:
         if rendered is not None and not force:
-            logger.info("%s: rendered with seed %d; rendering it again with seed %d", session_dir, rendered, seed)
+            logger.info("%s: rendered as %s; rendering it again as %s", session_dir, rendered, wanted)
         scene, spec = demo_scene()
         logger.info("rendering the synthetic session into %s", session_dir)
         write_session_folder(scene, spec, session_dir, seed=seed, progress=progress, overwrite=True,
                              header=DEMO_HEADER | {"serial": f"DEMO-{seed}", "date": _today()},
-                             catalogue=DEMO_CATALOGUE)
-        atomic_write_text(stamp, json.dumps({"seed": seed}) + "\n")
+                             catalogue=DEMO_CATALOGUE, target=target)
+        atomic_write_text(stamp, json.dumps(wanted) + "\n")
     else:
         logger.info("%s: reusing the session rendered earlier with seed %d (--force renders it again)",
                     session_dir, seed)
@@ -350,11 +362,12 @@ def _today() -> str:
     return datetime.date.today().isoformat()
 
 
-def _demo_seed(stamp: Path) -> int | None:
-    """The seed recorded in a demo folder's stamp, or None (no stamp, unreadable:
-    the session is rendered again)."""
+def _demo_record(stamp: Path) -> dict | None:
+    """What a demo folder's stamp records its session was rendered with (the seed,
+    and the N-marker target if any), or None (no stamp, unreadable: the session is
+    rendered again)."""
     try:
-        seed = json.loads(stamp.read_text(encoding="utf-8"))["seed"]
-    except (OSError, ValueError, KeyError, TypeError):
+        record = json.loads(stamp.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
         return None
-    return seed if isinstance(seed, int) else None
+    return record if isinstance(record, dict) else None

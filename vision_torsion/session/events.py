@@ -42,6 +42,10 @@ from pathlib import Path
 __all__ = ["FolderEvents", "EVENT_MODES", "network_filesystem", "NETWORK_FILESYSTEMS"]
 
 logger = logging.getLogger(__name__)
+# watchdog's threads log their own shutdown races (an emitter asked for events after
+# stop()) at ERROR; with no handler of the application's, Python's last-resort handler
+# would print them on a user's terminal. What the events miss, the polling sees.
+logging.getLogger("watchdog").addHandler(logging.NullHandler())
 
 #: The ways a folder can be followed: "auto" (filesystem events where they work,
 #: else polling) and "poll" (polling only).

@@ -47,7 +47,7 @@ from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
 from ..fileio import check_output_dir, write_records_csv
-from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, output_folder
+from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, TARGET_RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
 from ..settings import MeasureSettings
@@ -57,7 +57,8 @@ from .load import Session, load_session, unlisted_images
 from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
-__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
+__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
+           "code_fingerprint"]
 
 logger = logging.getLogger(__name__)
 
@@ -84,9 +85,10 @@ class ProcessResult:
     measurements_path : pathlib.Path
         The ``measurements.csv`` written.
     n_images, n_ok, n_failed : int
-        Rows of the manifest, and how many got status ``ok`` / ``failed`` or
-        ``suspect`` (measured, but a marker's fit residual is far above the
-        session's noise: :mod:`vision_torsion.quality`).
+        Rows of the manifest, and how many got status ``ok`` / any other but
+        ``pending``: ``failed``, ``suspect`` (measured, but a marker's fit residual
+        is far above the session's noise: :mod:`vision_torsion.quality`), or an
+        N-marker target's identity statuses (:mod:`.targetrows`).
     n_measured, n_cached : int
         Images measured in this run, and images whose result came from the cache.
     failures : tuple of (str, str)
@@ -98,6 +100,8 @@ class ProcessResult:
         Image files in the session (or bound camera) folder that no row names.
     suspect : tuple of str
         The images among `failures` whose status is ``suspect`` (the others failed).
+    failure_statuses : tuple of str
+        The status of each of `failures`, in the same order.
     """
 
     measurements_path: Path
@@ -110,6 +114,7 @@ class ProcessResult:
     pending: tuple[tuple[str, str], ...] = ()
     unlisted: tuple[str, ...] = ()
     suspect: tuple[str, ...] = ()
+    failure_statuses: tuple[str, ...] = ()
 
     @property
     def n_pending(self) -> int:
@@ -132,7 +137,7 @@ class ProcessResult:
 _DOWNSTREAM = ("session", "cli", "analysis", "stiffness", "report", "synthetic")
 
 
-def _code_fingerprint() -> str:
+def code_fingerprint() -> str:
     """Digest of the measuring code's source (every module outside `_DOWNSTREAM`).
 
     A version number is not bumped for every change to the measuring code, so the
@@ -155,10 +160,30 @@ def _settings_key(settings: MeasureSettings, measure=measure_pair) -> str:
     d = settings.to_dict()
     if d.get("correction"):
         d["correction"] = digest(Path(d["correction"]).read_bytes())
-    key = {"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT}
+    key = {"settings": d, "code": code_fingerprint(), "cache": _CACHE_FORMAT}
     if measure is not measure_pair:
         key["measure"] = f"{getattr(measure, '__module__', '')}.{getattr(measure, '__qualname__', repr(measure))}"
     return json.dumps(key, sort_keys=True)
+
+
+def session_measuring(session: Session, measure):
+    """How the images of `session` are measured, shared by ``process``, ``bind`` and
+    ``watch`` so that one cache key gives one result whichever measured first.
+
+    Returns
+    -------
+    (callable, str, callable)
+        The measuring function (`measure`, or for an N-marker target, ``[target]``,
+        every marker found: :mod:`.targetrows`), the settings part of the cache key
+        (the target's layout included), and the check a cache entry must pass.
+    """
+    if session.config.target is None:
+        return measure, _settings_key(session.settings, measure), _valid_entry
+    from .targetrows import measure_target_markers, target_settings_key, valid_target_entry
+
+    measure = measure_target_markers if measure is measure_pair else measure
+    return measure, target_settings_key(_settings_key(session.settings, measure), session.config.target), \
+        valid_target_entry
 
 
 def _valid_entry(entry: dict) -> bool:
@@ -383,8 +408,16 @@ def _table(session: Session, entries: list[dict], correction=None) -> tuple[list
     """The columns and rows of measurements.csv (manifest columns, then the results)."""
     manifest = session.manifest
     keep = [c for c in manifest.columns if c not in OUTPUT_COLUMNS]
-    records = []
-    for row, (angle, angle_std, why, status) in zip(manifest.rows, _angles(session, entries, correction)):
+    records, extras, extra_columns = [], None, ()
+    if session.config.target is None:
+        results = _angles(session, entries, correction)
+    else:  # an N-marker target: the rigid fit of all markers, the axis motion (.targetrows)
+        from .targetrows import target_rows
+
+        done = target_rows(session, entries, correction)
+        results = [(r.angle_deg, r.angle_std_deg, r.message, r.status) for r in done]
+        extras, extra_columns = [r.extra for r in done], TARGET_RESULT_COLUMNS
+    for k, (row, (angle, angle_std, why, status)) in enumerate(zip(manifest.rows, results)):
         torque = session.torque(row)
         rec = {c: v for c, v in row.fields if c in keep}
         rec.update(torque_nm=torque.torque_nm, torque_std_nm=torque.torque_std_nm,
@@ -393,8 +426,10 @@ def _table(session: Session, entries: list[dict], correction=None) -> tuple[list
                    angle_deg=angle, angle_std_deg=angle_std,
                    status=status,
                    message=_relative_message(why, manifest.image_path(row), row.image) if why else "")
+        if extras is not None:
+            rec.update(extras[k])
         records.append(rec)
-    return keep + list(OUTPUT_COLUMNS), records
+    return keep + list(OUTPUT_COLUMNS) + list(extra_columns), records
 
 
 def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
@@ -421,6 +456,12 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         :func:`~vision_torsion.pair.measure_pair`, is the measurement core; another
         function (a stand-in in tests, an experimental fit) keys the cache apart from
         it by its qualified name, and with more than three jobs must be picklable.
+        For a session of an N-marker target (``[target]`` in session.toml) the
+        default is :func:`~.targetrows.measure_target_markers` (every marker), and
+        the rows come from the rigid fit of all of them (:mod:`.targetrows`: status
+        ``marker_missing``, ``ambiguous``, ``layout_mismatch`` or a ``suspect`` bump
+        with its reason, and the columns
+        :data:`~vision_torsion.measurements.TARGET_RESULT_COLUMNS`).
 
     Returns
     -------
@@ -435,10 +476,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     Raises
     ------
     SessionError
-        Invalid session folder or session.toml, or `out_dir` is the session folder;
-        a session of an N-marker target (``[target]`` in session.toml, reason
-        ``target_not_processed``): its images are measured with
-        :func:`vision_torsion.rigid.measure_target_folder` for now.
+        Invalid session folder or session.toml, or `out_dir` is the session folder.
     ManifestError
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
@@ -449,11 +487,6 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs > _MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
-    if session.config.target is not None:  # two markers of it would give an angle, with no check of the rest
-        raise SessionError(f"{session.folder / 'session.toml'}: [target] names the {session.config.target.n_markers}"
-                           f"-marker target {session.config.target.name!r}, which `process` does not measure yet; "
-                           "measure each orientation's images with `vision-torsion measure IMAGES --reference REF "
-                           "--target FILE|NAME`", reason="target_not_processed")
     out = output_folder(session.folder, out_dir)
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
@@ -464,9 +497,9 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     # a bad correction file is unusable input: say so before measuring anything
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
-    key = _settings_key(settings, measure)
+    measure, key, check = session_measuring(session, measure)
     cache_dir = out / CACHE_DIRNAME
-    cached, logs = read_cache(cache_dir, check=_valid_entry)
+    cached, logs = read_cache(cache_dir, check=check)
     run = CacheLog.new_run()
     pending = set(session.manifest.pending)
     present = [row for row in session.manifest.rows if row.line not in pending]
@@ -487,8 +520,9 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if len(logs) + len(new_logs) > 1:
         # one log for the next run; the old logs' entries were read at the start (a
         # single log, e.g. of a first run in this process, is one already)
-        merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=_valid_entry)}, logs + new_logs)
-    failed = [r for r in records if r["status"] in ("failed", SUSPECT)]  # a suspect angle is not good data
+        merge_cache(cache_dir, {**cached, **read_logs(new_logs, check=check)}, logs + new_logs)
+    # a suspect angle is not good data, nor an N-marker target's marker_missing, ambiguous, layout_mismatch
+    failed = [r for r in records if r["status"] not in ("ok", "pending")]
     waiting = [r for r in records if r["status"] == "pending"]
     failures = tuple((r["image"], r["message"]) for r in failed)
     # report figures in the default output folder are not shots, whichever -o this run has
@@ -504,4 +538,5 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
                          failures=failures,
                          pending=tuple((r["image"], r["message"]) for r in waiting),
                          unlisted=unlisted,
-                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT))
+                         suspect=tuple(r["image"] for r in failed if r["status"] == SUSPECT),
+                         failure_statuses=tuple(r["status"] for r in failed))

@@ -22,8 +22,8 @@ from ..images import GreyImage, read_image_bytes
 from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, read_logs
 from .load import Session
 
-__all__ = ["Shot", "ShotMeasurer", "image_warnings", "edge_width", "polarity_note", "SATURATED_FRACTION",
-           "BLUR_RATIO"]
+__all__ = ["Shot", "ShotMeasurer", "image_warnings", "blur_warning", "edge_width", "polarity_note",
+           "SATURATED_FRACTION", "BLUR_RATIO"]
 
 
 @dataclass(frozen=True)
@@ -102,11 +102,19 @@ def image_warnings(pair, reference, saturated: float) -> list[str]:
     if math.isfinite(saturated) and saturated > SATURATED_FRACTION:
         out.append(f"saturated: {100 * saturated:.1f} % of the pixels at full scale "
                    "(shorten the exposure or dim the light)")
-    width, ref = edge_width(pair), edge_width(reference)
-    if reference is not None and math.isfinite(width) and math.isfinite(ref) and width > BLUR_RATIO * ref:
-        out.append(f"blurred: marker edges {width:.1f} px wide against {ref:.1f} px in the "
-                   "reference (camera shake, or focus?); shoot it again")
+    if reference is not None and (blur := blur_warning(edge_width(pair), edge_width(reference))):
+        out.append(blur)
     return out
+
+
+def blur_warning(width_px: float, reference_px: float) -> str:
+    """"blurred: ..." when the marker edges (mean fitted edge width, px) are more than
+    :data:`BLUR_RATIO` times as wide as the reference image's; "" otherwise or when
+    either is unknown (NaN). The rule of :func:`image_warnings`, for any markers."""
+    if math.isfinite(width_px) and math.isfinite(reference_px) and width_px > BLUR_RATIO * reference_px:
+        return (f"blurred: marker edges {width_px:.1f} px wide against {reference_px:.1f} px in the "
+                "reference (camera shake, or focus?); shoot it again")
+    return ""
 
 
 def polarity_note(pair, polarity: str) -> str:
@@ -143,17 +151,17 @@ class ShotMeasurer:
 
     def __init__(self, session: Session, out_dir, *, measure=None):
         from ..pair import measure_pair
-        from .process import _settings_key, _valid_entry  # process's cache key and check
+        from .process import session_measuring  # process's measuring function, cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
-        self.key = _settings_key(self.settings, measure_pair if measure is None else measure)
+        measure, self.key, self._check = session_measuring(session, measure_pair if measure is None else measure)
+        self.target = session.config.target
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
-        self._check = _valid_entry
-        self.cached, self._logs = read_cache(self.cache_dir, check=_valid_entry)
+        self.cached, self._logs = read_cache(self.cache_dir, check=self._check)
         self._run = CacheLog.new_run()
         self._stack = ExitStack()
-        self._measure = measure
+        self._measure = None if measure is measure_pair else measure
 
     def __enter__(self):
         from .worker import in_process
@@ -216,5 +224,11 @@ class ShotMeasurer:
             message = entry.get("message", "").replace(str(path), path.name)
             return Shot(path, None, message, image, cached, timings, image_hash=image_hash,
                         saturated_fraction=saturated)
-        return Shot(path, PairMeasurement.from_dict(entry["pair"]), "", image, cached, timings,
-                    image_hash=image_hash, saturated_fraction=saturated)
+        if self.target is None:
+            pair, message = PairMeasurement.from_dict(entry["pair"]), ""
+        else:  # an N-marker target: two of its dots, named from the whole layout
+            from .targetrows import FoundMarkers, target_pair
+
+            pair, message = target_pair(FoundMarkers.from_dict(entry["pair"]), self.target, name=path.name)
+        return Shot(path, pair, message, image, cached, timings, image_hash=image_hash,
+                    saturated_fraction=saturated)

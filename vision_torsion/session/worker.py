@@ -154,8 +154,10 @@ def prepare_task(data: bytes, task: tuple[str, str, str]) -> ReadImage:
         return ReadImage(key, image_hash, error=exc, undecodable=True)
     # here, in a reading thread (numpy releases the GIL), not in the one measuring thread
     saturated = saturated_fraction(image)
+    # the measuring function says which candidates it needs (an N-marker target's: all of them)
+    find = getattr(_Cache.measure, "find_candidates", pair_candidates)
     try:
-        candidates = pair_candidates(image.data, _settings_from(settings_json))
+        candidates = find(image.data, _settings_from(settings_json))
     except Exception as exc:  # noqa: BLE001 - reported by finish_task, as if measuring failed
         return ReadImage(key, image_hash, image=image, error=exc, saturated=saturated)
     return ReadImage(key, image_hash, image=image, candidates=candidates, saturated=saturated)

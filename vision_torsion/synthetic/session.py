@@ -66,12 +66,12 @@ class SessionSpec:
     angle_sign: int = 1
 
     def session_config(self, *, polarity: str = "dark", steps: int | None = None, header: dict | None = None,
-                       catalogue=None):
+                       catalogue=None, target=None):
         """The :class:`~vision_torsion.session.config.SessionConfig` of this session's rig
         and protocol (:func:`~vision_torsion.session.plan.plan_config`): markers of
         `polarity`; `steps` per phase instead of the spec's maximum torque; the
-        test's identity and catalogue as :func:`~vision_torsion.session.plan.plan_config`
-        takes them.
+        test's identity, catalogue and an N-marker `target` (None: two markers) as
+        :func:`~vision_torsion.session.plan.plan_config` takes them.
 
         Raises
         ------
@@ -84,7 +84,8 @@ class SessionSpec:
             max_torque_nm=None if steps is not None else self.max_torque_nm, steps=steps,
             step_mass_kg=self.step_mass_kg, arm_radius_m=self.arm_radius_m, orientations_deg=self.orientations_deg,
             cycles=self.cycles, gravity_m_per_s2=self.gravity_m_per_s2, mass_tolerance_kg=self.mass_tolerance_kg,
-            polarity=polarity, angle_sign=self.angle_sign, header=header, catalogue=catalogue)
+            polarity=polarity, angle_sign=self.angle_sign, header=header, catalogue=catalogue,
+            **({} if target is None else {"target": target}))
 
 
 def _spec_from_dict(table: dict, where: str) -> SessionSpec:
@@ -204,9 +205,22 @@ def session_truth(spec: SessionSpec, rows, *, seed: int = 0):
     return frame, {"cycles": params, "spec": dataclasses.asdict(spec)}
 
 
+def _target_scene(scene: Scene, target):
+    """`scene` with the dots of `target` for markers (the farthest at the scene's
+    marker distance), and the target read."""
+    from ..targets import Target, load_target
+    from .target_scenes import target_scene
+
+    target = target if isinstance(target, Target) else load_target(target)
+    reach_mm = float(np.max(np.hypot(target.centres_mm[:, 0], target.centres_mm[:, 1])))
+    if not reach_mm > 0:
+        raise SceneError(f"target {target.name!r}: every dot is on the shaft axis; nothing turns")
+    return target_scene(target, px_per_mm=scene.markers.distance_px / reach_mm, base=scene), target
+
+
 def write_session_folder(
     scene: Scene, spec: SessionSpec, out_dir, *, seed: int = 0, progress: bool = False, overwrite: bool = False,
-    header: dict | None = None, catalogue=None,
+    header: dict | None = None, catalogue=None, target=None,
 ) -> Path:
     """Plan and render a complete synthetic test session.
 
@@ -228,6 +242,13 @@ def write_session_folder(
         The test's identity and the gear type's catalogue file, as
         :func:`~vision_torsion.session.plan.plan_session` takes them (into
         session.toml's ``[gear]``, ``[test]`` and ``[spec]``).
+    target : Target, str or os.PathLike, optional
+        An N-marker target (a ready target's name such as ``"ring16"``, a target
+        file): its dots replace the scene's two markers
+        (:func:`~vision_torsion.synthetic.target_scene`), scaled so the dot farthest
+        from the shaft sits at the scene's marker distance, with the scene's
+        polarity, optics and noise; session.toml gets its ``[target]``, and
+        truth.csv every dot's true centre (``marker1_x_px`` is dot 0).
 
     Returns
     -------
@@ -239,19 +260,24 @@ def write_session_folder(
     ------
     SceneError
         A rotation of the session would take a marker out of the frame (checked
-        before any image is written).
+        before any image is written), or the scaled target does not fit it.
+    TargetError
+        `target` cannot be read.
     SessionError
         Invalid rig or protocol, or the folder already holds a session.
     """
     from ..session.plan import plan_rows, plan_session
 
     out = Path(out_dir)
+    if target is not None:
+        scene, target = _target_scene(scene, target)
     suffix = ".jpg" if scene.noise.jpeg_quality else ".png"
     # planned by its whole number of steps (the spec's maximum snapped down, as documented):
     # planning by max_torque_nm would warn a demo user that 0.36 N·m is not whole steps
     rig = spec.session_config(polarity=scene.markers.polarity).rig
     n = max(int(np.floor(spec.max_torque_nm / rig.step_torque_nm + 1e-9)), 1)
-    config = spec.session_config(polarity=scene.markers.polarity, steps=n, header=header, catalogue=catalogue)
+    config = spec.session_config(polarity=scene.markers.polarity, steps=n, header=header, catalogue=catalogue,
+                                 target=target)
     # the rows the plan will hold, so the rotations are checked against the frame
     # before anything is written
     truth, params = session_truth(spec, plan_rows(config, n, suffix=suffix), seed=seed)
