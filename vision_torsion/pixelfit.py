@@ -77,6 +77,7 @@ from .ring import (
     occluder_groups,
     robust_sigma,
     robust_sigma_rows,
+    sector_count,
     sector_index,
     sectors_needed,
     solve_lu,
@@ -732,7 +733,7 @@ def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
         return []
     # sector_index's sectors (~1 px of arc) of each row, laid out in spans of `width`
     radii = P[:, 2].tolist()
-    n_sec = [max(16, round(2 * math.pi * R)) for R in radii]
+    n_sec = [sector_count(R) for R in radii]
     width = max(n_sec, default=0)
     # the edge zone's pixels, as flat indices into the rows (`at`) and into the
     # Jacobian's rows of ∂I/∂cx (`jat`), and their rows (`zr`, 0 for one marker)
