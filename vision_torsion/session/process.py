@@ -58,7 +58,7 @@ from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
-           "code_fingerprint"]
+           "code_fingerprint", "MAX_THREAD_JOBS"]
 
 logger = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ _CACHE_FORMAT = 6
 #: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
 #: up with about five reading threads (~10.5 ms per image each, mostly without
 #: it); three leaves room for slower measuring. Measured on two cores only.
-_MAX_THREAD_JOBS = 3
+MAX_THREAD_JOBS = 3
 
 
 @dataclass(frozen=True)
@@ -217,7 +217,7 @@ def _pool_context():
     fork instead of importing them again; this sets the process-wide preload list
     of :mod:`multiprocessing`'s fork server, keeping its default ``__main__`` entry.
     """
-    import multiprocessing  # here: only more than _MAX_THREAD_JOBS jobs start processes
+    import multiprocessing  # here: only more than MAX_THREAD_JOBS jobs start processes
 
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
@@ -245,11 +245,11 @@ def _progress_bar(total: int, progress: bool):
 
 def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
     """Yield each task's result in task order: in this process with `jobs` up to
-    :data:`_MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
+    :data:`MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
     jobs = _jobs_within_open_files(jobs, len(tasks))
     bar = _progress_bar(len(tasks), progress)
     try:
-        if jobs <= _MAX_THREAD_JOBS or len(tasks) <= 1:
+        if jobs <= MAX_THREAD_JOBS or len(tasks) <= 1:
             with in_process(cache_dir, run, known, measure):
                 results = (_read_ahead(tasks, readers=jobs) if jobs > 1
                            else map(measure_task, tasks))
@@ -296,10 +296,10 @@ def _open_file_limit() -> int | None:
 
 
 def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
-    """`jobs`, or the threads of this process (at most :data:`_MAX_THREAD_JOBS`) when
+    """`jobs`, or the threads of this process (at most :data:`MAX_THREAD_JOBS`) when
     the open-file limit has no room for `jobs` worker processes (logged)."""
     limit = _open_file_limit()
-    if jobs <= _MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
+    if jobs <= MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
         return jobs
     try:
         in_use = len(os.listdir("/proc/self/fd"))
@@ -308,8 +308,8 @@ def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
     if in_use + _FILES_RESERVED + _FILES_PER_WORKER * jobs <= limit:
         return jobs
     logger.warning("only %d files may be open (ulimit -n), too few for %d worker processes; measuring "
-                   "with %d threads of this process instead", limit, jobs, _MAX_THREAD_JOBS)
-    return _MAX_THREAD_JOBS
+                   "with %d threads of this process instead", limit, jobs, MAX_THREAD_JOBS)
+    return MAX_THREAD_JOBS
 
 
 def _read_ahead(tasks, *, readers: int):
@@ -445,7 +445,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         ``measurements.csv`` and the cache ``.vision-torsion-cache/``.
     jobs : int, optional
         Images read and decoded at once; all available cores by default. 1
-        measures in this process alone; up to 3 (``_MAX_THREAD_JOBS``) run as
+        measures in this process alone; up to 3 (``MAX_THREAD_JOBS``) run as
         reading threads of this process beside the measuring one; more run as
         worker processes.
     progress : bool
@@ -484,7 +484,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs is not None:
         jobs = check_number(jobs, name="jobs", error=SessionError, low=1, whole=True)
     jobs = jobs or _default_jobs()
-    if jobs > _MAX_THREAD_JOBS:
+    if jobs > MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
     out = output_folder(session.folder, out_dir)
