@@ -49,6 +49,7 @@ from common import write_result  # noqa: E402 (the script's folder is on sys.pat
 
 from vision_torsion.analysis.models import bilinear_response  # noqa: E402
 from vision_torsion.errors import SessionError  # noqa: E402
+from vision_torsion.measurements import couple_torque_nm  # noqa: E402
 from vision_torsion.session.bind import bind_session  # noqa: E402
 from vision_torsion.session.plan import plan_session  # noqa: E402
 from vision_torsion.session.process import process_session  # noqa: E402
@@ -160,16 +161,14 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) 
         session, camera = Path(tmp) / "s", Path(tmp) / "cam"
         plan, _ = capture_script(scene, spec, Path(tmp) / "plan", seed=seed)
         sign = {"ref": 0, "pos": 1, "neg": -1}
-        torques = [sign[r["phase"][:3]] * 2 * float(r["mass_kg"]) * 9.81 * 0.05 for r in plan.rows]
+        torques = [sign[r["phase"][:3]] * couple_torque_nm(float(r["mass_kg"]), gravity_m_per_s2=spec.gravity_m_per_s2,
+                                                          arm_radius_m=spec.arm_radius_m) for r in plan.rows]
         row = mistake_row(kind, rng, torques)
         plan, shots = capture_script(scene, spec, session, seed=seed, response=GEARS[gear], **options(row))
         refused = None
         if target != TWO:  # the same plan, with the N-marker target in session.toml
-            plan_session(session, max_torque_nm=spec.max_torque_nm, step_mass_kg=spec.step_mass_kg,
-                         arm_radius_m=spec.arm_radius_m, orientations_deg=spec.orientations_deg,
-                         cycles=spec.cycles, gravity_m_per_s2=spec.gravity_m_per_s2,
-                         mass_tolerance_kg=spec.mass_tolerance_kg, polarity=scene.markers.polarity,
-                         angle_sign=spec.angle_sign, overwrite=True, target=target)
+            plan_session(spec.session_config(polarity=scene.markers.polarity, target=target), session,
+                         overwrite=True)
             try:
                 process_session(session, out_dir=Path(tmp) / "processed")
             except SessionError as exc:
