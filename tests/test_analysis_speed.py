@@ -40,7 +40,7 @@ def test_break_search_chi2_is_the_plain_weighted_fit():
     th = np.concatenate([h, -h]) + rng.normal(0.0, 2e-6, 20)
     sign = np.repeat([1.0, -1.0], 10)
     sa, st = np.full(20, 2e-6), np.full(20, 1e-3)
-    chi2 = catalogue._BreakChi2(tau, th, sign, sa, st)
+    chi2 = catalogue.BreakChi2(tau, th, sign, sa, st)
     for brk in ([0.1], [0.12, 0.26], [0.05, 0.2]):
         edges = [0.0, *brk, np.inf]
         cols = [np.clip(np.abs(tau) - lo, 0.0, hi - lo) * sign for lo, hi in zip(edges[:-1], edges[1:])]
@@ -66,7 +66,7 @@ def _branches(seed, n_levels=12):
     tau = np.concatenate([x, -x])
     th = np.concatenate([h, -h]) + rng.normal(0.0, 2e-6, 2 * n_levels)
     sign = np.repeat([1.0, -1.0], n_levels)
-    return catalogue._BreakChi2(tau, th, sign, np.full(tau.size, 2e-6), np.full(tau.size, 1e-3)), x
+    return catalogue.BreakChi2(tau, th, sign, np.full(tau.size, 2e-6), np.full(tau.size, 1e-3)), x
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -81,12 +81,12 @@ def test_break_grid_search_picks_what_the_plain_loop_picks(seed):
                   [[0.001, 0.002], [0.2, 0.1], [mids[3], mids[7]]]):  # two invalid placements first
         exact = np.array([chi2(c)[0] for c in cands])
         best_k = int(np.argmin(exact))                   # argmin: the first of equal minima
-        assert catalogue._first_best(chi2, cands) == (exact[best_k], list(cands[best_k]))
+        assert catalogue.first_best_placement(chi2, cands) == (exact[best_k], list(cands[best_k]))
         approx = chi2.many(cands)
         valid = np.isfinite(exact)
         np.testing.assert_allclose(approx[valid], exact[valid], rtol=1e-6)
         assert np.all(np.isinf(approx[~np.isfinite(exact)]))
-    assert catalogue._first_best(chi2, [[0.2, 0.1]]) == (np.inf, None)
+    assert catalogue.first_best_placement(chi2, [[0.2, 0.1]]) == (np.inf, None)
 
 
 def _phase(seed):

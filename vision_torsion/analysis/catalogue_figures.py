@@ -3,6 +3,8 @@ fixed (linear least squares), or with the breaks fitted (one or two; T1, T2 are 
 their uncertainty by a parametric bootstrap that refits the breaks (:mod:`.catalogue`): the
 shown u95 is the larger of ``k·std`` and the draws' own symmetric 95 % half-width
 (:func:`.catalogue.break_bootstrap`), and breaks the bootstrap cannot refit withhold the family.
+A fitted second break whose neighbouring slopes agree within their uncertainty is merged
+(:func:`.catalogue.fit_catalogue_breaks`), so K2 is never the soft slope split in two.
 
 The loading branches from zero are fitted: the descending run below zero torque and the
 ascending run above it. A fit that fails its lack-of-fit gate is shown flagged, its
@@ -86,5 +88,6 @@ def catalogue_figures(loop: Loop, options: AnalysisOptions) -> FigureRows:
                 col.add(n, "nm", res["breaks_nm"][j], res["breaks_std_angle"][j], res["breaks_std_torque"][j],
                         method, check=chk, draws=draws, interval=res["breaks_u95"][j])
             else:
-                col.fail(n, "nm", "one break describes the loading branches (two segments)", kind="not_applicable")
+                col.fail(n, "nm", f"one break describes the loading branches (two segments); {res['criterion']}",
+                         kind="not_applicable")
     return col
