@@ -204,9 +204,11 @@ def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[in
         The angle sign to check with (the session's ``angle_sign`` by default).
     """
     sign = session.config.angle_sign if sign is None else sign
-    found = []
+    found, loops = [], []  # each orientation's steps also against the same steps of the ones before
     for seq, points in _sequences(session, bound, pairs, sign):
-        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
+        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session),
+                                                         earlier=loops)]
+        loops.append(points)
     kinks = gear_kinks([w for _, w in found])  # the gear's own, seen twice: not mistakes
     return sorted((x for n, x in enumerate(found) if n not in kinks), key=lambda t: t[0])
 
@@ -371,8 +373,9 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         return bound, left, step_warnings(session, bound, pairs, sign=sign)
 
     def misfit(bound):  # of two fixes that leave as few misfits, the one whose steps fit best
-        return sum(step_misfit(points, step_torque_nm=_step_torque(session))
-                   for _, points in _sequences(session, bound, pairs, sign))
+        loops = [points for _, points in _sequences(session, bound, pairs, sign)]
+        return sum(step_misfit(points, step_torque_nm=_step_torque(session), earlier=loops[:n])
+                   for n, points in enumerate(loops))
 
     bound, leftovers, warns = evaluate(skip, missing, swap)
     fixes, cur_skip, cur_missing, cur_swap = [], list(skip), list(missing), list(swap)
