@@ -58,12 +58,18 @@ later ones included. Only the last step of a closed sequence cannot be decided: 
 is warned about, undecided, and it is the gear's when the same step elsewhere (in
 another orientation) shows it too (:func:`gear_kinks`). Checked only across one or
 two planned weight steps (not across the unphotographed pre-load or the return to
-zero before a closing image) and only between images of one orientation. In the
-first half-loop of a session the loop has not shown its steps yet: a mistake where
-the gear's stiffness changes by more than the mistake's signature (a missed shot
-inside a soft zone, a piece forgotten on a kinked step) looks like the gear there,
-and shows later (the load turning back a row early; against the same step in the
-second half, in ``bind``). These are warnings for the person at the rig, not a
+zero before a closing image) and only between images of one orientation; a step
+this orientation's loop has not shown yet is compared with the same step of the
+loops photographed before it (``earlier``: the earlier orientations, the gear's
+own stiffness at that torque already seen), so a later orientation's first
+half-loop is judged as its second half is, and a kink seen there is expected, not
+a mistake. In the first half-loop of the session's first orientation nothing has
+shown the steps yet: a mistake where the gear's stiffness changes by more than the
+mistake's signature (a missed shot inside a soft zone or at the switch, a piece
+forgotten on a kinked step) looks like the gear there, and cannot be told from it
+until the load reverses (the load turning back a row early, which ``watch`` names
+with the rows that fit; against the same step in the second half, in ``bind``).
+These are warnings for the person at the rig, not a
 statistical test; the false-alarm rate on the paper's loops is tested
 (tests/test_rig_bind_inputs.py), and the kinked gears of
 :mod:`vision_torsion.synthetic.gears` in tests/test_rig_mistakes.py and

@@ -34,7 +34,13 @@ A tick:
 4. Its angle (against its orientation's reference image, ``angle_sign`` applied),
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
    blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
-   one (> 0.5 % of the pixels at full scale), are returned at once as events.
+   one (> 0.5 % of the pixels at full scale), are returned at once as events. The
+   steps of a later orientation are also compared with the same steps of the
+   orientations before it. After a missed shot decided in an orientation (its files
+   a row early) its last row is left for no photograph, and after an extra shot
+   (its files a row late) its last photograph is set aside with a message, so that
+   the next orientation's photographs bind to its own rows (``bind`` with the fix
+   binds them all).
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
