@@ -346,3 +346,17 @@ def test_after_an_extra_shot_the_orientations_last_photograph_is_set_aside(tmp_p
         r"warned about\): not bound here, so that the next photograph binds to line 20: orientation 120, "
         r"cycle 1, reference, step 0; `bind` with the fix binds it to its row", aside.message)
     assert ("IMG_0020.png", 20) in [(e.file, e.line) for e in events if e.kind == "shot"]
+
+
+def test_bind_keeps_the_sign_of_the_first_orientation_when_a_mistake_shifts_the_later_ones(tmp_path):
+    # an extra shot in the first of three orientations binds both later ones a row late:
+    # their references to the orientation before's last load, so their first loads seem to
+    # turn against the torque; the first orientation's first load says the sign is right
+    spec = SessionSpec(max_torque_nm=0.07848, orientations_deg=(0.0, 120.0, 240.0))
+    plan, shots = capture_script(SCENE, spec, tmp_path / "session", seed=17, extra_after=13,
+                                 response=KINKED["bilinear τc=0.03"])
+    camera = tmp_path / "camera"
+    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
+    res = bind_session(tmp_path / "session", camera, write=False)
+    assert not any("angle_sign" in d for d in res.diagnoses)
+    assert res.command.endswith("--skip IMG_0015.png") and not res.remaining

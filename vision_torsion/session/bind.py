@@ -215,8 +215,12 @@ def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[in
 
 def _sign_diagnosis(session: Session, bound, pairs):
     """(the sign to check with, the one-line diagnosis or None): the session's
-    ``angle_sign`` is inverted when the first loaded image turned against its
-    torque in most orientations (:func:`~.steps.first_load_inverted`)."""
+    ``angle_sign`` is inverted when the first loaded image of its first orientation
+    turned against its torque (:func:`~.steps.first_load_inverted`; the diagnosis
+    counts the orientations where it did). The first orientation decides: its
+    reference and first load are the session's first photographs, bound to their
+    rows, while a missed or extra shot before a later orientation binds that one's
+    files a row off, its reference to another orientation's load."""
     from .steps import first_load_inverted
 
     sign = session.config.angle_sign
@@ -227,7 +231,7 @@ def _sign_diagnosis(session: Session, bound, pairs):
         if loaded:
             verdicts.append(None if i is None else (seq[i], points[i]))
     against = [v for v in verdicts if v is not None]
-    if not against or 2 * len(against) <= len(verdicts):
+    if not verdicts or verdicts[0] is None:
         return sign, None
     pos, point = against[0]
     row, f = bound[pos]
