@@ -269,9 +269,9 @@ def main() -> None:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     from common import write_result
 
-    from vision_torsion.session.process import _code_fingerprint
+    from vision_torsion.session.process import code_fingerprint
 
-    code_at_start = _code_fingerprint()
+    code_at_start = code_fingerprint()
     try:
         t0 = time.perf_counter()
         truth = make_session(work / "full", n, cores)
@@ -328,7 +328,7 @@ def main() -> None:
                             "measured_only_the_rest": only_rest},
         "all_runs_give_the_same_file": same_files, "max_angle_error_deg": worst,
         "target_ratio": 1.3,
-        "measuring_code_changed_during_run": _code_fingerprint() != code_at_start,
+        "measuring_code_changed_during_run": code_fingerprint() != code_at_start,
     }
     write_result(RESULTS, report)  # NaN (no separate worker with --jobs 1) becomes null
 

@@ -106,17 +106,35 @@ def test_a_bright_occluder_near_a_dot_leaves_it_ok(gap):
     assert _errors(table, np.array([(100.3, 100.6)]))[0] < 0.03
 
 
-@pytest.mark.parametrize("over, level", [(2.0, 200.0), (3.0, 200.0), (2.0, 215.0), (3.0, 215.0)])
+@pytest.mark.parametrize(
+    "over, level",
+    [(2.0, 200.0), (3.0, 200.0), (2.0, 215.0), (3.0, 215.0),
+     (2.0, 240.0), (2.0, 255.0), (3.0, 255.0), (4.0, 255.0)],
+)
 def test_a_dot_partly_hidden_by_an_occluder_is_occluded_never_ok(over, level):
-    """An occluder at the background's level or brighter (200, 215 DN) over 2-3 px of
-    the dot's edge cuts a chord off it and moves the disc model's centre by 0.5-0.9
-    px: the dot is ``occluded``, with the reason, and the other dot stays ok."""
+    """An occluder at the background's level or brighter (200, 215 DN) over 2-3 px of the
+    dot's edge cuts a chord off it and moves the disc model's centre by 0.5-0.9 px;
+    a much brighter one (240, 255 DN) is cut from the ring as a steep region
+    (``steep_cut``) and moves it by 0.6-1.6 px: the dot is ``occluded``, with the
+    reason, and the other dot stays ok."""
     table = find_markers(_occluder(over, level))
     d = np.hypot(table["x_px"] - 100.3, table["y_px"] - 100.6)
     row = table[d < 3.0]
     assert list(row["status"]) == ["occluded"]
     assert row["message"].iloc[0].startswith("the edge is not symmetric about the centre (third harmonic")
     assert _errors(table, np.array([(60.2, 175.4)]))[0] < 0.03
+
+
+@pytest.mark.parametrize("over", [1.0, -4.0])
+def test_an_occluder_that_cuts_no_chord_leaves_the_dot_ok(over):
+    """A clip at 255 DN reaching 1 px into the dot's blurred edge, or 4 px short of it,
+    is cut from the ring (``steep_cut``) without hiding the dot: it stays ok to
+    0.03 px (found: 0.01), flagged, not ``occluded``."""
+    table = find_markers(_occluder(over))
+    d = np.hypot(table["x_px"] - 100.3, table["y_px"] - 100.6)
+    row = table[d < 3.0]
+    assert list(row["status"]) == ["ok"] and bool(row["steep_cut"].iloc[0])
+    assert _errors(table, np.array([(100.3, 100.6)]))[0] < 0.03
 
 
 def test_an_ellipse_has_no_edge_asymmetry():

@@ -263,7 +263,26 @@ def test_robust_sigma_is_unbiased_for_quantised_noise_and_ignores_an_occluder():
     assert abs(robust_sigma(occluded) / 2.0 - 1) < 0.05
 
 
-def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypatch):
+def _assert_fitted_as_one_by_one(patches, starts, together):
+    """Each of `together` (fit_discs of `patches` from `starts`) is fit_disc's result
+    for its marker to rounding, or the same FitError."""
+    for patch, (sx, sy, sr, b, f), many in zip(patches, starts, together):
+        try:
+            one = fit_disc(None, sx, sy, sr, edge_width=1.2, levels=(b, f), patch=patch)
+        except FitError as exc:
+            assert isinstance(many, FitError) and str(many) == str(exc)
+            continue
+        assert not isinstance(many, FitError), many
+        assert (many.x_px, many.y_px, many.radius_px) == pytest.approx((one.x_px, one.y_px, one.radius_px), abs=1e-9)
+        np.testing.assert_allclose(many.cov, one.cov, rtol=1e-7)
+        assert many.n_pixels == one.n_pixels and many.circularity == pytest.approx(one.circularity, abs=1e-9)
+        np.testing.assert_allclose(many.edge_x_px, one.edge_x_px, atol=1e-9)
+        np.testing.assert_allclose(many.edge_y_px, one.edge_y_px, atol=1e-9)
+        assert many.residual_rms_px == pytest.approx(one.residual_rms_px, abs=1e-12)
+        assert many.edge_noise_px == pytest.approx(one.edge_noise_px, rel=1e-9)
+
+
+def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene):
     """fit_discs (vectorised across markers) gives what fit_disc gives each marker,
     to rounding: on twelve markers of a ring, one of them crossed by a wire (the
     occluder cut, examined again in its row as fit_disc examines it), plus a flat patch (a failure
@@ -289,42 +308,47 @@ def test_markers_fitted_together_are_fitted_as_one_by_one(small_scene, monkeypat
     starts.append((60.0, 60.0, 9.0, 100.0, 40.0))
     together = fit_discs(patches, starts, edge_width=1.2)
     assert len(together) == len(patches)
-    for patch, (sx, sy, sr, b, f), many in zip(patches, starts, together):
-        try:
-            one = fit_disc(None, sx, sy, sr, edge_width=1.2, levels=(b, f), patch=patch)
-        except FitError as exc:
-            assert isinstance(many, FitError) and str(many) == str(exc)
-            continue
-        assert not isinstance(many, FitError), many
-        assert (many.x_px, many.y_px, many.radius_px) == pytest.approx((one.x_px, one.y_px, one.radius_px), abs=1e-9)
-        np.testing.assert_allclose(many.cov, one.cov, rtol=1e-7)
-        assert many.n_pixels == one.n_pixels and many.circularity == pytest.approx(one.circularity, abs=1e-9)
-        np.testing.assert_allclose(many.edge_x_px, one.edge_x_px, atol=1e-9)
-        np.testing.assert_allclose(many.edge_y_px, one.edge_y_px, atol=1e-9)
-        assert many.residual_rms_px == pytest.approx(one.residual_rms_px, abs=1e-12)
-        assert many.edge_noise_px == pytest.approx(one.edge_noise_px, rel=1e-9)
+    _assert_fitted_as_one_by_one(patches, starts, together)
     assert isinstance(together[-1], FitError)
-    # in groups of 5 (as hundreds are, in groups of 64): the same results
-    import vision_torsion.pixelfit as pixelfit
-
+    # hundreds are fitted in groups of 64: six copies of these the same results
     kept = [None if isinstance(a, FitError) else (a.edge_x_px.copy(), a.cov.copy()) for a in together]
-    monkeypatch.setattr(pixelfit, "_BATCH", 5)
-    grouped = fit_discs(patches, starts, edge_width=1.2)
-    for a, b in zip(together, grouped):
+    grouped = fit_discs(patches * 6, starts * 6, edge_width=1.2)
+    for a, b in zip(together * 6, grouped):
         assert str(a) == str(b) if isinstance(a, FitError) else (a.x_px, a.y_px) == (b.x_px, b.y_px)
     # the batch's arrays are reused from call to call: nothing returned is one of them
     for a, k in zip(together, kept):
         if k is not None:
             assert np.array_equal(a.edge_x_px, k[0]) and np.array_equal(a.cov, k[1])
-    # evaluated one row at a time (blocks of rows, as large rings are): the same values
-    monkeypatch.setattr(pixelfit, "_BLOCK", 1)
-    for a, b in zip(grouped, fit_discs(patches, starts, edge_width=1.2)):
-        assert str(a) == str(b) if isinstance(a, FitError) else (a.x_px, a.y_px, a.radius_px) == (
-            b.x_px, b.y_px, b.radius_px)
     # the wired marker went through the occluder cut: fewer pixels than without the wire
     sx, sy, sr, b, f = starts[0]
     clean = fit_disc(plain.image, sx, sy, sr, edge_width=1.2, levels=(b, f))
     assert together[0].n_pixels < clean.n_pixels
+
+
+def test_large_and_half_hidden_markers_fitted_together_are_fitted_as_one_by_one(standard_scene):
+    """Rings of thousands of pixels (evaluated a row at a time) and, between them, a
+    marker whose pixels beyond its left half are flagged a neighbour's: its edge is
+    seen on too short an arc, and fit_discs gives fit_disc's FitError for that row
+    alone, with the same counts."""
+    from dataclasses import replace
+
+    from vision_torsion.pixelfit import fit_discs, patch_extent
+
+    r = render(standard_scene, 4.0, seed=12)
+    radius = standard_scene.markers.radius_px
+    B, F = float(np.median(r.image)), float(r.image.min())
+    patches, starts = [], []
+    for x, y in r.centres:
+        patches.append(marker_patch(r.image, x + 0.3, y - 0.2, patch_extent(radius, 1.2) + 1.0))
+        starts.append((x + 0.3, y - 0.2, radius, B, F))
+    hidden = patches[0]
+    hidden = replace(hidden, excluded=hidden.xs > starts[0][0] - 0.6 * radius)
+    patches.insert(1, hidden)
+    starts.insert(1, starts[0])
+    together = fit_discs(patches, starts, edge_width=1.2)
+    _assert_fitted_as_one_by_one(patches, starts, together)
+    assert [isinstance(f, FitError) for f in together] == [False, True, False]
+    assert "edge sectors carry information" in str(together[1])
 
 
 def test_robust_sigma_of_rows_is_robust_sigma_of_each():

@@ -574,3 +574,27 @@ def test_the_live_page_and_its_stamp_change_with_each_photograph(rig):
         run(w, clock, 1)
         second, in_stamp = versions()
         assert second == in_stamp != first and "IMG_0001.png" in page.read_text()
+
+
+def test_a_bound_photo_replaced_by_an_over_size_file_fails_its_row(rig):
+    from vision_torsion.images import MAX_IMAGE_FILE_BYTES
+
+    folder, cam, plan, photos = rig
+    put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
+    put(cam, "IMG_0002.png", photos[plan.rows[1]["image"]])
+    clock = Clock()
+    with Watcher(folder, camera_dir=cam, clock=clock, events="poll") as w:
+        run(w, clock)
+        assert w.bound[1].angle is not None
+        sparse(cam / "IMG_0002.png", MAX_IMAGE_FILE_BYTES + 1)
+        os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
+        events = run(w, clock)
+        assert messages(events, "replaced") == [
+            "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
+            "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
+            "old result is dropped"]
+        # the old angle is not kept for a file that is no longer that image
+        assert np.isnan(w.bound[1].angle)
+        assert w.bound[1].own == [f"not read: IMG_0002.png: {MAX_IMAGE_FILE_BYTES + 1} bytes, larger than an "
+                                  f"image file may be ({MAX_IMAGE_FILE_BYTES} bytes)"]
+        assert run(w, clock) == []  # said once

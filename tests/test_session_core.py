@@ -55,7 +55,7 @@ def test_angles_match_the_rendered_truth_in_parallel(rendered, tmp_path, monkeyp
     # one job, two reading threads or two worker processes: the same file, byte for byte
     single = process_session(folder, out_dir=tmp_path / "one", jobs=1)
     assert single.measurements_path.read_bytes() == result.measurements_path.read_bytes()
-    monkeypatch.setattr(process_module, "_MAX_THREAD_JOBS", 1)
+    monkeypatch.setattr(process_module, "MAX_THREAD_JOBS", 1)
     pooled = process_session(folder, out_dir=tmp_path / "pool", jobs=2)
     assert pooled.n_measured == len(plan.rows)
     assert pooled.measurements_path.read_bytes() == result.measurements_path.read_bytes()

@@ -242,7 +242,7 @@ def test_changed_measuring_code_measures_everything_again(session, core, monkeyp
 
     folder, _, _ = session
     process_session(folder, jobs=1, measure=core.measure_pair)
-    monkeypatch.setattr(process_module, "_code_fingerprint", lambda: "another core")
+    monkeypatch.setattr(process_module, "code_fingerprint", lambda: "another core")
     assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 20
     assert process_session(folder, jobs=1, measure=core.measure_pair).n_measured == 0
 

@@ -722,18 +722,67 @@ def _neighbour_at_edge(f: DiscFit, patch: MarkerPatch | None) -> bool:
     return bool(np.any(patch.excluded & (d2 < reach * reach)))
 
 
-def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
-    """Status ``occluded`` for a fit whose edge is asymmetric about its centre
-    (:data:`_ASYMMETRY_SHARE`), else None; not judged beside a neighbour
-    (:func:`_neighbour_at_edge`, `patch` the fit's pixels).
+#: A ``steep_cut`` fit is judged for asymmetry only when its edge points leave no
+#: gap wider than this (degrees): a cut surround takes the sectors facing it (gaps of
+#: 130-175 degrees on rendered dots beside a dark card edge), and a harmonic fitted to
+#: the rest of the circle says nothing of a hidden part.
+_STEEP_MAX_GAP_DEG = 90.0
 
-    Not for a fit that cut a region as dark (bright) as the marker from its ring
-    (``steep_cut``, flagged on its own): its edge points sense that region (0.3-0.9
-    px of third harmonic for a dot touching a dark surround, whose pixel fit is good
-    to 0.1 px), so the harmonic cannot tell a hidden part from a cut surround."""
-    if f.steep_cut:
+#: The median absolute deviation of a normal variable in units of its σ.
+_MAD_TO_SIGMA = 0.6745
+
+
+def _edge_profile(f: DiscFit):
+    """The pixel fit's per-sector edge points about its centre, in order of direction:
+    (directions in rad, radial offsets from the circle in px)."""
+    dx, dy = f.edge_x_px - f.x_px, f.edge_y_px - f.y_px
+    order = np.argsort(np.arctan2(dy, dx))
+    return np.arctan2(dy, dx)[order], np.hypot(dx, dy)[order] - f.radius_px
+
+
+def _steep_cut_hides(f: DiscFit):
+    """For a ``steep_cut`` fit: the noise figure (px) its asymmetry is judged against
+    when the edge may hide a part of the marker, else None.
+
+    A region as dark (bright) as the marker merged with it leaves the sectors facing
+    it cut (a gap over :data:`_STEEP_MAX_GAP_DEG`) or bulging outwards; an occluder at
+    the background's level or brighter over its edge hides a chord, the edge's deepest
+    inward dip (three sectors' mean) beyond its largest outward bulge. The cut
+    region's blurred edge inflates :attr:`DiscFit.edge_noise_px` (0.12-0.18 px beside
+    a 255 DN clip, 0.02 px without); the scatter of the sectors' offsets about their
+    neighbours' (the median absolute second difference, 0.03-0.05 px there) holds the
+    noise without the occluder's smooth misfit, and the smaller of the two is used."""
+    psi, delta = _edge_profile(f)
+    if psi.size < 7 or np.degrees(np.max(np.diff(np.r_[psi, psi[0] + 2.0 * np.pi]))) > _STEEP_MAX_GAP_DEG:
         return None
-    limit = _ASYMMETRY_SHARE * f.radius_px + _ASYMMETRY_NOISE_TIMES * f.edge_noise_px
+    smooth = (np.roll(delta, 1) + delta + np.roll(delta, -1)) / 3.0
+    if not -smooth.min() > smooth.max():
+        return None
+    # the offsets' second differences: a smooth chord or bulge leaves them near zero
+    # but at its two corners, which the median passes over; σ√6 for independent noise
+    second = np.roll(delta, 1) - 2.0 * delta + np.roll(delta, -1)
+    scatter = float(np.median(np.abs(second)) / (_MAD_TO_SIGMA * np.sqrt(6.0)))
+    return min(f.edge_noise_px, scatter)
+
+
+def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
+    """Status ``occluded`` for a fit whose edge is asymmetric about its centre, else
+    None; not judged beside a neighbour (:func:`_neighbour_at_edge`, `patch` the fit's
+    pixels).
+
+    Asymmetric: the third harmonic (:func:`edge_asymmetry_px`) above
+    :data:`_ASYMMETRY_SHARE` of the radius plus :data:`_ASYMMETRY_NOISE_TIMES` times
+    the edge points' noise figure. A fit that cut a region as dark (bright) as the
+    marker from its ring (``steep_cut``) is judged only when its edge may hide a part
+    of it (:func:`_steep_cut_hides`, which also gives its noise figure): a cut
+    surround's edge points sense that region (0.3-0.9 px of third harmonic beside a
+    dark card edge, whose pixel fit is good to 0.1 px)."""
+    noise = f.edge_noise_px
+    if f.steep_cut:
+        noise = _steep_cut_hides(f)
+        if noise is None:
+            return None
+    limit = _ASYMMETRY_SHARE * f.radius_px + _ASYMMETRY_NOISE_TIMES * noise
     # the harmonic is part of the edge points' RMS distance from the circle (a/√2 of
     # it on evenly spread sectors; 1.5x for missing ones): most fits need not look
     if not 1.5 * np.sqrt(2.0) * f.residual_rms_px > limit:

@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
+from itertools import accumulate
 
 import cv2
 import numpy as np
@@ -67,7 +68,6 @@ from .ring import (
     cut_occluders,
     damped_normal_matrix,
     fast_median,
-    harmonic_circularity,
     in_edge_zone,
     lost_sectors,
     marker_patch,
@@ -77,7 +77,7 @@ from .ring import (
     occluder_groups,
     robust_sigma,
     robust_sigma_rows,
-    sector_edge_offsets,
+    sector_count,
     sector_index,
     sectors_needed,
     solve_lu,
@@ -476,43 +476,6 @@ def _inverse(A, *, lapack=False):
     return inverse
 
 
-def _edge_diagnostics(p, resid, J, u, sigma2):
-    """Per-sector edge points (:func:`~vision_torsion.ring.sector_edge_offsets`),
-    their RMS distance from the circle (px), the circularity they give
-    (:func:`~vision_torsion.ring.harmonic_circularity`) and their RMS standard
-    deviation from the pixel noise alone (px; :func:`_away_variance`, `sigma2` the
-    ring's residual variance in DN²)."""
-    cx, cy, R = p[0], p[1], p[2]
-    band = np.flatnonzero(in_edge_zone(u))
-    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
-    # directions need no coordinates (half a turn off when g < 0, a dark marker)
-    g_cos, g_sin, g = J[:3].take(band, axis=1)
-    psi = np.arctan2(g_sin, g_cos)
-    if p[5] < p[4]:
-        psi += np.pi
-    k, n_sec = sector_index(psi, R)
-    delta, ang, info = sector_edge_offsets(k, n_sec, g, resid.take(band), g_cos, g_sin)
-    c, s = np.cos(ang), np.sin(ang)
-    r = R + delta
-    return (
-        cx + r * c,
-        cy + r * s,
-        float(np.sqrt(np.dot(delta, delta) / delta.size)),
-        harmonic_circularity(delta, c, s, R),
-        float(np.sqrt(_away_variance(resid, u, sigma2) * np.mean(1.0 / info))),
-    )
-
-
-def _away_variance(resid, u, sigma2) -> float:
-    """Residual variance (DN²) of the pixels more than 3s from the edge (|u| >= 3),
-    or `sigma2` when fewer than 30: the pixel noise, without the misfit of an edge
-    that is not the model's circle (an ellipse's, which inflates the ring's whole
-    variance by 2-15x on rendered ones)."""
-    away = ~in_edge_zone(u)
-    n = np.count_nonzero(away)
-    return float(np.dot(resid[away], resid[away]) / n) if n >= 30 else sigma2
-
-
 def fit_disc(
     image, cx, cy, radius, *, edge_width=1.2, levels=None, max_iter=30, patch: MarkerPatch | None = None
 ) -> DiscFit:
@@ -641,8 +604,8 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) ->
         raise FitError(f"the marker's edge model did not converge in {max_iter} iterations")
     n = resid.size
     sigma2 = ssr / max(n - 8, 1)
-    return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(p, resid, J, u, sigma2), n=n,
-                     steep_cut=steep_cut)
+    return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(
+        p[None], resid[None], J[None], u[None], [n], [ssr])[0], n=n, steep_cut=steep_cut)
 
 
 class _Scratch(threading.local):
@@ -750,65 +713,90 @@ def _normal_equations(Jm, resid):
     return Jm @ Jm.transpose(0, 2, 1), (Jm @ resid[:, :, None])[:, :, 0]
 
 
-def _edge_diagnostics_rows(P, resid, Jm, u, n, sigma2) -> list:
-    """:func:`_edge_diagnostics` of rows of markers (parameters `P`, M x 8; the
-    model's residuals, Jacobian and u of their padded rings, of `n` pixels each;
-    their residual variances `sigma2`) in one set of array operations: per row the
-    edge points (x, y), their RMS, circularity and RMS standard deviation from the
-    noise, or the FitError of too few sectors (:func:`sector_edge_offsets`'s)."""
-    m = len(P)
+def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
+    """Per row of markers (parameters `P`, M x 8; the model's residuals (M x N),
+    Jacobian (M x 8 x N) and u (M x N) on the first `n` (M ints) pixels of each row
+    and padding after, far outside the edge zone; `ssr` (M floats) the rows' sums of
+    squared residuals, DN²): the edge points of the angular sectors (x, y in px;
+    :func:`~vision_torsion.ring.sector_edge_offsets`' rule), their RMS distance from
+    the circle (px), the circularity they give
+    (:func:`~vision_torsion.ring.harmonic_circularity`) and their RMS standard
+    deviation from the pixel noise alone (px), or the FitError of too few sectors.
+
+    The noise is the residual variance of the pixels more than 3s from the edge
+    (|u| >= 3), or the ring's when fewer than 30: without the misfit of an edge that
+    is not the model's circle (an ellipse's, which inflates the ring's whole
+    variance by 2-15x on rendered ones). :func:`fit_disc` asks for one row,
+    :func:`fit_discs` for all of its rows at once; one row takes no per-row sums."""
+    m, size = resid.shape
     if not m:
         return []
-    # the edge zone's pixels only (row by row, in order), as flat arrays
-    zr, zc = np.nonzero(in_edge_zone(u) & (np.arange(u.shape[1]) < n[:, None]))
-    g_cos, g_sin, gb = Jm[zr, 0, zc], Jm[zr, 1, zc], Jm[zr, 2, zc]
+    # sector_index's sectors (~1 px of arc) of each row, laid out in spans of `width`
+    radii = P[:, 2].tolist()
+    n_sec = [sector_count(R) for R in radii]
+    width = max(n_sec, default=0)
+    # the edge zone's pixels, as flat indices into the rows (`at`) and into the
+    # Jacobian's rows of ∂I/∂cx (`jat`), and their rows (`zr`, 0 for one marker)
+    at = np.flatnonzero(in_edge_zone(u))
+    if m == 1:
+        zr, jat, per_row = 0, at, n_sec[0]
+    else:
+        zr = at // size
+        jat = at + zr * (7 * size)
+        per_row = np.array(n_sec)[zr]
+    # J[0] = g·cos ψ and J[1] = g·sin ψ, with g = J[2] = ∂I/∂R: the pixels'
+    # directions need no coordinates (half a turn off when g < 0, a dark marker)
+    flat = Jm.reshape(-1)
+    g_cos, g_sin, g = flat.take(jat), flat.take(jat + size), flat.take(jat + 2 * size)
+    rz = resid.reshape(-1).take(at)
     psi = np.arctan2(g_sin, g_cos)
-    psi[(P[:, 5] < P[:, 4])[zr]] += np.pi  # a dark marker: g < 0 turns the direction round
-    n_sec = np.maximum(16, np.round(2 * np.pi * P[:, 2]).astype(np.int64))
-    per_row = n_sec[zr]
-    sector = ((psi + np.pi) * (per_row / (2 * np.pi))).astype(np.int64) % per_row
-    first = np.concatenate([[0], np.cumsum(n_sec)[:-1]])
-    where = first[zr] + sector
-    total = int(n_sec.sum())
-    den, num, cs, sn = (
-        np.bincount(where, w, minlength=total) for w in (gb * gb, gb * resid[zr, zc], gb * g_cos, gb * g_sin)
-    )
-    # per row: its sectors as a padded row (M x the most sectors)
-    col = np.arange(int(n_sec.max()))
-    valid = col < n_sec[:, None]
-    at = np.where(valid, first[:, None] + col, 0)
-    den, num, cs, sn = (np.where(valid, a[at], 0.0) for a in (den, num, cs, sn))
-    positive = den > 0
-    count = positive.sum(axis=1)
-    ordered = np.sort(np.where(positive, den, np.inf), axis=1)
-    rows = np.arange(m)
-    lo, hi = ordered[rows, np.maximum(count - 1, 0) // 2], ordered[rows, np.minimum(count // 2, ordered.shape[1] - 1)]
-    median = np.where(count % 2 == 1, hi, 0.5 * (lo + hi))  # fast_median of the positive ones
-    good = np.where(count[:, None] > 0, den > 0.1 * median[:, None], positive) & valid
-    kept = good.sum(axis=1)
-    need = sectors_needed(n_sec)
-    delta = np.where(good, num / np.where(good, den, 1.0), 0.0)
-    ang = np.arctan2(sn, cs)
+    dark = P[:, 5] < P[:, 4]
+    if dark.any():
+        psi += np.pi * dark[zr]
+    where = ((psi + np.pi) * (per_row / (2 * np.pi))).astype(np.int64) % per_row
+    if m > 1:
+        where += zr * width
+    den, num, cs, sn = (np.bincount(where, w, minlength=m * width) for w in (g * g, g * rz, g * g_cos, g * g_sin))
+    # the sectors with more than a tenth of their row's median information (of those with any)
+    cut = np.empty(m)
+    for k, row in enumerate(den.reshape(m, width)):
+        positive = row[row > 0]
+        cut[k] = 0.1 * fast_median(positive) if positive.size else 0.0
+    sel = np.flatnonzero(den > (cut[0] if m == 1 else np.repeat(cut, width)))
+    info = den[sel]
+    delta = num[sel] / info
+    ang = np.arctan2(sn[sel], cs[sel])
     c, s = np.cos(ang), np.sin(ang)
-    r = P[:, 2:3] + delta
-    ex, ey = P[:, :1] + r * c, P[:, 1:2] + r * s
-    per = np.maximum(kept, 1)
-    rms = np.sqrt((delta * delta).sum(axis=1) / per)
-    a2 = (2.0 / per) * (delta * (c * c - s * s)).sum(axis=1)
-    b2 = (2.0 / per) * (delta * (2.0 * c * s)).sum(axis=1)
-    circularity = 1.0 - 2.0 * np.hypot(a2, b2) / P[:, 2]
-    # :func:`_away_variance` of each row (the padding's u is inf: masked by n)
-    away = ~in_edge_zone(u) & (np.arange(u.shape[1]) < n[:, None])
-    na = away.sum(axis=1)
-    var_away = np.where(na >= 30, (np.where(away, resid, 0.0) ** 2).sum(axis=1) / np.maximum(na, 1), sigma2)
-    noise = np.sqrt(var_away * (np.where(good, 1.0 / np.where(good, den, 1.0), 0.0)).sum(axis=1) / per)
+    sr = 0 if m == 1 else sel // width  # the sectors' rows
+    at_row = P[0] if m == 1 else P[sr].T
+    r = at_row[2] + delta
+    ex, ey = at_row[0] + r * c, at_row[1] + r * s
+    d2, cos2, sin2, inv = (_row_sums(sr, v, m) for v in (delta * delta, delta * (c * c - s * s),
+                                                           delta * (2.0 * c * s), 1.0 / info))
+    zone_ss = _row_sums(zr, rz * rz, m)
+    zone_n = [at.size] if m == 1 else np.bincount(zr, minlength=m).tolist()
+    ends = list(accumulate([sel.size] if m == 1 else np.bincount(sr, minlength=m).tolist()))
+    starts = [0] + ends[:-1]
+    need = sectors_needed(np.array(n_sec)).tolist()
     out = []
-    for k in rows:
-        if kept[k] < need[k]:
-            out.append(FitError(f"only {int(kept[k])} edge sectors carry information (need {int(need[k])})"))
-        else:
-            out.append((ex[k, good[k]], ey[k, good[k]], float(rms[k]), float(circularity[k]), float(noise[k])))
+    for k, (lo, hi, R, n_k, ssr_k) in enumerate(zip(starts, ends, radii, n, ssr)):
+        kept = hi - lo
+        if kept < need[k]:
+            out.append(FitError(f"only {kept} edge sectors carry information (need {need[k]})"))
+            continue
+        away_n = n_k - zone_n[k]
+        var_away = (ssr_k - zone_ss[k]) / away_n if away_n >= 30 else ssr_k / max(n_k - 8, 1)
+        circularity = 1.0 - 2.0 * math.hypot(2.0 / kept * cos2[k], 2.0 / kept * sin2[k]) / R
+        out.append((ex[lo:hi], ey[lo:hi], math.sqrt(d2[k] / kept), circularity, math.sqrt(var_away * inv[k] / kept)))
     return out
+
+
+def _row_sums(rows, values, m) -> list:
+    """The sums (floats) of `values` over each of `m` rows (`rows`: each value's
+    row; 0 when `m` is 1)."""
+    if m == 1:
+        return [float(values.sum())]
+    return np.bincount(rows, values, minlength=m).tolist()
 
 
 #: Diagonal indices of an 8x8 matrix.
@@ -975,9 +963,10 @@ class _RowsFit:
         sigma2 = self.ssr / np.maximum(px.n - 8, 1)
         resid, Jm, u = self.resid, self.Jm, self.u
         if good.size == m:  # no copies of the rows (most fits: none failed)
-            diagnostics = _edge_diagnostics_rows(P, resid, Jm, u, px.n, sigma2)
+            diagnostics = _edge_diagnostics(P, resid, Jm, u, px.n.tolist(), self.ssr.tolist())
         else:
-            diagnostics = _edge_diagnostics_rows(P[good], resid[good], Jm[good], u[good], px.n[good], sigma2[good])
+            diagnostics = _edge_diagnostics(P[good], resid[good], Jm[good], u[good], px.n[good].tolist(),
+                                            self.ssr[good].tolist())
         try:
             inverses = np.linalg.inv(A[good])
         except np.linalg.LinAlgError:

@@ -37,6 +37,7 @@ __all__ = [
     "occluder_group",
     "occluder_groups",
     "cut_occluders",
+    "sector_count",
     "sector_index",
     "sector_edge_offsets",
     "sectors_needed",
@@ -452,12 +453,17 @@ def solve_lu(A, b):
         raise FitError("the marker's edge model is degenerate (no edge in the ring)")
     return x.reshape(-1)
 
+def sector_count(radius) -> int:
+    """Number of angular sectors of a marker's edge at `radius` px: ~1 px of arc each,
+    at least 16. (At least 16, not more: the edge of a 3 px marker crosses ~19 pixels,
+    and sectors narrower than a pixel are left without edge pixels.)"""
+    return max(16, int(round(2 * np.pi * float(radius))))
+
+
 def sector_index(psi, radius):
-    """Angular sector (~1 px of arc at `radius` px, at least 16) of each direction
-    `psi` (rad, image axes), and the number of sectors. (At least 16, not more: the
-    edge of a 3 px marker crosses ~19 pixels, and sectors narrower than a pixel are
-    left without edge pixels.)"""
-    n_sec = max(16, int(round(2 * np.pi * radius)))
+    """Angular sector (:func:`sector_count` of them at `radius` px) of each direction
+    `psi` (rad, image axes), and the number of sectors."""
+    n_sec = sector_count(radius)
     return ((psi + np.pi) * (n_sec / (2 * np.pi))).astype(np.int64) % n_sec, n_sec
 
 

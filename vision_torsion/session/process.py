@@ -57,7 +57,8 @@ from .load import Session, load_session, unlisted_images
 from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
-__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME"]
+__all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
+           "code_fingerprint", "MAX_THREAD_JOBS"]
 
 logger = logging.getLogger(__name__)
 
@@ -72,7 +73,7 @@ _CACHE_FORMAT = 6
 #: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
 #: up with about five reading threads (~10.5 ms per image each, mostly without
 #: it); three leaves room for slower measuring. Measured on two cores only.
-_MAX_THREAD_JOBS = 3
+MAX_THREAD_JOBS = 3
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,7 @@ class ProcessResult:
 _DOWNSTREAM = ("session", "cli", "analysis", "stiffness", "report", "synthetic")
 
 
-def _code_fingerprint() -> str:
+def code_fingerprint() -> str:
     """Digest of the measuring code's source (every module outside `_DOWNSTREAM`).
 
     A version number is not bumped for every change to the measuring code, so the
@@ -159,16 +160,23 @@ def _settings_key(settings: MeasureSettings, measure=measure_pair) -> str:
     d = settings.to_dict()
     if d.get("correction"):
         d["correction"] = digest(Path(d["correction"]).read_bytes())
-    key = {"settings": d, "code": _code_fingerprint(), "cache": _CACHE_FORMAT}
+    key = {"settings": d, "code": code_fingerprint(), "cache": _CACHE_FORMAT}
     if measure is not measure_pair:
         key["measure"] = f"{getattr(measure, '__module__', '')}.{getattr(measure, '__qualname__', repr(measure))}"
     return json.dumps(key, sort_keys=True)
 
 
-def _measuring(session: Session, measure):
-    """(measuring function, cache key's settings part, cache entry check) of a session:
-    `measure` and the two-marker key, or for an N-marker target (``[target]``) every
-    marker found (:mod:`.targetrows`) under a key that holds the target."""
+def session_measuring(session: Session, measure):
+    """How the images of `session` are measured, shared by ``process``, ``bind`` and
+    ``watch`` so that one cache key gives one result whichever measured first.
+
+    Returns
+    -------
+    (callable, str, callable)
+        The measuring function (`measure`, or for an N-marker target, ``[target]``,
+        every marker found: :mod:`.targetrows`), the settings part of the cache key
+        (the target's layout included), and the check a cache entry must pass.
+    """
     if session.config.target is None:
         return measure, _settings_key(session.settings, measure), _valid_entry
     from .targetrows import measure_target_markers, target_settings_key, valid_target_entry
@@ -209,7 +217,7 @@ def _pool_context():
     fork instead of importing them again; this sets the process-wide preload list
     of :mod:`multiprocessing`'s fork server, keeping its default ``__main__`` entry.
     """
-    import multiprocessing  # here: only more than _MAX_THREAD_JOBS jobs start processes
+    import multiprocessing  # here: only more than MAX_THREAD_JOBS jobs start processes
 
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
@@ -237,11 +245,11 @@ def _progress_bar(total: int, progress: bool):
 
 def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
     """Yield each task's result in task order: in this process with `jobs` up to
-    :data:`_MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
+    :data:`MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
     jobs = _jobs_within_open_files(jobs, len(tasks))
     bar = _progress_bar(len(tasks), progress)
     try:
-        if jobs <= _MAX_THREAD_JOBS or len(tasks) <= 1:
+        if jobs <= MAX_THREAD_JOBS or len(tasks) <= 1:
             with in_process(cache_dir, run, known, measure):
                 results = (_read_ahead(tasks, readers=jobs) if jobs > 1
                            else map(measure_task, tasks))
@@ -288,10 +296,10 @@ def _open_file_limit() -> int | None:
 
 
 def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
-    """`jobs`, or the threads of this process (at most :data:`_MAX_THREAD_JOBS`) when
+    """`jobs`, or the threads of this process (at most :data:`MAX_THREAD_JOBS`) when
     the open-file limit has no room for `jobs` worker processes (logged)."""
     limit = _open_file_limit()
-    if jobs <= _MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
+    if jobs <= MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
         return jobs
     try:
         in_use = len(os.listdir("/proc/self/fd"))
@@ -300,8 +308,8 @@ def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
     if in_use + _FILES_RESERVED + _FILES_PER_WORKER * jobs <= limit:
         return jobs
     logger.warning("only %d files may be open (ulimit -n), too few for %d worker processes; measuring "
-                   "with %d threads of this process instead", limit, jobs, _MAX_THREAD_JOBS)
-    return _MAX_THREAD_JOBS
+                   "with %d threads of this process instead", limit, jobs, MAX_THREAD_JOBS)
+    return MAX_THREAD_JOBS
 
 
 def _read_ahead(tasks, *, readers: int):
@@ -437,7 +445,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         ``measurements.csv`` and the cache ``.vision-torsion-cache/``.
     jobs : int, optional
         Images read and decoded at once; all available cores by default. 1
-        measures in this process alone; up to 3 (``_MAX_THREAD_JOBS``) run as
+        measures in this process alone; up to 3 (``MAX_THREAD_JOBS``) run as
         reading threads of this process beside the measuring one; more run as
         worker processes.
     progress : bool
@@ -476,7 +484,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if jobs is not None:
         jobs = check_number(jobs, name="jobs", error=SessionError, low=1, whole=True)
     jobs = jobs or _default_jobs()
-    if jobs > _MAX_THREAD_JOBS:
+    if jobs > MAX_THREAD_JOBS:
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
     out = output_folder(session.folder, out_dir)
@@ -489,7 +497,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     # a bad correction file is unusable input: say so before measuring anything
     correction = load_correction(settings.correction)
     settings_json = json.dumps(settings.to_dict(), sort_keys=True)
-    measure, key, check = _measuring(session, measure)
+    measure, key, check = session_measuring(session, measure)
     cache_dir = out / CACHE_DIRNAME
     cached, logs = read_cache(cache_dir, check=check)
     run = CacheLog.new_run()

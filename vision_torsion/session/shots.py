@@ -151,11 +151,11 @@ class ShotMeasurer:
 
     def __init__(self, session: Session, out_dir, *, measure=None):
         from ..pair import measure_pair
-        from .process import _measuring  # process's measuring function, cache key and check
+        from .process import session_measuring  # process's measuring function, cache key and check
 
         self.settings = session.settings
         self.settings_json = json.dumps(self.settings.to_dict(), sort_keys=True)
-        measure, self.key, self._check = _measuring(session, measure_pair if measure is None else measure)
+        measure, self.key, self._check = session_measuring(session, measure_pair if measure is None else measure)
         self.target = session.config.target
         self.cache_dir = Path(out_dir) / CACHE_DIRNAME
         self.cached, self._logs = read_cache(self.cache_dir, check=self._check)

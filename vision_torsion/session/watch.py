@@ -479,14 +479,16 @@ class Watcher:
                 info.first_undecodable = now
             if info is not None and now - info.first_undecodable < self.give_up_s:
                 return []  # being rewritten: wait for it
-        if not shot.image_hash:
+        if not shot.image_hash and (shot.undecodable or not shot.message):
             return []
+        # an unreadable replacement (too large, no permission) is no longer the image measured:
+        # its row fails with the reason, as in `process`, instead of keeping the old angle
         if shot.image_hash == old.image_hash:  # touched, not changed
             old.stat = None if info is None else (info.size, info.mtime_ns)
             return []
         if self.hashes.get(old.image_hash) == name:
             del self.hashes[old.image_hash]
-        if not shot.undecodable:
+        if shot.image_hash and not shot.undecodable:
             self.hashes.setdefault(shot.image_hash, name)
         self._bind(pos, name, shot, info)
         b = self.bound[pos]
@@ -511,8 +513,8 @@ class Watcher:
         own: list[str] = []
         if b.stalled is not None:
             own.append(b.stalled)
-        elif shot.pair is None:
-            own.append(f"marker not found: {shot.message}")
+        elif shot.pair is None:  # no hash: the file could not be read at all
+            own.append(f"{'marker not found' if shot.image_hash else 'not read'}: {shot.message}")
         ref = self._reference(row.orientation_deg)
         reference = self.bound[ref].pair if ref is not None and ref != pos else None
         own += image_warnings(shot.pair, reference, shot.saturated_fraction)
