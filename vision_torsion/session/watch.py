@@ -268,6 +268,14 @@ class Watcher:
                 return i, row
         return None
 
+    def _carried(self, orientation: float, n: int) -> int:
+        """Rows the files after `orientation` are still off by, of the `n` its
+        decided missed (+) and extra (-) shots put them off: those not realigned at
+        its end (:meth:`unshot`, the photographs set aside)."""
+        if n > 0:
+            return 0 if orientation != self.rows[-1].orientation_deg else n
+        return n + self.overflow.get(orientation, 0)
+
     def unshot(self) -> set[int]:
         """Positions of the rows no photograph takes as bound: the last rows of an
         orientation whose files are a row early after a decided missed shot (the
@@ -531,9 +539,9 @@ class Watcher:
         for n, (p, w) in sorted(enumerate(steps), key=lambda t: self.order.index(t[1][0])):
             if n not in kinks:
                 # the files after an extra shot are a row late, after a missed shot a row early
-                shift = options.count("--missing") - options.count("--skip")
-                new = self.step_fix(p, w, shift)
+                # (in the orientation of the mistake, and after it where not realigned)
                 o = self.bound[p].row.orientation_deg
+                new = self.step_fix(p, w, net.get(o, 0) + sum(self._carried(x, k) for x, k in net.items() if x != o))
                 net[o] = (net.get(o, 0) + new.count("--missing") - new.count("--skip")
                           + (p in self.turned_early))
                 options += new
