@@ -2,6 +2,7 @@
 ``bind`` over simulated sessions of different gears and both target types (issue 28).
 
     python benchmarks/bench_capture.py [--seeds N] [--steps K] [--targets ...] [--target-seeds M]
+                                       [--orientations L] [--multi-seeds S]
 
 Every session is one orientation of a gear photographed by the scripted camera
 (:func:`vision_torsion.synthetic.scripted_camera.capture_script`, a 320×240 scene, 4 weight
@@ -12,6 +13,10 @@ a three-segment spring behind friction and a Masing gear
 weight piece forgotten, two shots swapped, a camera bump of 1 px, one of 3 px and
 0.05°, a blurred photograph, a wrong angle_sign; and clean sessions. Targets: two
 markers, and the N-marker ring16 (session.toml ``[target]``) drawn in the same frame.
+Besides, sessions of `L` orientations (two-marker target; the same gear in each)
+with one step mistake (missed, extra, forgotten, swapped) in the first orientation's
+loop or in the last one's, or none: a mistake in a later loop is judged against the
+same step of the loops before it.
 
 Each session is watched as its photographs arrive (``Watcher``, one tick per
 photograph) and then bound (``bind_session``). Counted:
@@ -128,17 +133,23 @@ MISTAKES = {
 }
 
 
-def mistake_row(kind: str, rng, torques) -> int:
+#: The mistakes of the multi-loop sessions: those the step checks find.
+MULTI = ("missed shot", "extra shot", "forgotten weight", "two shots swapped", "clean")
+
+
+def mistake_row(kind: str, rng, torques, block=None) -> int:
     """A row for the mistake where the step checks can see it: inside a branch of
     the loop (the load changing the same way for the steps before and after it).
     The first image after a load reversal has no step of its branch to compare
     with (the gear's stiffness may switch there by 15×), so a shot missed there
-    shows only as a row left without a photograph at the end."""
+    shows only as a row left without a photograph at the end. `block`: (first row,
+    end) of the orientation to place it in (the whole plan by default)."""
     if kind == "wrong angle_sign":
         return 1
     d = np.sign(np.diff(torques))  # d[r - 1]: the step into row r
     after = 2 if kind == "two shots swapped" else 1
-    inside = [r for r in range(3, len(torques) - after)
+    first, end = block or (0, len(torques))
+    inside = [r for r in range(first + 3, end - after)
               if all(d[r - 2 + j] == d[r - 1] for j in range(after + 2))]
     return int(rng.choice(inside))
 
@@ -152,9 +163,13 @@ def first_photo(kind: str, row: int, shots) -> int:
     return next(k for k, s in enumerate(shots) if s.row == row)
 
 
-def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) -> dict:
+def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO, *, orientations: int = 1,
+                in_loop: int = 0) -> dict:
+    """One session of `orientations` orientations, the mistake in orientation
+    number `in_loop` (0-based), watched and bound: what each found."""
     rng = np.random.default_rng(seed)
-    spec = SessionSpec(max_torque_nm=steps * STEP_NM, orientations_deg=(0.0,))
+    spec = SessionSpec(max_torque_nm=steps * STEP_NM,
+                       orientations_deg=tuple(360.0 * k / max(orientations, 3) for k in range(orientations)))
     options, said, fixed = MISTAKES[kind]
     scene = SCENES[target]
     with tempfile.TemporaryDirectory() as tmp:
@@ -163,7 +178,8 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) 
         sign = {"ref": 0, "pos": 1, "neg": -1}
         torques = [sign[r["phase"][:3]] * couple_torque_nm(float(r["mass_kg"]), gravity_m_per_s2=spec.gravity_m_per_s2,
                                                           arm_radius_m=spec.arm_radius_m) for r in plan.rows]
-        row = mistake_row(kind, rng, torques)
+        per = len(torques) // orientations
+        row = mistake_row(kind, rng, torques, (in_loop * per, (in_loop + 1) * per))
         plan, shots = capture_script(scene, spec, session, seed=seed, response=GEARS[gear], **options(row))
         refused = None
         if target != TWO:  # the same plan, with the N-marker target in session.toml
@@ -201,6 +217,7 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) 
     if res.command:
         bind_text.append(res.command)
     out = {"gear": gear, "target": target, "mistake": kind, "seed": seed, "row": row, "withdrawn": withdrawn,
+           "orientations": orientations, "loop": "first" if in_loop == 0 else "later",
            "photos": len(names), "watch_measured": measured, "bind_measured": res.n_files - len(unmeasured),
            "not_measured_because": why,
            "process_refused": refused,
@@ -223,16 +240,21 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO) 
 
 
 def table(rows) -> None:
-    print(f"{'mistake':<20} {'sessions':>8} {'watch found':>11} {'bind found':>10} "
+    """Per mistake (and, where the sessions hold several loops, per loop the
+    mistake is in: the first orientation's or a later one's) the counts."""
+    print(f"{'mistake':<34} {'sessions':>8} {'watch found':>11} {'bind found':>10} "
           f"{'watch false':>11} {'standing':>8} {'bind false':>10}")
+    split = any(r["orientations"] > 1 for r in rows)
     for kind in MISTAKES:
-        sel = [r for r in rows if r["mistake"] == kind]
-        if not sel:
-            continue
-        found_w = "—" if kind == "clean" else f"{sum(r['watch_detected'] for r in sel)}/{len(sel)}"
-        found_b = "—" if kind == "clean" else f"{sum(r['bind_detected'] for r in sel)}/{len(sel)}"
-        print(f"{kind:<20} {len(sel):>8} {found_w:>11} {found_b:>10} {sum(r['watch_false'] for r in sel):>11} "
-              f"{sum(r['watch_standing'] for r in sel):>8} {sum(r['bind_false'] for r in sel):>10}")
+        for loop in ("first", "later"):
+            sel = [r for r in rows if r["mistake"] == kind and r["loop"] == loop]
+            if not sel:
+                continue
+            label = f"{kind} ({loop} loop)" if split and kind != "clean" else kind
+            found_w = "—" if kind == "clean" else f"{sum(r['watch_detected'] for r in sel)}/{len(sel)}"
+            found_b = "—" if kind == "clean" else f"{sum(r['bind_detected'] for r in sel)}/{len(sel)}"
+            print(f"{label:<34} {len(sel):>8} {found_w:>11} {found_b:>10} {sum(r['watch_false'] for r in sel):>11} "
+                  f"{sum(r['watch_standing'] for r in sel):>8} {sum(r['bind_false'] for r in sel):>10}")
     photos = sum(r["photos"] for r in rows)
     refused = sorted({str(r["process_refused"]) for r in rows if r["process_refused"]})
     print(f"photographs measured: watch {sum(r['watch_measured'] for r in rows)}/{photos}, "
@@ -244,7 +266,7 @@ def table(rows) -> None:
         return
     for r in rows:
         if r["mistake"] != "clean" and not (r["watch_detected"] and r["bind_detected"]):
-            print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} (seed {r['seed']}): "
+            print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} ({r['loop']} loop, seed {r['seed']}): "
                   f"watch {r['watch_detected']}, bind {r['bind_detected']}")
 
 
@@ -254,6 +276,10 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=4, help="weight steps per phase")
     ap.add_argument("--targets", default=",".join(SCENES), help=f"target types, comma-separated ({', '.join(SCENES)})")
     ap.add_argument("--target-seeds", type=int, default=1, help="sessions per gear and mistake of the N-marker target")
+    ap.add_argument("--orientations", type=int, default=2,
+                    help="orientations of the multi-loop sessions (below 2: none are run)")
+    ap.add_argument("--multi-seeds", type=int, default=1,
+                    help="multi-loop sessions per gear, step mistake and loop it is in")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = []
@@ -264,15 +290,30 @@ def main(argv=None) -> int:
             for j, kind in enumerate(MISTAKES):
                 for s in range(seeds):
                     rows.append(one_session(gear, kind, 1000 * s + 17 * j + 101 * g, args.steps, target))
+    multi = []
+    if args.orientations >= 2:
+        for g, gear in enumerate(GEARS):
+            for j, kind in enumerate(MULTI):
+                for in_loop in ((0,) if kind == "clean" else (0, args.orientations - 1)):
+                    for s in range(args.multi_seeds):
+                        multi.append(one_session(gear, kind, 1000 * s + 17 * j + 101 * g + 7 * in_loop, args.steps,
+                                                 orientations=args.orientations, in_loop=in_loop))
     print(f"{len(rows)} sessions ({len(GEARS)} gears × {len(MISTAKES)} cases × seeds, targets: "
-          f"{', '.join(targets)}), {2 + 4 * args.steps} photographs each, {time.perf_counter() - t0:.0f} s")
+          f"{', '.join(targets)}), {2 + 4 * args.steps} photographs each; {len(multi)} sessions of "
+          f"{args.orientations} orientations; {time.perf_counter() - t0:.0f} s")
     for target in targets:
         sel = [r for r in rows if r["target"] == target]
         print(f"\n{target}: {len(sel)} sessions")
         table(sel)
+    if multi:
+        print(f"\n{TWO}, {args.orientations} orientations: {len(multi)} sessions")
+        table(multi)
+    rows += multi
     kept = [{k: v for k, v in r.items() if not k.endswith("_said")} for r in rows]  # messages hold temp paths
     write_result(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds,
-                                                      "target_seeds": args.target_seeds, "targets": targets})
+                                                      "target_seeds": args.target_seeds, "targets": targets,
+                                                      "orientations": args.orientations,
+                                                      "multi_seeds": args.multi_seeds})
     return 0
 
 

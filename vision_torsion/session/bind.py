@@ -204,17 +204,23 @@ def step_warnings(session: Session, bound, pairs, *, sign=None) -> list[tuple[in
         The angle sign to check with (the session's ``angle_sign`` by default).
     """
     sign = session.config.angle_sign if sign is None else sign
-    found = []
+    found, loops = [], []  # each orientation's steps also against the same steps of the ones before
     for seq, points in _sequences(session, bound, pairs, sign):
-        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session))]
+        found += [(seq[w.index], w) for w in check_steps(points, step_torque_nm=_step_torque(session),
+                                                         earlier=loops)]
+        loops.append(points)
     kinks = gear_kinks([w for _, w in found])  # the gear's own, seen twice: not mistakes
     return sorted((x for n, x in enumerate(found) if n not in kinks), key=lambda t: t[0])
 
 
 def _sign_diagnosis(session: Session, bound, pairs):
     """(the sign to check with, the one-line diagnosis or None): the session's
-    ``angle_sign`` is inverted when the first loaded image turned against its
-    torque in most orientations (:func:`~.steps.first_load_inverted`)."""
+    ``angle_sign`` is inverted when the first loaded image of its first orientation
+    turned against its torque (:func:`~.steps.first_load_inverted`; the diagnosis
+    counts the orientations where it did). The first orientation decides: its
+    reference and first load are the session's first photographs, bound to their
+    rows, while a missed or extra shot before a later orientation binds that one's
+    files a row off, its reference to another orientation's load."""
     from .steps import first_load_inverted
 
     sign = session.config.angle_sign
@@ -225,7 +231,7 @@ def _sign_diagnosis(session: Session, bound, pairs):
         if loaded:
             verdicts.append(None if i is None else (seq[i], points[i]))
     against = [v for v in verdicts if v is not None]
-    if not against or 2 * len(against) <= len(verdicts):
+    if not verdicts or verdicts[0] is None:
         return sign, None
     pos, point = against[0]
     row, f = bound[pos]
@@ -371,8 +377,9 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         return bound, left, step_warnings(session, bound, pairs, sign=sign)
 
     def misfit(bound):  # of two fixes that leave as few misfits, the one whose steps fit best
-        return sum(step_misfit(points, step_torque_nm=_step_torque(session))
-                   for _, points in _sequences(session, bound, pairs, sign))
+        loops = [points for _, points in _sequences(session, bound, pairs, sign)]
+        return sum(step_misfit(points, step_torque_nm=_step_torque(session), earlier=loops[:n])
+                   for n, points in enumerate(loops))
 
     bound, leftovers, warns = evaluate(skip, missing, swap)
     fixes, cur_skip, cur_missing, cur_swap = [], list(skip), list(missing), list(swap)

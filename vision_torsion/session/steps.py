@@ -58,12 +58,18 @@ later ones included. Only the last step of a closed sequence cannot be decided: 
 is warned about, undecided, and it is the gear's when the same step elsewhere (in
 another orientation) shows it too (:func:`gear_kinks`). Checked only across one or
 two planned weight steps (not across the unphotographed pre-load or the return to
-zero before a closing image) and only between images of one orientation. In the
-first half-loop of a session the loop has not shown its steps yet: a mistake where
-the gear's stiffness changes by more than the mistake's signature (a missed shot
-inside a soft zone, a piece forgotten on a kinked step) looks like the gear there,
-and shows later (the load turning back a row early; against the same step in the
-second half, in ``bind``). These are warnings for the person at the rig, not a
+zero before a closing image) and only between images of one orientation; a step
+this orientation's loop has not shown yet is compared with the same step of the
+loops photographed before it (``earlier``: the earlier orientations, the gear's
+own stiffness at that torque already seen), so a later orientation's first
+half-loop is judged as its second half is, and a kink seen there is expected, not
+a mistake. In the first half-loop of the session's first orientation nothing has
+shown the steps yet: a mistake where the gear's stiffness changes by more than the
+mistake's signature (a missed shot inside a soft zone or at the switch, a piece
+forgotten on a kinked step) looks like the gear there, and cannot be told from it
+until the load reverses (the load turning back a row early, which ``watch`` names
+with the rows that fit; against the same step in the second half, in ``bind``).
+These are warnings for the person at the rig, not a
 statistical test; the false-alarm rate on the paper's loops is tested
 (tests/test_rig_bind_inputs.py), and the kinked gears of
 :mod:`vision_torsion.synthetic.gears` in tests/test_rig_mistakes.py and
@@ -150,7 +156,7 @@ class StepWarning:
 
 
 def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
-                hindsight: bool | None = None) -> list[StepWarning]:
+                hindsight: bool | None = None, earlier=()) -> list[StepWarning]:
     """Warnings for the steps of one orientation's image sequence (module docstring).
 
     Parameters
@@ -170,6 +176,13 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         included (a closed sequence, ``bind``: the default when not `open_end`).
         False: only with the images before it and the next one, so that each
         verdict stays as it was said as the sequence grows (``watch``).
+    earlier : sequence of sequences of StepPoint
+        The session's loops photographed before this one (the earlier
+        orientations' complete sequences, in capture order). A step that this
+        sequence has not shown yet is compared with the same step of the latest of
+        them that shows it (the gear's own stiffness at that torque, already
+        seen), so the first half-loop of a later orientation is judged as its
+        second half is, and a kink seen there is expected, not a mistake.
 
     Returns
     -------
@@ -182,17 +195,32 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         warned about, undecided (:attr:`StepWarning.decided`).
     """
     hindsight = not open_end if hindsight is None else hindsight
+    return _checked(points, step_torque_nm, open_end, hindsight, _known(earlier, step_torque_nm))[0]
+
+
+def _known(earlier, step_torque_nm) -> dict:
+    """Place in the loop -> compliance of the steps that fitted in the loops
+    `earlier`, from the latest loop that shows it."""
+    known: dict = {}
+    for loop in earlier:
+        known.update({place: c[max(c)] for place, c in _checked(loop, step_torque_nm, False, True, {})[1].items()})
+    return known
+
+
+def _checked(points, step_torque_nm, open_end, hindsight, known):
+    """check_steps: the warnings, and the compliance by place in the loop of the
+    steps that fitted, the sequence bound with the fixes of its mistakes."""
     points, origin = list(points), list(range(len(points)))
     out: list[StepWarning] = []
     done = 0  # warnings before this position of `points` are said already
     while True:
-        found = [w for w in _scan(points, step_torque_nm, open_end, None if hindsight else {})[0]
-                 if w.index >= done]
+        found, seen = _scan(points, step_torque_nm, open_end, None if hindsight else {}, known)
+        found = [w for w in found if w.index >= done]
         shift = next((w for w in found if w.kind in ("no_movement", "large_step") and w.decided), None)
         out += [dataclasses.replace(w, index=origin[w.index]) for w in found
                 if shift is None or w.index <= shift.index]
         if shift is None:
-            return out
+            return out, seen
         # the files after it are a row late (an extra shot) or a row early (a missed
         # shot): the rest is checked as bound with the fix, one mistake, one warning
         i, n = shift.index, len(points)
@@ -206,15 +234,16 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
             origin, done = origin[:n - 1], i + 1
 
 
-def _scan(points, step_torque_nm, open_end, prior=None):
+def _scan(points, step_torque_nm, open_end, prior=None, known=None):
     """check_steps on `points` as bound (no re-binding after a mistake): the
     warnings, and the compliance of the steps that fitted by place in the loop.
     A closed sequence is looked at twice: the second time every step has the same
-    step elsewhere in the loop, later ones included, to compare with."""
+    step elsewhere in the loop, later ones included, to compare with. `known`:
+    place -> compliance of earlier loops, for the steps this one has not shown."""
     steps = _steps(points)
     if prior is None:
-        prior = _scan(points, step_torque_nm, open_end, prior={})[1]
-    state = _State(step_torque_nm, prior)
+        prior = _scan(points, step_torque_nm, open_end, prior={}, known=known)[1]
+    state = _State(step_torque_nm, prior, known)
     out: list[StepWarning] = []
     for k, s in enumerate(steps):
         if not state.single(s.d_tau):
@@ -272,8 +301,9 @@ class _State:
     fitted in this branch (local), and of every step that fitted, by its place in
     the loop (:func:`_place`: the same step elsewhere in the loop)."""
 
-    def __init__(self, step_torque_nm, prior=None):
+    def __init__(self, step_torque_nm, prior=None, known=None):
         self.step = step_torque_nm
+        self.known = known or {}  # place in the loop -> compliance in an earlier loop of the session
         self.local = None  # compliance (deg/N·m) of the last step of this branch that fitted
         self.before = None  # and of the one that fitted before it (the branch's trend)
         self.direction = None
@@ -295,13 +325,14 @@ class _State:
 
     def at(self, place, index):
         """Compliance of the step at `place` in the loop nearest before image `index`
-        that fitted (in a closed sequence, else the nearest after it), or None."""
+        that fitted (in a closed sequence, else the nearest after it), else in an
+        earlier loop of the session, or None."""
         found = dict(self.prior.get(place, {}))
         found.update(self.seen.get(place, {}))
         found = {i: c for i, c in found.items() if i != index and i not in self.flagged}
         before = [i for i in found if i < index]
         pick = max(before) if before else min(found, default=None)
-        return None if pick is None else found[pick]
+        return self.known.get(place) if pick is None else found[pick]
 
     def same_step(self, s, span=None):
         """The expected angle step of `s` (or of the step over `span`, N·m, after
@@ -314,6 +345,14 @@ class _State:
         d = (b - a) / n
         cs = [self.at(self.place((a + j * d, a + (j + 1) * d)), s.index) for j in range(n)]
         return None if None in cs else sum(cs) * d
+
+    def here(self, s) -> bool:
+        """Whether this loop has shown the same step as `s` (not only an earlier loop)."""
+        known, self.known = self.known, {}
+        try:
+            return self.same_step(s) is not None
+        finally:
+            self.known = known
 
     def expected(self, s):
         """(expected angle step, from the same step elsewhere?) or (None, False)."""
@@ -359,7 +398,7 @@ def _judge(s, nxt, state, *, last) -> StepWarning | None:
     if state.after_warning:
         return None
     e, same = state.expected(s)
-    if e is not None and nxt is not None and _row_early(s, nxt, state, e):
+    if e is not None and nxt is not None and _row_early(s, nxt, state, e, same):
         return _warning(s, "large_step", s.d_theta / e,
                         f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× the expected "
                         f"{e:+.4f}° and the next photograph already turns back as the load does one row "
@@ -367,7 +406,8 @@ def _judge(s, nxt, state, *, last) -> StepWarning | None:
     if not state.out_of_line(s):
         return None
     ratio = s.d_theta / e
-    what = "the same step elsewhere in the loop" if same else "the previous step's"
+    what = ("the previous step's" if not same else "the same step elsewhere in the loop" if state.here(s)
+            else "the same step in an earlier orientation")
     said = f"step out of line: Δangle {s.d_theta:+.4f}° is {ratio:.2f}× {what} {e:+.4f}°"
     if nxt is None and last:  # the end of the sequence: nothing can tell
         if not same and _ALONE <= ratio <= _LARGE[0]:  # a gear's drift along a branch looks the same
@@ -420,14 +460,15 @@ def _decide(s, nxt, state, e, same) -> str | None:
     return "large_step" if _LARGE[0] < ratio < _LARGE[1] and follow <= _GOES_ON else None
 
 
-def _row_early(s, nxt, state, e) -> bool:
+def _row_early(s, nxt, state, e, same) -> bool:
     """Step `s` larger than expected and the next photograph turning back while the
     plan goes on: both a row early (a missed shot before the turning load), when
     the turn back is as large as the first step back from a turning load seen
     elsewhere in the loop, and unlike this branch's own step reversed (two
-    photographs taken the other way round)."""
+    photographs taken the other way round). Larger than expected: by 8 % against
+    the same step elsewhere (`same`), else by 15 % against the branch's trend."""
     if not (nxt.d_tau * s.d_tau > 0 and nxt.d_theta * nxt.d_tau < 0
-            and abs(nxt.d_theta) >= _STILL_SIGMAS * nxt.sigma and s.d_theta / e > _EARLY):
+            and abs(nxt.d_theta) >= _STILL_SIGMAS * nxt.sigma and s.d_theta / e > (_SAME_FIT if same else _EARLY)):
         return False
     turn = nxt.span[1]
     back = state.at(state.place((turn, turn - nxt.d_tau)), nxt.index)
@@ -443,7 +484,7 @@ def _warning(s, kind, ratio, message, *, decided=True) -> StepWarning:
     return StepWarning(s.index, kind, s.d_theta, s.d_tau, ratio, message, decided=decided, torque_span_nm=s.span)
 
 
-def step_misfit(points, *, step_torque_nm: float) -> float:
+def step_misfit(points, *, step_torque_nm: float, earlier=()) -> float:
     """How far a closed sequence's steps are from the same steps elsewhere in its loop.
 
     Two bindings of one session that leave no step warning each (a missed shot
@@ -457,6 +498,9 @@ def step_misfit(points, *, step_torque_nm: float) -> float:
         The images of one orientation in capture order (as for :func:`check_steps`).
     step_torque_nm : float
         Torque of one planned weight step (N·m).
+    earlier : sequence of sequences of StepPoint
+        The loops photographed before (as for :func:`check_steps`): a step this
+        loop shows nowhere else is compared with the same step there.
 
     Returns
     -------
@@ -465,8 +509,9 @@ def step_misfit(points, *, step_torque_nm: float) -> float:
         step elsewhere of ``|ln(Δθ / expected Δθ)|`` (0 for a perfectly
         repeating loop; dimensionless).
     """
-    seen = _scan(points, step_torque_nm, False, prior={})[1]
-    state = _State(step_torque_nm, seen)
+    known = _known(earlier, step_torque_nm)
+    seen = _scan(points, step_torque_nm, False, prior={}, known=known)[1]
+    state = _State(step_torque_nm, seen, known)
     total = 0.0
     for s in _steps(points):
         e = state.same_step(s) if state.single(s.d_tau) else None

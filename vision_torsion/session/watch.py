@@ -34,7 +34,13 @@ A tick:
 4. Its angle (against its orientation's reference image, ``angle_sign`` applied),
    Δangle and the step checks of :mod:`.steps`, plus the marker search failing, a
    blurred image (marker edges > 1.5× as wide as in the reference) or a saturated
-   one (> 0.5 % of the pixels at full scale), are returned at once as events.
+   one (> 0.5 % of the pixels at full scale), are returned at once as events. The
+   steps of a later orientation are also compared with the same steps of the
+   orientations before it. After a missed shot decided in an orientation (its files
+   a row early) its last row is left for no photograph, and after an extra shot
+   (its files a row late) its last photograph is set aside with a message, so that
+   the next orientation's photographs bind to its own rows (``bind`` with the fix
+   binds them all).
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
@@ -47,6 +53,7 @@ missing rows.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -216,6 +223,11 @@ class Watcher:
         self.sign = int(cfg.angle_sign)  # inverted when the first load turns against it
         self.sign_decided: int | None = None  # the first loaded photograph's position (-1: right)
         self.swapped: dict[int, tuple[int, str]] = {}  # position -> (its partner, the diagnosis)
+        # orientation -> rows its files are off by after its decided missed (+1 each) and
+        # extra (-1 each) shots: rows no photograph takes, photographs that belong before
+        self.shift: dict[float, int] = {}
+        self.overflow: dict[float, int] = {}  # orientation -> its photographs set aside so far
+        self.turned_early: set[int] = set()  # positions where the load turned back a row early
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
         self.events = FolderEvents(self.camera, mode=events)
         self._closed = False
@@ -245,14 +257,39 @@ class Watcher:
     @property
     def complete(self) -> bool:
         """Every row has its photograph (or was declared missing)."""
-        return all(i in self.bound or row.line in self.missing for i, row in enumerate(self.rows))
+        unshot = self.unshot()
+        return all(i in self.bound or row.line in self.missing or i in unshot for i, row in enumerate(self.rows))
 
     def next_row(self):
         """(position, row) of the next row to photograph, or None."""
+        unshot = self.unshot()
         for i, row in enumerate(self.rows):
-            if i not in self.bound and row.line not in self.missing:
+            if i not in self.bound and row.line not in self.missing and i not in unshot:
                 return i, row
         return None
+
+    def _carried(self, orientation: float, n: int) -> int:
+        """Rows the files after `orientation` are still off by, of the `n` its
+        decided missed (+) and extra (-) shots put them off: those not realigned at
+        its end (:meth:`unshot`, the photographs set aside)."""
+        if n > 0:
+            return 0 if orientation != self.rows[-1].orientation_deg else n
+        return n + self.overflow.get(orientation, 0)
+
+    def unshot(self) -> set[int]:
+        """Positions of the rows no photograph takes as bound: the last rows of an
+        orientation whose files are a row early after a decided missed shot (the
+        ``bind`` fix marks the missed row instead), so that the next orientation's
+        photographs bind to its own rows. None in the plan's last orientation (no
+        photograph comes after it: its rows wait, as after a missed shot in a
+        session of one orientation)."""
+        out: set[int] = set()
+        for orientation, n in self.shift.items():
+            if n > 0 and orientation != self.rows[-1].orientation_deg:
+                mine = [i for i, row in enumerate(self.rows) if row.orientation_deg == orientation
+                        and i not in self.bound and row.line not in self.missing]
+                out.update(mine[-n:])
+        return out
 
     def wait(self, timeout: float) -> bool:
         """Wait until something happens in the camera folder (a file closed, renamed
@@ -408,6 +445,17 @@ class Watcher:
             pos = self.rows.index(row) if row is not None and self.rows.index(row) not in self.bound else None
         if pos is None:
             nxt = self.next_row()
+            if (nxt is not None and self.order and self.camera_mode
+                    and (last := self.rows[self.order[-1]]).orientation_deg != nxt[1].orientation_deg
+                    and self.overflow.get(last.orientation_deg, 0) < -self.shift.get(last.orientation_deg, 0)):
+                # after an extra shot the files are a row late: this is the orientation's last one
+                o = last.orientation_deg
+                self.overflow[o] = self.overflow.get(o, 0) + 1
+                self.set_aside[name] = "a row late"
+                return [self._notice("ignored", name, f"{name}: orientation {o:g}'s last photograph (its files "
+                                     "are a row late after the extra shot warned about): not bound here, so that "
+                                     f"the next photograph binds to {row_text(nxt[1])}; `bind` with the fix "
+                                     "binds it to its row")]
             if nxt is None:
                 self.done.add(name)
                 return [self._notice("leftover", name, f"{name}: every planned row already has its "
@@ -482,17 +530,23 @@ class Watcher:
         before = {p: list(x.warnings) for p, x in self.bound.items()}
         derived: dict[int, list[str]] = {p: [] for p in self.bound}
         steps: list[tuple[int, object]] = []
+        loops: list = []  # the step points of the orientations before, each judged against them
         for orientation in dict.fromkeys(x.row.orientation_deg for x in self.bound.values()):
-            steps += self._analyse(orientation, derived)
+            steps += self._analyse(orientation, derived, loops)
         kinks = gear_kinks([w for _, w in steps])  # the gear's own, seen twice: not mistakes
         options: list[str] = []  # every fix so far, in capture order: one bind command applies them all
+        net: dict[float, int] = {}
         for n, (p, w) in sorted(enumerate(steps), key=lambda t: self.order.index(t[1][0])):
             if n not in kinks:
                 # the files after an extra shot are a row late, after a missed shot a row early
-                shift = options.count("--missing") - options.count("--skip")
-                new = self.step_fix(p, w, shift)
+                # (in the orientation of the mistake, and after it where not realigned)
+                o = self.bound[p].row.orientation_deg
+                new = self.step_fix(p, w, net.get(o, 0) + sum(self._carried(x, k) for x, k in net.items() if x != o))
+                net[o] = (net.get(o, 0) + new.count("--missing") - new.count("--skip")
+                          + (p in self.turned_early))
                 options += new
                 derived[p].insert(0, w.message + ("; " + self.bind_fix(*options) if new else ""))
+        self.shift = net
         if self.sign_decided in derived:
             derived[self.sign_decided].insert(0, self.sign_message(self.sign_decided))
         for p, x in self.bound.items():
@@ -520,10 +574,13 @@ class Watcher:
         return next((p for p in sorted(self.bound) if self.bound[p].row.orientation_deg == orientation
                      and self.bound[p].row.phase == "reference"), None)
 
-    def _analyse(self, orientation: float, derived: dict) -> list[tuple[int, object]]:
+    def _analyse(self, orientation: float, derived: dict, loops: list) -> list[tuple[int, object]]:
         """Angles, step checks, swaps, the axis and the sign of one orientation's
         photographs so far: the step warnings [(position, StepWarning)]; the swaps'
-        and the axis' messages are added to `derived` (position -> messages)."""
+        and the axis' messages are added to `derived` (position -> messages). The
+        steps are compared with the same steps of `loops` (the step points of the
+        orientations photographed before) where this one has not shown them yet;
+        its own points are appended to `loops`."""
         from ..angle import pair_angle
         from .axis import check_axis
         from .steps import first_load_inverted
@@ -547,14 +604,19 @@ class Watcher:
                     x.result = None
                 self._angles(rb, ok, pair_angle)
                 points = self._points(ok)
-        open_end = any(row.orientation_deg == orientation and i not in self.bound
+        unshot = self.unshot()
+        open_end = any(row.orientation_deg == orientation and i not in self.bound and i not in unshot
                        and row.line not in self.missing for i, row in enumerate(self.rows))
         # verdicts from the images so far and the next only: a warning once said stays
-        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
+        warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
+                            earlier=loops)
         if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
-            self._try_swap(ok, points, warns, open_end)
+            self._try_swap(ok, points, warns, open_end, loops)
             points = self._points(ok)
-            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
+            warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
+                                earlier=loops)
+        warns = [self._turned_early(ok, points, w, loops) for w in warns]
+        loops.append(points)
         for p in ok:
             if p in self.swapped:
                 derived[p].append(self.swapped[p][1])
@@ -582,7 +644,7 @@ class Watcher:
 
         return [StepPoint(self.torques[p], angle(p), self.bound[p].result.angle_std_deg) for p in ok]
 
-    def _try_swap(self, ok, points, warns, open_end) -> None:
+    def _try_swap(self, ok, points, warns, open_end, loops) -> None:
         """The newest photograph warned: were it and the one before taken the other way
         round? If exchanging them makes their steps fit, they are recorded as swapped
         (with the ``bind`` fix) and checked that way from now on."""
@@ -595,7 +657,8 @@ class Watcher:
             return  # across a reversal of the load: a swap cannot be told from the gear there
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
-        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False)
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
+                            earlier=loops)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
         fa, fb = self.bound[a].file, self.bound[b].file
@@ -606,6 +669,46 @@ class Watcher:
                 f"other way round); {fix}")
         self.swapped[a] = (b, text)
         self.swapped[b] = (a, text)
+
+    def _turned_early(self, ok, points, warning, loops):
+        """`warning` with the diagnosis and fix when it is a photograph of a turning
+        load that already turns back (a wrong direction) and a shot missed in its
+        branch explains it: the rows whose photograph, marked missed, leaves the
+        branch without a warning are named. Where the loop has not shown these
+        steps before (its first half, in the first orientation), a soft zone or a
+        switch hides the double step among its neighbours and several rows fit:
+        ``bind`` after the orientation tells them apart against the rest of the
+        loop, which is the fix given. Other warnings are returned as they are."""
+        k = warning.index
+        if warning.kind != "wrong_direction" or k < 3 or not self.camera_mode:
+            return warning
+        pos = ok[k]
+        row, after = self.rows[pos], pos + 1
+        way = self.torques[ok[k - 1]] - self.torques[ok[k - 2]]
+        if (after >= len(self.rows) or self.rows[after].orientation_deg != row.orientation_deg
+                or (self.torques[after] - self.torques[pos]) * way >= 0
+                or (self.torques[pos] - self.torques[ok[k - 1]]) * way <= 0):
+            return warning  # not the turning load of a branch the plan goes on with
+        start = k - 1  # the branch's first photograph after the pre-load
+        while start > 2 and (self.torques[ok[start - 1]] - self.torques[ok[start - 2]]) * way > 0:
+            start -= 1
+        fits = []
+        for j in range(start, k + 1):  # the photograph of the row bound at ok[j] was never taken
+            trial = points[:j] + [StepPoint(self.torques[ok[i] + 1], p.angle_deg, p.angle_std_deg)
+                                  for i, p in enumerate(points[j:k + 1], start=j)]
+            if not check_steps(trial, step_torque_nm=self.step_torque, open_end=True, hindsight=False,
+                               earlier=loops):
+                fits.append(str(self.bound[ok[j]].row.line))
+        if not fits:
+            return warning
+        self.turned_early.add(pos)  # the files are a row early from some row of this branch on
+        fix = shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera)])
+        return dataclasses.replace(warning, message=(
+            f"the load turned back a row early: Δangle {warning.delta_angle_deg:+.4f}° for a planned torque "
+            f"step of {warning.delta_torque_nm:+.5f} N·m: a missed shot in this branch, at line "
+            f"{' or '.join(fits)} (the steps the loop has shown so far fit each; where the gear's stiffness "
+            f"changes, the double step looks like its neighbours until the same steps come again); fix: after "
+            f"this orientation `{fix}` names the row (--missing LINE) against the rest of the loop"))
 
     def bind_fix(self, *options: str) -> str:
         """"fix: " and the ``vision-torsion bind`` command line with `options`."""
