@@ -598,3 +598,48 @@ def test_a_bound_photo_replaced_by_an_over_size_file_fails_its_row(rig):
         assert w.bound[1].own == [f"not read: IMG_0002.png: {MAX_IMAGE_FILE_BYTES + 1} bytes, larger than an "
                                   f"image file may be ({MAX_IMAGE_FILE_BYTES} bytes)"]
         assert run(w, clock) == []  # said once
+
+
+class StuckObserver:
+    """An observer whose stop never returns (its reading thread blocked in read())."""
+
+    def __init__(self):
+        import threading
+
+        self.never = threading.Event()
+
+    def start(self):
+        pass
+
+    def schedule(self, handler, path, event_filter=None):
+        return object()
+
+    def unschedule(self, watch):
+        self.never.wait()
+
+    def stop(self):
+        self.never.wait()
+
+    def join(self, timeout=None):
+        pass
+
+
+def test_a_stuck_observer_never_holds_up_the_end_of_a_watch(tmp_path):
+    import threading
+    import time
+
+    from vision_torsion.session.events import STOP_WAIT_S, FolderEvents
+
+    ev = FolderEvents(tmp_path, observer=StuckObserver)
+    assert ev.active
+
+    def end():
+        ev.rearm()  # drops the folder's watch first: bounded too
+        ev.close()
+
+    ending = threading.Thread(target=end, daemon=True)
+    t0 = time.monotonic()
+    ending.start()
+    ending.join(timeout=4 * STOP_WAIT_S)
+    assert not ending.is_alive(), "closing waited for an observer that never stops"
+    assert time.monotonic() - t0 < 3 * STOP_WAIT_S + 1.0

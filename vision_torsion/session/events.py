@@ -47,6 +47,30 @@ logger = logging.getLogger(__name__)
 # would print them on a user's terminal. What the events miss, the polling sees.
 logging.getLogger("watchdog").addHandler(logging.NullHandler())
 
+#: Longest wait (s) for the observer to stop or drop a folder. Its reading thread can
+#: stay blocked in ``read()`` on the inotify descriptor when no event wakes it (a
+#: known watchdog behaviour on Linux); the wait is bounded so that ``watch`` always
+#: ends on Ctrl-C, and the threads, daemons, end with the process.
+STOP_WAIT_S = 2.0
+
+
+def _bounded(action, what: str) -> None:
+    """Run `action` in a daemon thread and wait for it at most :data:`STOP_WAIT_S`;
+    its errors (a folder already gone, an observer never started) are logged at
+    debug level, never raised."""
+    def run():
+        try:
+            action()
+        except (KeyError, OSError, RuntimeError) as exc:
+            logger.debug("%s: %s", what, exc)
+
+    worker = threading.Thread(target=run, name="vision-torsion-events-stop", daemon=True)
+    worker.start()
+    worker.join(timeout=STOP_WAIT_S)
+    if worker.is_alive():
+        logger.debug("%s did not finish within %g s; left to end with the process", what, STOP_WAIT_S)
+
+
 #: The ways a folder can be followed: "auto" (filesystem events where they work,
 #: else polling) and "poll" (polling only).
 EVENT_MODES = ("auto", "poll")
@@ -228,15 +252,15 @@ class FolderEvents:
         return True
 
     def close(self) -> None:
-        """Stop the observer (once)."""
+        """Stop the observer (once), waiting at most :data:`STOP_WAIT_S` for it."""
         observer, self._observer = self._observer, None
         self._watch = None
         if observer is not None:
-            try:
+            def stop():
                 observer.stop()
-                observer.join(timeout=5)
-            except (OSError, RuntimeError) as exc:  # never started, or already gone
-                logger.debug("stopping the file notifications: %s", exc)
+                observer.join(timeout=STOP_WAIT_S)
+
+            _bounded(stop, "stopping the file notifications")
 
     def __enter__(self):
         return self
@@ -256,10 +280,8 @@ class FolderEvents:
     def _stop_watch(self) -> None:
         watch, self._watch = self._watch, None
         if watch is not None and self._observer is not None:
-            try:
-                self._observer.unschedule(watch)
-            except (KeyError, OSError) as exc:  # its folder is gone: the emitter stopped itself
-                logger.debug("unscheduling %s: %s", self.folder, exc)
+            observer = self._observer
+            _bounded(lambda: observer.unschedule(watch), f"unscheduling {self.folder}")
 
     def _changed(self, name: str) -> None:
         with self._lock:
