@@ -542,14 +542,21 @@ def test_ctrl_c_ends_a_watch_on_filesystem_events_cleanly(rig):
     folder, cam, plan, photos = rig
     root = Path(__file__).resolve().parents[1]
     env = {**os.environ, "PYTHONPATH": str(root), "PYTHONWARNINGS": "error"}
-    cmd = [sys.executable, "-m", "vision_torsion", "watch", str(folder), "--camera-dir", str(cam), "--no-report"]
+    # -X faulthandler: if it ever hangs, SIGABRT makes it print every thread's stack
+    cmd = [sys.executable, "-X", "faulthandler", "-m", "vision_torsion", "watch", str(folder), "--camera-dir",
+           str(cam), "--no-report"]
     with subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         try:
             assert "(filesystem events)" in proc.stdout.readline()
             write_closed(cam / "IMG_0001.png", photos[plan.rows[0]["image"]])
             assert "IMG_0001.png → line 2" in proc.stdout.readline()
             proc.send_signal(signal.SIGINT)
-            out, err = proc.communicate(timeout=60)
+            try:
+                out, err = proc.communicate(timeout=60)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGABRT)
+                out, err = proc.communicate(timeout=30)
+                pytest.fail(f"watch did not end within 60 s of Ctrl-C; its threads:\n{err}")
         finally:
             proc.kill()
     assert proc.returncode == 0, err
