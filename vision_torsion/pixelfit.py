@@ -561,7 +561,7 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) ->
         step = solve_lu(damped_normal_matrix(A, lam), b)
         trial = p + step
         trial[3] = bounded_edge_width(trial[3], p[3])
-        if final and max(abs(step[0]), abs(step[1])) < _CONVERGED_PX:
+        if final and max(abs(step[0]), abs(step[1]), abs(trial[3] - p[3])) < _CONVERGED_PX:
             # Converged: take this last step without evaluating the model there.
             # Gauss-Newton converges quadratically here, so what it leaves is far
             # below 1e-3 px; the noise, covariance and diagnostics of the model at
@@ -577,6 +577,7 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) ->
                 raise FitError("the marker's edge model does not converge")
             continue
         moved = max(abs(trial[0] - p[0]), abs(trial[1] - p[1]))
+        widened = abs(trial[3] - p[3])
         p, resid, J, u, ssr = trial, r_t, J_t, u_t, ssr_t
         lam = max(0.3 * lam, 1e-9)
         if not final and moved < (_SETTLED_PX if cuts == 0 else _CONVERGED_PX):
@@ -597,7 +598,7 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter) ->
                 ssr = float(resid @ resid)
                 if not final:
                     continue
-        if final and moved < _CONVERGED_PX:
+        if final and max(moved, widened) < _CONVERGED_PX:
             A = J @ J.T
             break
     else:
@@ -841,7 +842,8 @@ class _RowsFit:
         P, final = self.P, self.final
         trial = P[act] + step
         trial[:, 3] = bounded_edge_width(trial[:, 3], P[act, 3])
-        small = np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])) < _CONVERGED_PX
+        small = np.maximum(np.maximum(np.abs(step[:, 0]), np.abs(step[:, 1])),
+                           np.abs(trial[:, 3] - P[act, 3])) < _CONVERGED_PX
         last = final[act] & small
         # converged: the last step taken without evaluating the model (as fit_disc)
         P[act[last]] = trial[last]
@@ -862,6 +864,7 @@ class _RowsFit:
         if not acc.size:
             return True
         moved = np.maximum(np.abs(trial[:, 0] - P[acc, 0]), np.abs(trial[:, 1] - P[acc, 1]))
+        widened = np.abs(trial[:, 3] - P[acc, 3])
         if acc.size == m:  # every marker stepped: the new arrays as they are
             self.P, self.resid, self.Jm, self.u, self.ssr = trial, r_t, J_t, u_t, ssr_t
             self.cur = 1 - self.cur
@@ -876,7 +879,7 @@ class _RowsFit:
             self.A[acc], self.b[acc] = A_t[better], b_t[better]
         self.lam[acc] = np.maximum(0.3 * self.lam[acc], 1e-9)
         going_on = self._examinations(acc, moved)
-        self.active[acc[self.final[acc] & (moved < _CONVERGED_PX) & ~going_on[acc]]] = False
+        self.active[acc[self.final[acc] & (np.maximum(moved, widened) < _CONVERGED_PX) & ~going_on[acc]]] = False
         return True
 
     def _steps(self, act):
