@@ -25,8 +25,11 @@ and CPU time, user + system, as a shell sees them), alternately ``--repeats`` ti
   folder (no cache), the whole command.
 
 It prints the ratios process / floor and full decode / floor, and per image, on one
-core in this process (CPU time, best of three): the 1/8 decode, a full decode to grey
-by ``simplejpeg`` (what ``process`` does), a full OpenCV decode, and the least a
+core in this process (CPU time, best of three): the 1/8 decode, a half-scale decode
+to grey (libjpeg-turbo's 4/8 DCT scaling), a full decode to grey by ``simplejpeg``
+(what ``process`` does), the DCT coefficients read by ``jpeglib`` (``read_dct(path).Y``,
+when jpeglib is installed: the way to the coefficients a "1/8 from the DC terms, inverse
+DCT only around the markers" reader would take), a full OpenCV decode, and the least a
 "1/8 look, then full resolution only around the markers" reader would pay: the
 1/8 decode plus the entropy decoding of the file down to the lowest marker's last
 row (libjpeg cannot skip entropy-coded data without restart markers, so a cropped
@@ -232,11 +235,27 @@ def per_image(session: Path) -> dict:
             times.append(time.process_time() - c)
         cut_ms = 1e3 * min(times) / len(cuts)
     floor_ms = best(eighth)
+    try:
+        import jpeglib
+    except ImportError:
+        coefficients_ms = None
+    else:
+        paths = [str(session / name) for name in truth["image"]]
+        times = []
+        for _ in range(3):
+            c = time.process_time()
+            for path in paths:
+                jpeglib.read_dct(path).Y  # noqa: B018 - the luma coefficients are read on first use
+            times.append(time.process_time() - c)
+        coefficients_ms = 1e3 * min(times) / len(paths)
     if cut_ms is not None:
         best_cut = floor_ms + cut_ms
     return {
         "eighth_ms": floor_ms,
+        "half_grey_simplejpeg_ms": best(lambda raw: simplejpeg.decode_jpeg(
+            raw, colorspace="GRAY", min_height=HEIGHT // 2, min_width=WIDTH // 2)),
         "full_grey_simplejpeg_ms": best(lambda raw: simplejpeg.decode_jpeg(raw, colorspace="GRAY")),
+        "jpeglib_read_dct_ms": coefficients_ms,
         "full_opencv_ms": best(lambda raw: cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)),
         "entropy_to_marker_bottom_ms": cut_ms,
         "eighth_then_crop_lower_bound_ms": best_cut,
@@ -310,16 +329,20 @@ def main() -> None:
                   f"({r['floor_cpu_s']:.2f} s) | {r['full_s']:.2f} s ({r['full_cpu_s']:.2f} s) | "
                   f"{r['process_s']:.2f} s ({r['process_cpu_s']:.2f} s) | {r['ratio']:.2f} ({r['cpu_ratio']:.2f}) |")
     print("\nper image, one core, CPU (best of three passes)\n")
-    print("| session | MB | 1/8 decode (floor) | full grey, simplejpeg | full OpenCV | entropy down to the lowest "
-          "marker | 1/8 look + crop, least | process angle RMS error / std |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| session | MB | 1/8 decode (floor) | 1/2 grey, simplejpeg | full grey, simplejpeg | DCT coefficients, "
+          "jpeglib | full OpenCV | entropy down to the lowest marker | 1/8 look + crop, least | "
+          "process angle RMS error / std |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, entry in result["sessions"].items():
         p, a = entry["per_image"], entry["angles"]
         crop = (f"{p['entropy_to_marker_bottom_ms']:.1f} ms | {p['eighth_then_crop_lower_bound_ms']:.1f} ms "
                 f"({p['eighth_then_crop_lower_bound_ms'] / p['eighth_ms']:.2f}x)"
                 if p["entropy_to_marker_bottom_ms"] is not None else "- | -")
-        print(f"| {name} | {p['file_mb']:.2f} | {p['eighth_ms']:.1f} ms | {p['full_grey_simplejpeg_ms']:.1f} ms "
-              f"({p['full_grey_simplejpeg_ms'] / p['eighth_ms']:.2f}x) | {p['full_opencv_ms']:.1f} ms "
+        coefficients = ("-" if p["jpeglib_read_dct_ms"] is None else
+                        f"{p['jpeglib_read_dct_ms']:.1f} ms ({p['jpeglib_read_dct_ms'] / p['eighth_ms']:.2f}x)")
+        print(f"| {name} | {p['file_mb']:.2f} | {p['eighth_ms']:.1f} ms | {p['half_grey_simplejpeg_ms']:.1f} ms "
+              f"({p['half_grey_simplejpeg_ms'] / p['eighth_ms']:.2f}x) | {p['full_grey_simplejpeg_ms']:.1f} ms "
+              f"({p['full_grey_simplejpeg_ms'] / p['eighth_ms']:.2f}x) | {coefficients} | {p['full_opencv_ms']:.1f} ms "
               f"({p['full_opencv_ms'] / p['eighth_ms']:.2f}x) | {crop} | {a['rms_error_over_std']:.2f} "
               f"({a['n_ok']}/{a['n_rows']} ok) |")
     for name, entry in result["sessions"].items():
