@@ -600,3 +600,77 @@ def test_markers_beside_a_surround_fitted_together_are_fitted_as_one_by_one():
         assert (many.x_px, many.y_px) == pytest.approx((one.x_px, one.y_px), abs=1e-9)
     assert [f.steep_cut for f in singles] == [True, True, False]
 
+
+
+def _jpeg_disc(seed, quality, *, size=200, radius=60.0):
+    """A dark disc (r `radius` px, blur 2.5 px, read noise 3 DN) at a random
+    sub-pixel centre, 8-bit, through a JPEG of `quality` (None: none); and its
+    centre."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    cx, cy = size / 2 + rng.uniform(-4, 4), size / 2 + rng.uniform(-4, 4)
+    xs, ys = supersampled_grid(size, size)
+    image = cv2.GaussianBlur(area_image(np.hypot(xs - cx, ys - cy) < radius), (0, 0), 2.5)
+    image = np.clip(np.rint(image + rng.normal(0.0, 3.0, image.shape)), 0, 255).astype(np.uint8)
+    if quality is not None:
+        encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1]
+        image = cv2.imdecode(encoded, cv2.IMREAD_UNCHANGED)
+    return image, cx, cy
+
+
+@pytest.mark.parametrize("quality", [None, 75])
+def test_the_covariance_from_jpeg_blocks_is_honest(quality):
+    """Over 20 discs (40 centre coordinates), the RMS of error/σ with the covariance
+    taken from the 8x8 blocks (block_px=8) lies in 0.75-1.3, JPEG (quality 75) or
+    not; the white-noise covariance of the same fits is too small for the JPEG's
+    (1.73 here: each block's error is smooth, σ²(JᵀJ)⁻¹ takes it as independent).
+    0.75-1.3: the RMS of 40 standard normals has a spread of 0.11. The centre is
+    the same either way."""
+    white, blocks = [], []
+    for seed in range(20):
+        image, cx, cy = _jpeg_disc(seed, quality)
+        w = fit_disc(image, cx, cy, 60.0, edge_width=2.5)
+        b = fit_disc(image, cx, cy, 60.0, edge_width=2.5, block_px=8)
+        assert (b.x_px, b.y_px) == (w.x_px, w.y_px)
+        white += [(w.x_px - cx) ** 2 / w.cov[0, 0], (w.y_px - cy) ** 2 / w.cov[1, 1]]
+        blocks += [(b.x_px - cx) ** 2 / b.cov[0, 0], (b.y_px - cy) ** 2 / b.cov[1, 1]]
+    assert 0.75 < np.sqrt(np.mean(blocks)) < 1.3
+    if quality is not None:
+        assert np.sqrt(np.mean(white)) > 1.4
+
+
+def test_a_ring_over_few_blocks_keeps_the_white_noise_covariance():
+    """The centre of a marker of 5 px radius is informed by fewer than MIN_BLOCKS
+    8x8 blocks (about 4: those along its edge): its covariance is σ²(JᵀJ)⁻¹
+    whatever block_px says (so few blocks would leave the covariance as uncertain
+    as the correction; this one's came out 0.4x and 2.9x in x and y); a large
+    one's changes."""
+    from vision_torsion.pixelfit import MIN_BLOCKS
+
+    assert MIN_BLOCKS > 5
+    image, cx, cy = _jpeg_disc(1, 75, size=60, radius=5.0)
+    w = fit_disc(image, cx, cy, 5.0, edge_width=2.5)
+    b = fit_disc(image, cx, cy, 5.0, edge_width=2.5, block_px=8)
+    np.testing.assert_array_equal(b.cov, w.cov)
+    image, cx, cy = _jpeg_disc(1, 75)
+    w = fit_disc(image, cx, cy, 60.0, edge_width=2.5)
+    b = fit_disc(image, cx, cy, 60.0, edge_width=2.5, block_px=8)
+    assert not np.allclose(b.cov, w.cov, rtol=0.05)
+
+
+def test_markers_fitted_together_take_the_block_covariance_as_one_by_one():
+    """fit_discs with block_px gives fit_disc's block-robust covariance, to rounding."""
+    from vision_torsion.pixelfit import fit_discs, patch_extent
+
+    patches, starts = [], []
+    for seed in (3, 4):
+        image, cx, cy = _jpeg_disc(seed, 80)
+        patches.append(marker_patch(image, cx + 0.2, cy - 0.1, patch_extent(60.0, 2.5) + 1.0))
+        starts.append((cx + 0.2, cy - 0.1, 60.3, 200.0, 40.0))
+    for patch, (sx, sy, sr, b, f), many in zip(patches, starts, fit_discs(patches, starts, edge_width=2.5,
+                                                                            block_px=8)):
+        one = fit_disc(None, sx, sy, sr, edge_width=2.5, levels=(b, f), patch=patch, block_px=8)
+        white = fit_disc(None, sx, sy, sr, edge_width=2.5, levels=(b, f), patch=patch)
+        np.testing.assert_allclose(many.cov, one.cov, rtol=1e-6, atol=1e-15)
+        assert one.cov[0, 0] > 1.2 * white.cov[0, 0]
