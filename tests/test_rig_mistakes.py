@@ -174,12 +174,14 @@ def missed(points, i):
 
 def live(points, earlier=()):
     """What watch is told as the images arrive: the warnings of each newest sequence
-    (`earlier`: the sequences of the orientations photographed before)."""
+    (`earlier`: the sequences of the orientations photographed before), but a
+    missed shot's signature awaiting the next image (said only before an
+    orientation's last row)."""
     said = []
     for n in range(2, len(points) + 1):
         for w in check_steps(points[:n], step_torque_nm=STEP_NM, open_end=n < len(points), hindsight=False,
                              earlier=earlier):
-            if (w.index, w.kind) not in [(x.index, x.kind) for x, _ in said]:
+            if not w.awaiting_next and (w.index, w.kind) not in [(x.index, x.kind) for x, _ in said]:
                 said.append((w, n - 1))
     return said
 
@@ -360,3 +362,55 @@ def test_bind_keeps_the_sign_of_the_first_orientation_when_a_mistake_shifts_the_
     res = bind_session(tmp_path / "session", camera, write=False)
     assert not any("angle_sign" in d for d in res.diagnoses)
     assert res.command.endswith("--skip IMG_0015.png") and not res.remaining
+
+
+# -- a shot missed at an orientation's second-to-last row ---------------------------------
+
+def test_a_shot_missed_before_the_orientations_last_row_is_decided_by_the_next_orientations_reference(tmp_path):
+    # row 16 (line 18, +3 pieces) missed: IMG_0017.png shows the last row's load (two
+    # planned steps in one, said at once with the fix it would take), and IMG_0018.png,
+    # bound next to the last row, is orientation 120's reference: the jump decides it
+    session, camera, events = shoot_two(tmp_path, missed=16)
+    found = warnings(events)
+    assert [(f, when) for f, _, when in found] == [("IMG_0017.png", "IMG_0017.png"),
+                                                   ("IMG_0017.png", "IMG_0018.png")]
+    assert re.search(r"the same step elsewhere in the loop .* the next two planned steps together .*: a missed "
+                     r"shot\? .*; if so, fix: vision-torsion bind \S+ \S+ --missing 18$", found[0][1])
+    assert re.search(r"the next photograph, IMG_0018\.png, is not of this orientation .*: a missed shot \(this "
+                     r"photograph shows the next row's load, line 19: .*; the next photograph is bound to line 20: "
+                     r"orientation 120, cycle 1, reference, step 0\); fix: vision-torsion bind \S+ \S+ --missing "
+                     r"18$", found[1][1])
+    shots = [(e.file, e.line) for e in events if e.kind == "shot"]
+    assert ("IMG_0018.png", 20) in shots and ("IMG_0035.png", 37) in shots  # orientation 120 on its own rows
+    assert not [e for e in events if e.kind == "retracted"]
+    res = bind_session(session, camera, write=False)
+    assert res.command.endswith("--missing 18")
+
+
+def test_the_next_orientations_reference_after_a_clean_orientation_binds_to_it(tmp_path):
+    # the reference jump alone decides nothing: after a complete orientation the next
+    # photograph is bound to the next row, its reference, as planned
+    session, camera, events = shoot_two(tmp_path)
+    assert not [e for e in events if e.kind in ("warning", "retracted")]
+    assert ("IMG_0019.png", 20) in [(e.file, e.line) for e in events if e.kind == "shot"]
+
+
+def test_a_shot_missed_before_the_sessions_last_row_is_said_at_the_image(tmp_path):
+    # one orientation, row 16 missed: no next photograph will come, so the missed shot's
+    # signature (two planned steps in one against the same steps elsewhere) is said at once
+    session, camera, n = shoot(tmp_path, {"missed": 16, "response": KINKED["Masing"]})
+    found = warnings(watch(session, camera, n))
+    assert [(f, when) for f, _, when in found] == [("IMG_0017.png", "IMG_0017.png")]
+    assert re.search(r"[01]\.\d\d× the next two planned steps together .*: a missed shot\? \(this photograph would "
+                     r"show the next row's load; or it and the next were taken the other way round: the next "
+                     r"photograph will tell\); if so, fix: vision-torsion bind \S+ \S+ --missing 18$", found[0][1])
+
+
+@pytest.mark.parametrize("gear", list(KINKED))
+def test_a_missed_shots_signature_awaits_the_next_image_undecided(gear):
+    i = 16
+    shifted = missed(sequence(gear), i)
+    (w,) = check_steps(shifted, step_torque_nm=STEP_NM, open_end=True, hindsight=False)
+    assert (w.index, w.kind, w.decided, w.awaiting_next) == (i, "large_step", False, True)
+    # a clean open sequence: its newest step has no such signature
+    assert check_steps(sequence(gear)[:17], step_torque_nm=STEP_NM, open_end=True, hindsight=False) == []

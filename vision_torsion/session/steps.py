@@ -143,6 +143,13 @@ class StepWarning:
         gear's own change of stiffness (:func:`gear_kinks` tells, when it recurs).
     torque_span_nm : tuple of float
         The planned torques (N·m) of the step's two images, in capture order.
+    awaiting_next : bool
+        An open sequence's newest step (not decided: the next photograph decides
+        it) that is already a missed shot's signature: against the same steps
+        elsewhere in the loop (or in an earlier loop) it is off by the next planned
+        step's angle and equals the two planned steps together. Said at once,
+        because the next photograph may never come (the plan's last row) or be
+        another orientation's reference.
     """
 
     index: int
@@ -153,6 +160,7 @@ class StepWarning:
     message: str
     decided: bool = True
     torque_span_nm: tuple = ()
+    awaiting_next: bool = False
 
 
 def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
@@ -255,7 +263,11 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None):
         nxt = steps[k + 1] if k + 1 < len(steps) and state.single(steps[k + 1].d_tau) else None
         if k + 1 == len(steps) and open_end and state.out_of_line(s):
             state.after_warning = False
-            continue  # undecided until the next image: neither a warning nor a reference
+            early = _two_in_one(s, state)  # a missed shot's signature already: said now, undecided
+            if early is not None:
+                out.append(early)
+                state.flagged.add(s.index)
+            continue  # undecided until the next image: not a reference
         warn = _judge(s, nxt, state, last=k + 1 == len(steps))
         if warn is None:
             state.accept(s)
@@ -480,6 +492,34 @@ def _row_early(s, nxt, state, e, same) -> bool:
     return missed < math.log(_SAME_TOL) and missed < swapped
 
 
+def _two_in_one(s, state) -> StepWarning | None:
+    """The newest step `s` of an open sequence, not decided yet, when it is a
+    missed shot's signature on its own: against the same step elsewhere in the
+    loop (or an earlier loop) it is more than 8 % larger, and within 8 % of the
+    same two planned steps together (this one and the next the plan makes in the
+    same direction), nearer to them than to the one. A gear that repeats its loop
+    gives the same step again within 8 %; one that changes its stiffness between
+    loops changes a step by a factor, not by exactly its neighbour's angle. Else
+    None."""
+    e, same = state.expected(s)
+    if not same or s.d_theta / e < _SAME_FIT:
+        return None
+    two = state.same_step(s, (s.span[0], s.span[1] + s.d_tau))
+    if two is None or s.d_theta * two <= 0:
+        return None
+    off = abs(math.log(s.d_theta / two))
+    if off > math.log(_SAME_FIT) or off > abs(math.log(s.d_theta / e)) / 2:
+        return None
+    what = "the same step elsewhere in the loop" if state.here(s) else "the same step in an earlier orientation"
+    return dataclasses.replace(_warning(
+        s, "large_step", s.d_theta / e,
+        f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× {what} {e:+.4f}° and "
+        f"{s.d_theta / two:.2f}× the next two planned steps together {two:+.4f}°: a missed shot? (this "
+        "photograph would show the next row's load; or it and the next were taken the other way round: the "
+        "next photograph will tell)", decided=False),
+        awaiting_next=True)
+
+
 def _warning(s, kind, ratio, message, *, decided=True) -> StepWarning:
     return StepWarning(s.index, kind, s.d_theta, s.d_tau, ratio, message, decided=decided, torque_span_nm=s.span)
 
@@ -574,7 +614,8 @@ def gear_kinks(warnings) -> set[int]:
 
     groups: dict = {}
     for n, w in enumerate(warnings):
-        if not w.decided and len(w.torque_span_nm) == 2 and w.kind in ("small_step", "large_step"):
+        if (not w.decided and not w.awaiting_next and len(w.torque_span_nm) == 2
+                and w.kind in ("small_step", "large_step")):
             groups.setdefault(key(w), []).append(n)
     out: set[int] = set()
     for members in groups.values():
