@@ -414,3 +414,34 @@ def test_a_missed_shots_signature_awaits_the_next_image_undecided(gear):
     assert (w.index, w.kind, w.decided, w.awaiting_next) == (i, "large_step", False, True)
     # a clean open sequence: its newest step has no such signature
     assert check_steps(sequence(gear)[:17], step_torque_nm=STEP_NM, open_end=True, hindsight=False) == []
+
+
+# -- two photographs taken the other way round where the plan goes on ---------------------
+
+@pytest.mark.parametrize(("gear", "swapped", "orientations"), [
+    ("three-segment", 6, (0.0,)),  # first loop, in the soft zone: the second looked like the turn back
+    ("bilinear τc=0.03", 33, (0.0, 120.0)),  # the last orientation's rows 15 and 16, before its last row
+])
+def test_a_swap_where_the_plan_goes_on_is_not_taken_for_a_missed_shot(tmp_path, gear, swapped, orientations):
+    # the second photograph turns back; a missed shot would explain that only where the
+    # plan's load turns back after its row, and here the plan goes on: a swap
+    spec = SessionSpec(max_torque_nm=0.07848, orientations_deg=orientations)
+    plan, shots = capture_script(SCENE, spec, tmp_path / "session", seed=23, swapped=swapped,
+                                 response=KINKED[gear])
+    camera = tmp_path / "camera"
+    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
+    found = warnings(watch(tmp_path / "session", camera, len(shots), 18 * len(orientations)))
+    a, b = f"IMG_{swapped + 1:04d}.png", f"IMG_{swapped + 2:04d}.png"
+    assert {f for f, _, _ in found} == {a, b}, found
+    assert all(when == b and re.search(rf"{a} and {b} look swapped.*--swap {a} {b}$", m) for _, m, when in found)
+
+
+def test_a_turn_back_before_the_plan_turns_is_no_missed_shot():
+    # rows 14-16 bound, row 16's photograph shows row 15's load (a swap); the plan goes
+    # on to +4 pieces after it (plan_after), so no missed shot is said at row 15
+    points = sequence("bilinear τc=0.03")
+    swapped = points[:15] + [StepPoint(PLANNED[15], points[16].angle_deg, 0.0005),
+                             StepPoint(PLANNED[16], points[15].angle_deg, 0.0005)]
+    kinds = [w.kind for w in check_steps(swapped, step_torque_nm=STEP_NM, open_end=True, hindsight=False,
+                                         plan_after=PLANNED[17:])]
+    assert kinds == ["wrong_direction"]

@@ -164,7 +164,7 @@ class StepWarning:
 
 
 def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
-                hindsight: bool | None = None, earlier=()) -> list[StepWarning]:
+                hindsight: bool | None = None, earlier=(), plan_after=None) -> list[StepWarning]:
     """Warnings for the steps of one orientation's image sequence (module docstring).
 
     Parameters
@@ -191,6 +191,13 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         them that shows it (the gear's own stiffness at that torque, already
         seen), so the first half-loop of a later orientation is judged as its
         second half is, and a kink seen there is expected, not a mistake.
+    plan_after : sequence of float, optional
+        The planned torques (N·m) of the orientation's rows after the last
+        point's, in plan order (empty: the last point is the orientation's last
+        row; None: not known). A photograph turning back a row before the load
+        does is a missed shot only where the plan turns back after the next row
+        (else it is two photographs taken the other way round, or another
+        mistake); inside the sequence the next point tells.
 
     Returns
     -------
@@ -203,7 +210,8 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         warned about, undecided (:attr:`StepWarning.decided`).
     """
     hindsight = not open_end if hindsight is None else hindsight
-    return _checked(points, step_torque_nm, open_end, hindsight, _known(earlier, step_torque_nm))[0]
+    after = None if plan_after is None else tuple(float(t) for t in plan_after)
+    return _checked(points, step_torque_nm, open_end, hindsight, _known(earlier, step_torque_nm), after)[0]
 
 
 def _known(earlier, step_torque_nm) -> dict:
@@ -215,14 +223,14 @@ def _known(earlier, step_torque_nm) -> dict:
     return known
 
 
-def _checked(points, step_torque_nm, open_end, hindsight, known):
+def _checked(points, step_torque_nm, open_end, hindsight, known, plan_after=None):
     """check_steps: the warnings, and the compliance by place in the loop of the
     steps that fitted, the sequence bound with the fixes of its mistakes."""
     points, origin = list(points), list(range(len(points)))
     out: list[StepWarning] = []
     done = 0  # warnings before this position of `points` are said already
     while True:
-        found, seen = _scan(points, step_torque_nm, open_end, None if hindsight else {}, known)
+        found, seen = _scan(points, step_torque_nm, open_end, None if hindsight else {}, known, plan_after)
         found = [w for w in found if w.index >= done]
         shift = next((w for w in found if w.kind in ("no_movement", "large_step") and w.decided), None)
         out += [dataclasses.replace(w, index=origin[w.index]) for w in found
@@ -232,7 +240,8 @@ def _checked(points, step_torque_nm, open_end, hindsight, known):
         # the files after it are a row late (an extra shot) or a row early (a missed
         # shot): the rest is checked as bound with the fix, one mistake, one warning
         i, n = shift.index, len(points)
-        if shift.kind == "no_movement":
+        if shift.kind == "no_movement":  # the last point's row is now the one after the new last
+            plan_after = None if plan_after is None else (points[-1].torque_nm, *plan_after)
             points = points[:i] + [StepPoint(points[j - 1].torque_nm, points[j].angle_deg, points[j].angle_std_deg)
                                    for j in range(i + 1, n)]
             origin, done = origin[:i] + origin[i + 1:], i
@@ -242,15 +251,16 @@ def _checked(points, step_torque_nm, open_end, hindsight, known):
             origin, done = origin[:n - 1], i + 1
 
 
-def _scan(points, step_torque_nm, open_end, prior=None, known=None):
+def _scan(points, step_torque_nm, open_end, prior=None, known=None, plan_after=None):
     """check_steps on `points` as bound (no re-binding after a mistake): the
     warnings, and the compliance of the steps that fitted by place in the loop.
     A closed sequence is looked at twice: the second time every step has the same
     step elsewhere in the loop, later ones included, to compare with. `known`:
-    place -> compliance of earlier loops, for the steps this one has not shown."""
+    place -> compliance of earlier loops, for the steps this one has not shown.
+    `plan_after`: as for check_steps."""
     steps = _steps(points)
     if prior is None:
-        prior = _scan(points, step_torque_nm, open_end, prior={}, known=known)[1]
+        prior = _scan(points, step_torque_nm, open_end, prior={}, known=known, plan_after=plan_after)[1]
     state = _State(step_torque_nm, prior, known)
     out: list[StepWarning] = []
     for k, s in enumerate(steps):
@@ -268,7 +278,7 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None):
                 out.append(early)
                 state.flagged.add(s.index)
             continue  # undecided until the next image: not a reference
-        warn = _judge(s, nxt, state, last=k + 1 == len(steps))
+        warn = _judge(s, nxt, state, last=k + 1 == len(steps), turns=_turns(steps, k, plan_after))
         if warn is None:
             state.accept(s)
         else:
@@ -396,8 +406,27 @@ class _State:
         self.after_warning = False
 
 
-def _judge(s, nxt, state, *, last) -> StepWarning | None:
-    """The warning of step `s` (None: it fits), decided with the step after it."""
+def _turns(steps, k, plan_after) -> bool | None:
+    """Whether the plan's load turns back after the row of step ``k + 1``'s
+    image (None: not known): from the next image's row inside the sequence, from
+    `plan_after` at its end."""
+    if k + 1 >= len(steps):
+        return None
+    here, way = steps[k + 1].span[1], steps[k + 1].d_tau
+    if k + 2 < len(steps):
+        later = [steps[k + 2].span[1]]
+    elif plan_after is None:
+        return None
+    else:
+        later = list(plan_after)
+    nxt = next((t for t in later if t != here), None)
+    return nxt is not None and (nxt - here) * way < 0
+
+
+def _judge(s, nxt, state, *, last, turns=None) -> StepWarning | None:
+    """The warning of step `s` (None: it fits), decided with the step after it
+    (`turns`: whether the plan's load turns back after its image's row, None when
+    not known)."""
     if abs(s.d_theta) < _STILL_SIGMAS * s.sigma:
         return _warning(s, "no_movement", math.nan,
                         f"no movement: Δangle {s.d_theta:+.4f}° for a planned torque step of "
@@ -410,7 +439,7 @@ def _judge(s, nxt, state, *, last) -> StepWarning | None:
     if state.after_warning:
         return None
     e, same = state.expected(s)
-    if e is not None and nxt is not None and _row_early(s, nxt, state, e, same):
+    if e is not None and nxt is not None and turns is not False and _row_early(s, nxt, state, e, same):
         return _warning(s, "large_step", s.d_theta / e,
                         f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× the expected "
                         f"{e:+.4f}° and the next photograph already turns back as the load does one row "

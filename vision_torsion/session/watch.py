@@ -614,14 +614,17 @@ class Watcher:
         unshot = self.unshot()
         open_end = any(row.orientation_deg == orientation and i not in self.bound and i not in unshot
                        and row.line not in self.missing for i, row in enumerate(self.rows))
+        # the plan's loads after the newest photograph's row (in this orientation)
+        after = [self.torques[i] for i in range(ok[-1] + 1, len(self.rows)) if self.rows[i].orientation_deg
+                 == orientation and i not in unshot and self.rows[i].line not in self.missing] if ok else None
         # verdicts from the images so far and the next only: a warning once said stays
         warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                            earlier=loops)
+                            earlier=loops, plan_after=after)
         if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
-            self._try_swap(ok, points, warns, open_end, loops)
+            self._try_swap(ok, points, warns, open_end, loops, after)
             points = self._points(ok)
             warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                                earlier=loops)
+                                earlier=loops, plan_after=after)
         # a missed shot's signature is said before the next photograph only where that one may
         # never come or be the next orientation's (the second-to-last row): elsewhere it decides
         warns = [self._turned_early(ok, points, w, loops) for w in warns
@@ -656,7 +659,7 @@ class Watcher:
 
         return [StepPoint(self.torques[p], angle(p), self.bound[p].result.angle_std_deg) for p in ok]
 
-    def _try_swap(self, ok, points, warns, open_end, loops) -> None:
+    def _try_swap(self, ok, points, warns, open_end, loops, plan_after=None) -> None:
         """The newest photograph warned: were it and the one before taken the other way
         round? If exchanging them makes their steps fit, they are recorded as swapped
         (with the ``bind`` fix) and checked that way from now on."""
@@ -670,7 +673,7 @@ class Watcher:
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
         after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                            earlier=loops)
+                            earlier=loops, plan_after=plan_after)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
         fa, fb = self.bound[a].file, self.bound[b].file
@@ -738,7 +741,7 @@ class Watcher:
 
         def end_warned(seq):
             return [w for w in check_steps(seq, step_torque_nm=self.step_torque, open_end=False, hindsight=False,
-                                           earlier=loops) if w.index >= len(seq) - 2]
+                                           earlier=loops, plan_after=()) if w.index >= len(seq) - 2]
 
         jump = [w for w in end_warned(as_bound) if w.index == len(as_bound) - 1]
         if not jump or end_warned(ended):
