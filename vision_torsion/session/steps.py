@@ -37,11 +37,13 @@ An out-of-line step is decided with the step after it, by which explains both:
   row after its own): the step's excess over the same step elsewhere in the loop
   is the next planned step there (within 30 %), and the next photograph shows the
   step after that one (within 20 %; against the
-  previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one). Before a turning load
-  the next photograph already turns back, by as much as the first step back from a
-  turning load elsewhere in the loop (unlike this branch's step reversed: two
-  photographs taken the other way round, which ``watch`` and ``bind`` find by
-  exchanging them).
+  previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one, and, when the previous
+  step is the first after a kink, which may hold the switch anywhere in it, the next
+  going on like it within 15 %). Before a turning load the next photograph already
+  turns back, by as much as the first step back from a turning load elsewhere in
+  the loop (unlike this branch's step reversed: two photographs taken the other way
+  round, which ``watch`` and ``bind`` find by exchanging them), and only where the
+  plan's load does turn back after the next row (``plan_after``).
 
 A mistake's signature (0.5, 2 or 0 of a step) is far from the gear's by many times
 the scatter of a step ratio (σ_Δ/Δθ ≈ 0.3 % for 0.25° steps at 0.0005° noise), and
@@ -272,8 +274,10 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None, plan_after=N
             state.new_branch(direction)  # the load reversed: a new branch
         nxt = steps[k + 1] if k + 1 < len(steps) and state.single(steps[k + 1].d_tau) else None
         if k + 1 == len(steps) and open_end and state.out_of_line(s):
+            # a missed shot's signature already: said now, undecided (not on the step after a
+            # warning, which makes up for that mistake)
+            early = None if state.after_warning else _two_in_one(s, state)
             state.after_warning = False
-            early = _two_in_one(s, state)  # a missed shot's signature already: said now, undecided
             if early is not None:
                 out.append(early)
                 state.flagged.add(s.index)
@@ -396,6 +400,12 @@ class _State:
         r = s.d_theta / e
         return abs(math.log(r)) > math.log(_SAME_FIT) if same else (r < _SMALL or _LARGE[0] < r < _LARGE[1])
 
+    def kinked(self) -> bool:
+        """Whether the reference step (:attr:`local`) came with a jump of the
+        compliance beyond 2× from the step before it (a kink)."""
+        return (self.local is not None and self.before is not None
+                and not 1 / _TREND <= self.local / self.before <= _TREND)
+
     def accept(self, s) -> None:
         if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:
             self.before = self.local = None  # across a gap (a row without a photograph): no reference
@@ -498,6 +508,10 @@ def _decide(s, nxt, state, e, same) -> str | None:
     follow = nxt.compliance / s.compliance
     if ratio < _SMALL:
         return "small_step" if follow >= _RECOVERY else None
+    if state.kinked() and abs(math.log(nxt.compliance / state.local)) > math.log(_EARLY):
+        # the reference is the first step after a kink: the gear's switch may lie inside it (any
+        # fraction of the new compliance); only the next step going on like it confirms it
+        return None
     return "large_step" if _LARGE[0] < ratio < _LARGE[1] and follow <= _GOES_ON else None
 
 

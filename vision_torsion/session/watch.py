@@ -635,8 +635,11 @@ class Watcher:
         for p in ok:
             if p in self.swapped:
                 derived[p].append(self.swapped[p][1])
-        for w in check_axis([self.bound[p].pair for p in ok]):
-            derived[ok[w.index]].append(w.message)
+        for moved in check_axis([self.bound[p].pair for p in ok]):
+            derived[ok[moved.index]].append(moved.message)
+            # the orientation is to be shot again from there: the steps into the moved image and
+            # after it (the turn of the view added to one of them) are not mistakes of their own
+            warns = [w for w in warns if w.index < moved.index]
         return [(ok[w.index], w) for w in warns]
 
     def _angles(self, rb, ok, pair_angle) -> None:
@@ -672,8 +675,12 @@ class Watcher:
             return  # across a reversal of the load: a swap cannot be told from the gear there
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
-        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                            earlier=loops, plan_after=plan_after)
+        # at the plan's turning load the newest photograph turning back is also what a shot missed
+        # earlier in the branch gives (its files a row early): the exchanged pair's newest step must
+        # then fit as well (judged as if closed), not wait undecided
+        turning = bool(plan_after) and (plan_after[0] - torques[2]) * (torques[2] - torques[1]) < 0
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end and not turning,
+                            hindsight=False, earlier=loops, plan_after=plan_after)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
         fa, fb = self.bound[a].file, self.bound[b].file
