@@ -38,8 +38,8 @@ An out-of-line step is decided with the step after it, by which explains both:
   is the next planned step there (within 30 %), and the next photograph shows the
   step after that one (within 20 %; against the
   previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one, and, when the previous
-  step is the first after a kink, which may hold the switch anywhere in it, the next
-  going on like it within 15 %). Before a turning load the next photograph already
+  step is the first after a kink (a jump beyond 4×), which may hold the switch
+  anywhere in it, the next going on like it within 15 %). Before a turning load the next photograph already
   turns back, by as much as the first step back from a turning load elsewhere in
   the loop (unlike this branch's step reversed: two photographs taken the other way
   round, which ``watch`` and ``bind`` find by exchanging them), and only where the
@@ -102,6 +102,7 @@ _FORGOTTEN = 1 / _SAME_FIT
 _MADE_UP = 0.3
 _SUM_TOL = 1.2
 _EARLY = 1.15
+_KINK = 4.0
 
 
 @dataclass(frozen=True)
@@ -402,9 +403,11 @@ class _State:
 
     def kinked(self) -> bool:
         """Whether the reference step (:attr:`local`) came with a jump of the
-        compliance beyond 2× from the step before it (a kink)."""
+        compliance beyond 4× from the step before it: a switch inside the step
+        (the paper's is 15×; a gear stiffening by segments changes by their
+        ratio, 2.5× for the three-segment gear, over a step or two)."""
         return (self.local is not None and self.before is not None
-                and not 1 / _TREND <= self.local / self.before <= _TREND)
+                and not 1 / _KINK <= self.local / self.before <= _KINK)
 
     def accept(self, s) -> None:
         if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:

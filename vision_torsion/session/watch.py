@@ -40,7 +40,11 @@ A tick:
    a row early) its last row is left for no photograph, and after an extra shot
    (its files a row late) its last photograph is set aside with a message, so that
    the next orientation's photographs bind to its own rows (``bind`` with the fix
-   binds them all).
+   binds them all). A shot missed at an orientation's second-to-last row is said at
+   that image (its step is already two planned steps in one against the same steps
+   elsewhere); the photograph next in line for the last row, out of line there while
+   the one before it fits as the last row's, is the next orientation's reference:
+   the missed shot is decided and it binds to that reference.
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
@@ -683,6 +687,11 @@ class Watcher:
                             hindsight=False, earlier=loops, plan_after=plan_after)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
+        if turning:  # where the newest photograph shows the first step back just as well, wait for the next
+            back = points[:-1] + [StepPoint(plan_after[0], points[-1].angle_deg, points[-1].angle_std_deg)]
+            if not [w for w in check_steps(back, step_torque_nm=self.step_torque, open_end=False, hindsight=False,
+                                           earlier=loops) if w.index >= len(back) - 1]:
+                return
         fa, fb = self.bound[a].file, self.bound[b].file
         fix = (self.bind_fix("--swap", fa, fb) if self.camera_mode
                else f"fix: exchange the names of {fa} and {fb}")
