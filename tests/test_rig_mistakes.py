@@ -513,3 +513,16 @@ def test_at_a_later_loops_turning_load_a_missed_shot_and_a_swap_that_look_alike_
     assert not [m for _, m, _ in found if "swapped" in m]
     (turn,) = [m for f, m, _ in found if f == "IMG_0028.png"]
     assert re.search(r"the load turned back a row early: .* at line (\d+ or )*28( or \d+)* ", turn)
+
+
+def test_an_extra_shot_after_a_steep_step_does_not_make_that_step_a_missed_shot():
+    # three-segment gear: the step into row 4 is 1.6× the one before (the gear's own rise
+    # of compliance towards zero); an extra shot of row 4's load follows. A photograph
+    # without movement tells nothing of the step before it: one warning, the extra shot
+    i = 4
+    points = sequence("three-segment")
+    # 0.002° on (the noise's scatter, below 5 σ), the way the load goes: no movement
+    extra = StepPoint(PLANNED[i + 1], points[i].angle_deg - 0.002, 0.0005)
+    bound = points[:i + 1] + [extra] + [StepPoint(PLANNED[j + 1], p.angle_deg, p.angle_std_deg)
+                                        for j, p in enumerate(points[i + 1:-1], start=i + 1)]
+    assert [(w.index, w.kind) for w, _ in live(bound)] == [(i + 1, "no_movement")]

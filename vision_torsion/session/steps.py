@@ -493,8 +493,8 @@ def _decide(s, nxt, state, e, same) -> str | None:
             return None
         # a piece forgotten at the turning load: the way back starts half a step early
         return "small_step" if nxt.d_theta / back < 1 / _SAME_TOL else None
-    if nxt.d_theta * nxt.d_tau <= 0:  # no movement or back: an extra shot or a swap there
-        return None
+    if nxt.d_theta * nxt.d_tau <= 0 or abs(nxt.d_theta) < _STILL_SIGMAS * nxt.sigma:
+        return None  # no movement or back: an extra shot or a swap there, which tells nothing of this step
     e_next = state.same_step(nxt) if same else None
     if e_next is not None:  # which explains both steps: a piece forgotten, a missed shot, or the gear
         sign = 1.0 if s.d_tau > 0 else -1.0
