@@ -2,7 +2,7 @@
 ``bind`` over simulated sessions of different gears and both target types (issue 28).
 
     python benchmarks/bench_capture.py [--seeds N] [--steps K] [--targets ...] [--target-seeds M]
-                                       [--orientations L] [--multi-seeds S]
+                                       [--orientations L] [--multi-seeds S] [--seed-base B]
 
 Every session is one orientation of a gear photographed by the scripted camera
 (:func:`vision_torsion.synthetic.scripted_camera.capture_script`, a 320×240 scene, 4 weight
@@ -280,6 +280,8 @@ def main(argv=None) -> int:
                     help="orientations of the multi-loop sessions (below 2: none are run)")
     ap.add_argument("--multi-seeds", type=int, default=1,
                     help="multi-loop sessions per gear, step mistake and loop it is in")
+    ap.add_argument("--seed-base", type=int, default=0,
+                    help="added to every session's seed (fresh sessions: the mistake's row, the noise)")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rows = []
@@ -289,15 +291,16 @@ def main(argv=None) -> int:
         for g, gear in enumerate(GEARS):
             for j, kind in enumerate(MISTAKES):
                 for s in range(seeds):
-                    rows.append(one_session(gear, kind, 1000 * s + 17 * j + 101 * g, args.steps, target))
+                    rows.append(one_session(gear, kind, args.seed_base + 1000 * s + 17 * j + 101 * g, args.steps,
+                                            target))
     multi = []
     if args.orientations >= 2:
         for g, gear in enumerate(GEARS):
             for j, kind in enumerate(MULTI):
                 for in_loop in ((0,) if kind == "clean" else (0, args.orientations - 1)):
                     for s in range(args.multi_seeds):
-                        multi.append(one_session(gear, kind, 1000 * s + 17 * j + 101 * g + 7 * in_loop, args.steps,
-                                                 orientations=args.orientations, in_loop=in_loop))
+                        multi.append(one_session(gear, kind, args.seed_base + 1000 * s + 17 * j + 101 * g + 7 * in_loop,
+                                                 args.steps, orientations=args.orientations, in_loop=in_loop))
     print(f"{len(rows)} sessions ({len(GEARS)} gears × {len(MISTAKES)} cases × seeds, targets: "
           f"{', '.join(targets)}), {2 + 4 * args.steps} photographs each; {len(multi)} sessions of "
           f"{args.orientations} orientations; {time.perf_counter() - t0:.0f} s")
@@ -313,7 +316,7 @@ def main(argv=None) -> int:
     write_result(HERE / "results" / "capture.json", {"sessions": kept, "steps": args.steps, "seeds": args.seeds,
                                                       "target_seeds": args.target_seeds, "targets": targets,
                                                       "orientations": args.orientations,
-                                                      "multi_seeds": args.multi_seeds})
+                                                      "multi_seeds": args.multi_seeds, "seed_base": args.seed_base})
     return 0
 
 

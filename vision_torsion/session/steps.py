@@ -37,11 +37,13 @@ An out-of-line step is decided with the step after it, by which explains both:
   row after its own): the step's excess over the same step elsewhere in the loop
   is the next planned step there (within 30 %), and the next photograph shows the
   step after that one (within 20 %; against the
-  previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one). Before a turning load
-  the next photograph already turns back, by as much as the first step back from a
-  turning load elsewhere in the loop (unlike this branch's step reversed: two
-  photographs taken the other way round, which ``watch`` and ``bind`` find by
-  exchanging them).
+  previous step: ≈ 2 e then ≈ e, the next ≤ 0.7× this one, and, when the previous
+  step is the first after a kink (a jump beyond 4×), which may hold the switch
+  anywhere in it, the next going on like it within 15 %). Before a turning load the next photograph already
+  turns back, by as much as the first step back from a turning load elsewhere in
+  the loop (unlike this branch's step reversed: two photographs taken the other way
+  round, which ``watch`` and ``bind`` find by exchanging them), and only where the
+  plan's load does turn back after the next row (``plan_after``).
 
 A mistake's signature (0.5, 2 or 0 of a step) is far from the gear's by many times
 the scatter of a step ratio (σ_Δ/Δθ ≈ 0.3 % for 0.25° steps at 0.0005° noise), and
@@ -100,6 +102,7 @@ _FORGOTTEN = 1 / _SAME_FIT
 _MADE_UP = 0.3
 _SUM_TOL = 1.2
 _EARLY = 1.15
+_KINK = 4.0
 
 
 @dataclass(frozen=True)
@@ -143,6 +146,13 @@ class StepWarning:
         gear's own change of stiffness (:func:`gear_kinks` tells, when it recurs).
     torque_span_nm : tuple of float
         The planned torques (N·m) of the step's two images, in capture order.
+    awaiting_next : bool
+        An open sequence's newest step (not decided: the next photograph decides
+        it) that is already a missed shot's signature: against the same steps
+        elsewhere in the loop (or in an earlier loop) it is off by the next planned
+        step's angle and equals the two planned steps together. Said at once,
+        because the next photograph may never come (the plan's last row) or be
+        another orientation's reference.
     """
 
     index: int
@@ -153,10 +163,11 @@ class StepWarning:
     message: str
     decided: bool = True
     torque_span_nm: tuple = ()
+    awaiting_next: bool = False
 
 
 def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
-                hindsight: bool | None = None, earlier=()) -> list[StepWarning]:
+                hindsight: bool | None = None, earlier=(), plan_after=None) -> list[StepWarning]:
     """Warnings for the steps of one orientation's image sequence (module docstring).
 
     Parameters
@@ -183,6 +194,13 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         them that shows it (the gear's own stiffness at that torque, already
         seen), so the first half-loop of a later orientation is judged as its
         second half is, and a kink seen there is expected, not a mistake.
+    plan_after : sequence of float, optional
+        The planned torques (N·m) of the orientation's rows after the last
+        point's, in plan order (empty: the last point is the orientation's last
+        row; None: not known). A photograph turning back a row before the load
+        does is a missed shot only where the plan turns back after the next row
+        (else it is two photographs taken the other way round, or another
+        mistake); inside the sequence the next point tells.
 
     Returns
     -------
@@ -195,7 +213,8 @@ def check_steps(points, *, step_torque_nm: float, open_end: bool = False,
         warned about, undecided (:attr:`StepWarning.decided`).
     """
     hindsight = not open_end if hindsight is None else hindsight
-    return _checked(points, step_torque_nm, open_end, hindsight, _known(earlier, step_torque_nm))[0]
+    after = None if plan_after is None else tuple(float(t) for t in plan_after)
+    return _checked(points, step_torque_nm, open_end, hindsight, _known(earlier, step_torque_nm), after)[0]
 
 
 def _known(earlier, step_torque_nm) -> dict:
@@ -207,14 +226,14 @@ def _known(earlier, step_torque_nm) -> dict:
     return known
 
 
-def _checked(points, step_torque_nm, open_end, hindsight, known):
+def _checked(points, step_torque_nm, open_end, hindsight, known, plan_after=None):
     """check_steps: the warnings, and the compliance by place in the loop of the
     steps that fitted, the sequence bound with the fixes of its mistakes."""
     points, origin = list(points), list(range(len(points)))
     out: list[StepWarning] = []
     done = 0  # warnings before this position of `points` are said already
     while True:
-        found, seen = _scan(points, step_torque_nm, open_end, None if hindsight else {}, known)
+        found, seen = _scan(points, step_torque_nm, open_end, None if hindsight else {}, known, plan_after)
         found = [w for w in found if w.index >= done]
         shift = next((w for w in found if w.kind in ("no_movement", "large_step") and w.decided), None)
         out += [dataclasses.replace(w, index=origin[w.index]) for w in found
@@ -224,7 +243,8 @@ def _checked(points, step_torque_nm, open_end, hindsight, known):
         # the files after it are a row late (an extra shot) or a row early (a missed
         # shot): the rest is checked as bound with the fix, one mistake, one warning
         i, n = shift.index, len(points)
-        if shift.kind == "no_movement":
+        if shift.kind == "no_movement":  # the last point's row is now the one after the new last
+            plan_after = None if plan_after is None else (points[-1].torque_nm, *plan_after)
             points = points[:i] + [StepPoint(points[j - 1].torque_nm, points[j].angle_deg, points[j].angle_std_deg)
                                    for j in range(i + 1, n)]
             origin, done = origin[:i] + origin[i + 1:], i
@@ -234,15 +254,16 @@ def _checked(points, step_torque_nm, open_end, hindsight, known):
             origin, done = origin[:n - 1], i + 1
 
 
-def _scan(points, step_torque_nm, open_end, prior=None, known=None):
+def _scan(points, step_torque_nm, open_end, prior=None, known=None, plan_after=None):
     """check_steps on `points` as bound (no re-binding after a mistake): the
     warnings, and the compliance of the steps that fitted by place in the loop.
     A closed sequence is looked at twice: the second time every step has the same
     step elsewhere in the loop, later ones included, to compare with. `known`:
-    place -> compliance of earlier loops, for the steps this one has not shown."""
+    place -> compliance of earlier loops, for the steps this one has not shown.
+    `plan_after`: as for check_steps."""
     steps = _steps(points)
     if prior is None:
-        prior = _scan(points, step_torque_nm, open_end, prior={}, known=known)[1]
+        prior = _scan(points, step_torque_nm, open_end, prior={}, known=known, plan_after=plan_after)[1]
     state = _State(step_torque_nm, prior, known)
     out: list[StepWarning] = []
     for k, s in enumerate(steps):
@@ -254,9 +275,15 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None):
             state.new_branch(direction)  # the load reversed: a new branch
         nxt = steps[k + 1] if k + 1 < len(steps) and state.single(steps[k + 1].d_tau) else None
         if k + 1 == len(steps) and open_end and state.out_of_line(s):
+            # a missed shot's signature already: said now, undecided (not on the step after a
+            # warning, which makes up for that mistake)
+            early = None if state.after_warning else _two_in_one(s, state)
             state.after_warning = False
-            continue  # undecided until the next image: neither a warning nor a reference
-        warn = _judge(s, nxt, state, last=k + 1 == len(steps))
+            if early is not None:
+                out.append(early)
+                state.flagged.add(s.index)
+            continue  # undecided until the next image: not a reference
+        warn = _judge(s, nxt, state, last=k + 1 == len(steps), turns=_turns(steps, k, plan_after))
         if warn is None:
             state.accept(s)
         else:
@@ -374,6 +401,14 @@ class _State:
         r = s.d_theta / e
         return abs(math.log(r)) > math.log(_SAME_FIT) if same else (r < _SMALL or _LARGE[0] < r < _LARGE[1])
 
+    def kinked(self) -> bool:
+        """Whether the reference step (:attr:`local`) came with a jump of the
+        compliance beyond 4× from the step before it: a switch inside the step
+        (the paper's is 15×; a gear stiffening by segments changes by their
+        ratio, 2.5× for the three-segment gear, over a step or two)."""
+        return (self.local is not None and self.before is not None
+                and not 1 / _KINK <= self.local / self.before <= _KINK)
+
     def accept(self, s) -> None:
         if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:
             self.before = self.local = None  # across a gap (a row without a photograph): no reference
@@ -384,8 +419,27 @@ class _State:
         self.after_warning = False
 
 
-def _judge(s, nxt, state, *, last) -> StepWarning | None:
-    """The warning of step `s` (None: it fits), decided with the step after it."""
+def _turns(steps, k, plan_after) -> bool | None:
+    """Whether the plan's load turns back after the row of step ``k + 1``'s
+    image (None: not known): from the next image's row inside the sequence, from
+    `plan_after` at its end."""
+    if k + 1 >= len(steps):
+        return None
+    here, way = steps[k + 1].span[1], steps[k + 1].d_tau
+    if k + 2 < len(steps):
+        later = [steps[k + 2].span[1]]
+    elif plan_after is None:
+        return None
+    else:
+        later = list(plan_after)
+    nxt = next((t for t in later if t != here), None)
+    return nxt is not None and (nxt - here) * way < 0
+
+
+def _judge(s, nxt, state, *, last, turns=None) -> StepWarning | None:
+    """The warning of step `s` (None: it fits), decided with the step after it
+    (`turns`: whether the plan's load turns back after its image's row, None when
+    not known)."""
     if abs(s.d_theta) < _STILL_SIGMAS * s.sigma:
         return _warning(s, "no_movement", math.nan,
                         f"no movement: Δangle {s.d_theta:+.4f}° for a planned torque step of "
@@ -398,7 +452,7 @@ def _judge(s, nxt, state, *, last) -> StepWarning | None:
     if state.after_warning:
         return None
     e, same = state.expected(s)
-    if e is not None and nxt is not None and _row_early(s, nxt, state, e, same):
+    if e is not None and nxt is not None and turns is not False and _row_early(s, nxt, state, e, same):
         return _warning(s, "large_step", s.d_theta / e,
                         f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× the expected "
                         f"{e:+.4f}° and the next photograph already turns back as the load does one row "
@@ -439,8 +493,8 @@ def _decide(s, nxt, state, e, same) -> str | None:
             return None
         # a piece forgotten at the turning load: the way back starts half a step early
         return "small_step" if nxt.d_theta / back < 1 / _SAME_TOL else None
-    if nxt.d_theta * nxt.d_tau <= 0:  # no movement or back: an extra shot or a swap there
-        return None
+    if nxt.d_theta * nxt.d_tau <= 0 or abs(nxt.d_theta) < _STILL_SIGMAS * nxt.sigma:
+        return None  # no movement or back: an extra shot or a swap there, which tells nothing of this step
     e_next = state.same_step(nxt) if same else None
     if e_next is not None:  # which explains both steps: a piece forgotten, a missed shot, or the gear
         sign = 1.0 if s.d_tau > 0 else -1.0
@@ -457,6 +511,10 @@ def _decide(s, nxt, state, e, same) -> str | None:
     follow = nxt.compliance / s.compliance
     if ratio < _SMALL:
         return "small_step" if follow >= _RECOVERY else None
+    if state.kinked() and abs(math.log(nxt.compliance / state.local)) > math.log(_EARLY):
+        # the reference is the first step after a kink: the gear's switch may lie inside it (any
+        # fraction of the new compliance); only the next step going on like it confirms it
+        return None
     return "large_step" if _LARGE[0] < ratio < _LARGE[1] and follow <= _GOES_ON else None
 
 
@@ -478,6 +536,34 @@ def _row_early(s, nxt, state, e, same) -> bool:
     swap_e, _ = state.expected(nxt)
     swapped = abs(math.log(-nxt.d_theta / swap_e)) if swap_e is not None and swap_e != 0 else math.inf
     return missed < math.log(_SAME_TOL) and missed < swapped
+
+
+def _two_in_one(s, state) -> StepWarning | None:
+    """The newest step `s` of an open sequence, not decided yet, when it is a
+    missed shot's signature on its own: against the same step elsewhere in the
+    loop (or an earlier loop) it is more than 8 % larger, and within 8 % of the
+    same two planned steps together (this one and the next the plan makes in the
+    same direction), nearer to them than to the one. A gear that repeats its loop
+    gives the same step again within 8 %; one that changes its stiffness between
+    loops changes a step by a factor, not by exactly its neighbour's angle. Else
+    None."""
+    e, same = state.expected(s)
+    if not same or s.d_theta / e < _SAME_FIT:
+        return None
+    two = state.same_step(s, (s.span[0], s.span[1] + s.d_tau))
+    if two is None or s.d_theta * two <= 0:
+        return None
+    off = abs(math.log(s.d_theta / two))
+    if off > math.log(_SAME_FIT) or off > abs(math.log(s.d_theta / e)) / 2:
+        return None
+    what = "the same step elsewhere in the loop" if state.here(s) else "the same step in an earlier orientation"
+    return dataclasses.replace(_warning(
+        s, "large_step", s.d_theta / e,
+        f"step out of line: Δangle {s.d_theta:+.4f}° is {s.d_theta / e:.2f}× {what} {e:+.4f}° and "
+        f"{s.d_theta / two:.2f}× the next two planned steps together {two:+.4f}°: a missed shot? (this "
+        "photograph would show the next row's load; or it and the next were taken the other way round: the "
+        "next photograph will tell)", decided=False),
+        awaiting_next=True)
 
 
 def _warning(s, kind, ratio, message, *, decided=True) -> StepWarning:
@@ -574,7 +660,8 @@ def gear_kinks(warnings) -> set[int]:
 
     groups: dict = {}
     for n, w in enumerate(warnings):
-        if not w.decided and len(w.torque_span_nm) == 2 and w.kind in ("small_step", "large_step"):
+        if (not w.decided and not w.awaiting_next and len(w.torque_span_nm) == 2
+                and w.kind in ("small_step", "large_step")):
             groups.setdefault(key(w), []).append(n)
     out: set[int] = set()
     for members in groups.values():

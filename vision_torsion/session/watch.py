@@ -40,7 +40,11 @@ A tick:
    a row early) its last row is left for no photograph, and after an extra shot
    (its files a row late) its last photograph is set aside with a message, so that
    the next orientation's photographs bind to its own rows (``bind`` with the fix
-   binds them all).
+   binds them all). A shot missed at an orientation's second-to-last row is said at
+   that image (its step is already two planned steps in one against the same steps
+   elsewhere); the photograph next in line for the last row, out of line there while
+   the one before it fits as the last row's, is the next orientation's reference:
+   the missed shot is decided and it binds to that reference.
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
@@ -73,7 +77,7 @@ from .binding import Binding, load_binding, write_binding
 from .events import EVENT_MODES, FolderEvents
 from .live import LIVE_PAGE_NAME, LIVE_STAMP_NAME, LivePoint, live_page, stamp_script
 from .load import load_session
-from .steps import StepPoint, check_steps, gear_kinks
+from .steps import StepPoint, StepWarning, check_steps, gear_kinks
 
 __all__ = ["WatchEvent", "Watcher", "watch_session", "WatchResult", "printable"]
 
@@ -228,6 +232,9 @@ class Watcher:
         self.shift: dict[float, int] = {}
         self.overflow: dict[float, int] = {}  # orientation -> its photographs set aside so far
         self.turned_early: set[int] = set()  # positions where the load turned back a row early
+        # orientation -> (its photograph that shows its last row's load, the next orientation's
+        # reference that came after it): a shot missed at the orientation's second-to-last row
+        self.ended_early: dict[float, tuple[int, int]] = {}
         self.measurer = ShotMeasurer(self.session, self.out).__enter__()
         self.events = FolderEvents(self.camera, mode=events)
         self._closed = False
@@ -461,6 +468,7 @@ class Watcher:
                 return [self._notice("leftover", name, f"{name}: every planned row already has its "
                                      f"photograph ({len(self.rows)} rows); not bound (an extra shot?)")]
             pos = nxt[0]
+            pos = self._next_reference(pos, shot)
         self.done.add(name)
         self._bind(pos, name, shot, info)
         self.bound[pos].stalled = stalled
@@ -542,6 +550,9 @@ class Watcher:
                 # (in the orientation of the mistake, and after it where not realigned)
                 o = self.bound[p].row.orientation_deg
                 new = self.step_fix(p, w, net.get(o, 0) + sum(self._carried(x, k) for x, k in net.items() if x != o))
+                if w.awaiting_next:  # not decided: the fix it would take, not applied to the files after it
+                    derived[p].insert(0, w.message + ("; if so, " + self.bind_fix(*options, *new) if new else ""))
+                    continue
                 net[o] = (net.get(o, 0) + new.count("--missing") - new.count("--skip")
                           + (p in self.turned_early))
                 options += new
@@ -607,21 +618,32 @@ class Watcher:
         unshot = self.unshot()
         open_end = any(row.orientation_deg == orientation and i not in self.bound and i not in unshot
                        and row.line not in self.missing for i, row in enumerate(self.rows))
+        # the plan's loads after the newest photograph's row (in this orientation)
+        after = [self.torques[i] for i in range(ok[-1] + 1, len(self.rows)) if self.rows[i].orientation_deg
+                 == orientation and i not in unshot and self.rows[i].line not in self.missing] if ok else None
         # verdicts from the images so far and the next only: a warning once said stays
         warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                            earlier=loops)
+                            earlier=loops, plan_after=after)
         if warns and warns[-1].index == len(ok) - 1 and len(ok) >= 3:
-            self._try_swap(ok, points, warns, open_end, loops)
+            self._try_swap(ok, points, warns, open_end, loops, after)
             points = self._points(ok)
             warns = check_steps(points, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                                earlier=loops)
-        warns = [self._turned_early(ok, points, w, loops) for w in warns]
+                                earlier=loops, plan_after=after)
+        # a missed shot's signature is said before the next photograph only where that one may
+        # never come or be the next orientation's (the second-to-last row): elsewhere it decides
+        warns = [self._turned_early(ok, points, w, loops) for w in warns
+                 if not w.awaiting_next or self._second_to_last(ok[w.index])]
+        if orientation in self.ended_early:
+            warns = self._ended_early(orientation, ok, points, warns)
         loops.append(points)
         for p in ok:
             if p in self.swapped:
                 derived[p].append(self.swapped[p][1])
-        for w in check_axis([self.bound[p].pair for p in ok]):
-            derived[ok[w.index]].append(w.message)
+        for moved in check_axis([self.bound[p].pair for p in ok]):
+            derived[ok[moved.index]].append(moved.message)
+            # the orientation is to be shot again from there: the steps into the moved image and
+            # after it (the turn of the view added to one of them) are not mistakes of their own
+            warns = [w for w in warns if w.index < moved.index]
         return [(ok[w.index], w) for w in warns]
 
     def _angles(self, rb, ok, pair_angle) -> None:
@@ -644,7 +666,7 @@ class Watcher:
 
         return [StepPoint(self.torques[p], angle(p), self.bound[p].result.angle_std_deg) for p in ok]
 
-    def _try_swap(self, ok, points, warns, open_end, loops) -> None:
+    def _try_swap(self, ok, points, warns, open_end, loops, plan_after=None) -> None:
         """The newest photograph warned: were it and the one before taken the other way
         round? If exchanging them makes their steps fit, they are recorded as swapped
         (with the ``bind`` fix) and checked that way from now on."""
@@ -657,10 +679,19 @@ class Watcher:
             return  # across a reversal of the load: a swap cannot be told from the gear there
         trial = points[:-2] + [StepPoint(points[-2].torque_nm, points[-1].angle_deg, points[-1].angle_std_deg),
                                StepPoint(points[-1].torque_nm, points[-2].angle_deg, points[-2].angle_std_deg)]
-        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end, hindsight=False,
-                            earlier=loops)
+        # at the plan's turning load the newest photograph turning back is also what a shot missed
+        # earlier in the branch gives (its files a row early): the exchanged pair's newest step must
+        # then fit as well (judged as if closed), not wait undecided
+        turning = bool(plan_after) and (plan_after[0] - torques[2]) * (torques[2] - torques[1]) < 0
+        after = check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end and not turning,
+                            hindsight=False, earlier=loops, plan_after=plan_after)
         if any(w.index >= len(ok) - 3 for w in after) or len(after) >= len(warns):
             return
+        if turning:  # where the newest photograph shows the first step back just as well, wait for the next
+            back = points[:-1] + [StepPoint(plan_after[0], points[-1].angle_deg, points[-1].angle_std_deg)]
+            if not [w for w in check_steps(back, step_torque_nm=self.step_torque, open_end=False, hindsight=False,
+                                           earlier=loops) if w.index >= len(back) - 1]:
+                return
         fa, fb = self.bound[a].file, self.bound[b].file
         fix = (self.bind_fix("--swap", fa, fb) if self.camera_mode
                else f"fix: exchange the names of {fa} and {fb}")
@@ -669,6 +700,94 @@ class Watcher:
                 f"other way round); {fix}")
         self.swapped[a] = (b, text)
         self.swapped[b] = (a, text)
+
+    def _second_to_last(self, pos: int) -> bool:
+        """Whether row `pos` is its orientation's second-to-last."""
+        o = self.rows[pos].orientation_deg
+        return (pos + 1 < len(self.rows) and self.rows[pos + 1].orientation_deg == o
+                and (pos + 2 == len(self.rows) or self.rows[pos + 2].orientation_deg != o))
+
+    def _earlier_points(self, orientation: float) -> list[list[StepPoint]]:
+        """The step points of the orientations photographed before `orientation`
+        (their angles as the last tick measured them)."""
+        out = []
+        for o in dict.fromkeys(self.rows[p].orientation_deg for p in self.order):
+            if o == orientation:
+                break
+            ref = self._reference(o)
+            if ref is not None and self.bound[ref].pair is not None:
+                out.append(self._points([p for p in sorted(self.bound, key=self.order.index)
+                                         if self.rows[p].orientation_deg == o and p >= ref
+                                         and self.bound[p].pair is not None
+                                         and self.bound[p].result is not None]))
+        return out
+
+    def _next_reference(self, pos: int, shot) -> int:
+        """The row the photograph `shot`, next in line for row `pos`, is bound to:
+        `pos`, or the next orientation's reference when `pos` is an orientation's
+        last row and the photograph is not of this orientation while the one before
+        it shows this last row's load (a shot missed at the second-to-last row).
+
+        Evidence (both needed): bound to `pos`, its step from the photograph before
+        is out of line (the flexspline or the target was re-oriented: a jump, or
+        the angle back near the reference); and with the photograph before it
+        taken as the last row's, that photograph's step over the two planned
+        steps fits (the same steps elsewhere in the loop, or the branch's trend)
+        while, bound as it is, it does not."""
+        from ..angle import pair_angle
+
+        row = self.rows[pos]
+        if (not self.camera_mode or shot.pair is None or pos + 1 >= len(self.rows) or pos + 1 in self.bound
+                or self.rows[pos + 1].orientation_deg == row.orientation_deg
+                or self.rows[pos + 1].phase != "reference" or row.orientation_deg in self.ended_early):
+            return pos
+        o = row.orientation_deg
+        ref = self._reference(o)
+        if ref is None or self.bound[ref].pair is None:
+            return pos
+        ok = [p for p in sorted(self.bound, key=self.order.index) if self.rows[p].orientation_deg == o
+              and p >= ref and self.bound[p].pair is not None and self.bound[p].result is not None]
+        if len(ok) < 3 or ok[-1] != pos - 1:
+            return pos
+        points, loops = self._points(ok), self._earlier_points(o)
+        last = points[-1]
+        new = pair_angle(self.bound[ref].pair, shot.pair, near_deg=self.sign * last.angle_deg)
+        as_bound = points + [StepPoint(self.torques[pos], self.sign * new.angle_deg, new.angle_std_deg)]
+        ended = points[:-1] + [StepPoint(self.torques[pos], last.angle_deg, last.angle_std_deg)]
+
+        def end_warned(seq):
+            return [w for w in check_steps(seq, step_torque_nm=self.step_torque, open_end=False, hindsight=False,
+                                           earlier=loops, plan_after=()) if w.index >= len(seq) - 2]
+
+        jump = [w for w in end_warned(as_bound) if w.index == len(as_bound) - 1]
+        if not jump or end_warned(ended):
+            return pos
+        self.ended_early[o] = (ok[-1], pos + 1)
+        return pos + 1
+
+    def _ended_early(self, orientation: float, ok, points, warns) -> list:
+        """`warns` with the decided missed shot at the orientation's last
+        photograph, which shows its last row's load (:meth:`_next_reference`)."""
+        p, nxt = self.ended_early[orientation]
+        if p not in ok or ok[-1] != p or len(ok) < 3:
+            return warns
+        k = len(ok) - 1
+        d_theta = points[k].angle_deg - points[k - 1].angle_deg
+        d_tau = points[k].torque_nm - points[k - 1].torque_nm
+        old = next((w for w in warns if w.index == k), None)
+        ratio = old.ratio if old is not None else math.nan
+        nb = self.bound[nxt] if nxt in self.bound else None
+        after = f"the next photograph, {nb.file}, is not of this orientation" if nb else "the next photograph is not"
+        message = (f"step out of line: Δangle {d_theta:+.4f}°"
+                   + (f" is {ratio:.2f}× the expected step" if math.isfinite(ratio) else "")
+                   + f" for a planned torque step of {d_tau:+.5f} N·m, and {after} (its angle is off this "
+                   "orientation's loop: the flexspline or the target re-oriented), so this photograph is the "
+                   "orientation's last: two planned steps in one: a missed shot (this photograph shows the next "
+                   f"row's load, {row_text(self.rows[p + 1])}; the next photograph is bound to "
+                   f"{row_text(self.rows[nxt])})")
+        decided = StepWarning(k, "large_step", d_theta, d_tau, ratio, message,
+                              torque_span_nm=(points[k - 1].torque_nm, points[k].torque_nm))
+        return [w for w in warns if w.index != k] + [decided]
 
     def _turned_early(self, ok, points, warning, loops):
         """`warning` with the diagnosis and fix when it is a photograph of a turning
@@ -723,8 +842,10 @@ class Watcher:
         on bind one row later; a photograph with a piece forgotten is left out and
         its row marked as not photographed (its load cannot be set again without
         leaving the loop's path). The row is the one the photograph shows with the
-        fixes before it applied: `shift` rows after the one it is bound to."""
-        if not self.camera_mode or not warning.decided:
+        fixes before it applied: `shift` rows after the one it is bound to. A
+        missed shot's signature awaiting the next photograph
+        (:attr:`~.steps.StepWarning.awaiting_next`) gets the fix it would take."""
+        if not self.camera_mode or not (warning.decided or warning.awaiting_next):
             return []
         x = self.bound[pos]
         shown = pos + shift
