@@ -1106,24 +1106,26 @@ def _refit_unmasked(img, blobs: list[Blob], circles: np.ndarray, markers: list, 
     asymmetry check is not made beside a neighbour (:func:`_occluded`); such dots
     came out 0.6-1.3 px off, ``ok``. Without those masks the fit sees the whole edge
     and its own checks judge what lies there (an occluder cut, the asymmetry)."""
-    candidates = np.flatnonzero([m.ok for m in markers])
-    candidates = candidates[~np.isin(candidates, list(crowded))]
-    if not candidates.size:
+    # the candidates that may be no object, and the markers near them (near_candidates'
+    # rule, against those columns only: on a dense grid most markers have none)
+    suspects = np.flatnonzero([m.status in _NO_OBJECT or m.status == "border" for m in markers])
+    rows = np.setdiff1d(np.flatnonzero([m.ok for m in markers]), np.asarray(list(crowded), dtype=np.int64))
+    if not suspects.size or not rows.size:
         return
-    radius = np.array([m.radius_px for m in markers])
-    for k in range(0, candidates.size, 256):  # 256 markers at a time: a few MB at most
-        rows = candidates[k : k + 256]
-        near = near_candidates(circles, rows, width)
-        for i, flags in zip(rows.tolist(), near):
+    for k in range(0, rows.size, 256):  # 256 markers at a time: a few MB at most
+        x, y, r = circles[rows[k : k + 256]].T[:, :, None]
+        reach = candidate_extent(r, width) + neighbour_reach(circles[suspects, 2], width)
+        near = (np.abs(circles[suspects, 0] - x) < reach) & (np.abs(circles[suspects, 1] - y) < reach)
+        for i, flags in zip(rows[k : k + 256].tolist(), near):
             m = markers[i]
-            drop = [j for j in np.flatnonzero(flags).tolist() if _no_object(markers[j], blobs[j], radius[i])]
+            drop = [j for j in suspects[flags].tolist() if _no_object(markers[j], blobs[j], m.radius_px)]
             if not drop:
                 continue
             nb = circles[drop]
             apart = np.hypot(nb[:, 0] - m.x_px, nb[:, 1] - m.y_px)
             if not np.any(apart < m.radius_px + 3.0 * m.edge_width_px + 1.0 + neighbour_reach(nb[:, 2], width)):
                 continue  # their masks stay off its edge zone
-            keep = flags.copy()
+            keep = near_candidates(circles, np.array([i]), width)[0]
             keep[drop] = False
             again = fit_marker(img, blobs[i], edge_width=width, neighbours=circles[keep])
             markers[i] = again if again.ok else Marker(
