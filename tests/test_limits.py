@@ -358,6 +358,18 @@ def test_a_file_that_is_no_image_is_refused_from_its_first_bytes(tmp_path):
         read_image_bytes(path)
 
 
+@pytest.mark.parametrize("size", [0, 1, 15, 16, 17, 8191, 8192, 8193, 700_001])
+def test_the_bytes_read_are_the_whole_file(tmp_path, size):
+    """read_image_bytes returns the file's bytes exactly, with its signature checked or
+    not, whatever its size against the header and the read buffer."""
+    raw = (_png(8, 8) + np.random.default_rng(size).integers(0, 256, size, np.uint8).tobytes())[:size]
+    path = tmp_path / "a.png"
+    path.write_bytes(raw)
+    assert read_image_bytes(path, signature=False) == raw
+    if size >= 16:  # a whole PNG signature (fewer bytes are refused: not an image)
+        assert read_image_bytes(path) == raw
+
+
 @pytest.mark.parametrize("name, raw, message", [
     ("bw.png", _png(16, 16, bits=1, rows=b"".join(b"\x00\xaa\x55" for _ in range(16))),
      r"bw\.png: 1-bit PNG \(black and white or few grey levels\); the markers' edges are fitted to grey levels"),

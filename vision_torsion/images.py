@@ -352,12 +352,14 @@ def read_image_bytes(path, *, signature: bool = True) -> bytes:
             if size > MAX_IMAGE_FILE_BYTES:
                 raise ImageReadError(f"{name}: {size} bytes, larger than an image file may be "
                                      f"({MAX_IMAGE_FILE_BYTES} bytes)", reason="too_large")
-            head = fh.read(16)
-            if signature and head and _kind_from_magic(head) is None:
-                raise ImageReadError(f"{name}: not a PNG, TIFF, BMP or JPEG image (unrecognised file header)")
-            # the rest as the size says (one more byte tells a file still growing); asking
-            # read() for the largest allowed size would allocate that much for every image
-            return head + fh.read(max(size - len(head), 0) + 1)
+            if signature:
+                head = fh.peek(16)[:16]  # left in the buffer for the read below
+                if head and _kind_from_magic(head) is None:
+                    raise ImageReadError(f"{name}: not a PNG, TIFF, BMP or JPEG image (unrecognised file header)")
+            # the file in one read, as its size says (one more byte tells a file still
+            # growing): no copy joining its head to the rest; asking read() for the
+            # largest allowed size would allocate that much for every image
+            return fh.read(max(size, 16) + 1)
     except FileNotFoundError:
         raise ImageReadError(f"{name}: no such file", reason="not_found") from None
     except IsADirectoryError:
