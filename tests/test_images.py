@@ -190,3 +190,34 @@ def test_decode_image_of_bytes_equals_load_image(tmp_path, grey8):
     assert load_image(p, keep_integers=True).data.dtype == np.uint8
     with pytest.raises(ImageReadError, match="a.png: truncated PNG"):
         decode_image(raw[: len(raw) // 2], name=str(p))
+
+
+def test_a_jpeg_states_its_compression_blocks(tmp_path):
+    # the marker fits take their covariance from them (pixelfit); a lossless file has none
+    rng = np.random.default_rng(4)
+    grey = rng.integers(0, 256, size=(40, 48), dtype=np.uint8)
+    colour = rng.integers(0, 256, size=(40, 48, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "g.jpg"), grey)
+    cv2.imwrite(str(tmp_path / "c.jpg"), colour)  # 4:2:0; libjpeg-turbo gives its luma as the grey
+    cv2.imwrite(str(tmp_path / "g.png"), grey)
+    assert load_image(tmp_path / "g.jpg").jpeg_block_px == 8
+    assert load_image(tmp_path / "c.jpg").jpeg_block_px == 8
+    assert load_image(tmp_path / "g.png").jpeg_block_px == 0
+
+
+def test_a_colour_jpeg_opencv_converts_states_the_chroma_blocks(tmp_path, monkeypatch):
+    # a JPEG simplejpeg cannot decode (12-bit, arithmetic coding) goes to OpenCV,
+    # which converts colour to grey through its subsampled chroma (blocks of 16 px
+    # at most); simplejpeg failing as it does on those stands in for one here
+    import simplejpeg
+
+    def cannot(*args, **kwargs):
+        raise ValueError("Unsupported JPEG process")
+
+    rng = np.random.default_rng(5)
+    cv2.imwrite(str(tmp_path / "c.jpg"), rng.integers(0, 256, size=(40, 48, 3), dtype=np.uint8))
+    cv2.imwrite(str(tmp_path / "g.jpg"), rng.integers(0, 256, size=(40, 48), dtype=np.uint8))
+    monkeypatch.setattr(simplejpeg, "decode_jpeg", cannot)
+    colour, grey = load_image(tmp_path / "c.jpg"), load_image(tmp_path / "g.jpg")
+    assert colour.was_colour and colour.jpeg_block_px == 16
+    assert not grey.was_colour and grey.jpeg_block_px == 8

@@ -493,3 +493,31 @@ def test_neighbour_exclusion_of_many_patches_is_the_per_marker_one():
             flags = got[i].excluded
             np.testing.assert_array_equal(np.zeros(want.size, bool) if flags is None else flags, want)
             assert (flags is None) == (not want.any())
+
+
+def test_markers_of_a_jpeg_take_their_covariance_from_its_blocks(tmp_path):
+    """measure_pair and find_markers given a JPEG file (or its GreyImage) fit the
+    same centres as from its pixels as a plain array, with the covariance from its
+    8x8 blocks (pixelfit): larger than the white-noise one at quality 75 (1.2-1.3x
+    in σ here; the white one was 1.7x too small for such images in
+    test_pixelfit)."""
+    from vision_torsion.images import load_image, write_image
+    from vision_torsion.synthetic import Scene
+
+    scene = Scene().replace(image={"width": 500, "height": 300}, disk={"center_x": 250.3, "center_y": 150.8},
+                            markers={"radius_px": 45.0, "distance_px": 150.0})
+    path = tmp_path / "a.jpg"
+    write_image(path, render(scene, 20.0, seed=3).image, jpeg_quality=75)
+    pixels = load_image(path).data
+    for given in (path, load_image(path, keep_integers=True)):
+        blocks, white = measure_pair(given), measure_pair(pixels)
+        for b, w in zip(blocks.markers, white.markers):
+            assert (b.x_px, b.y_px) == (w.x_px, w.y_px)
+            assert b.x_std_px > 1.1 * w.x_std_px and b.y_std_px > 1.1 * w.y_std_px
+    table, plain = find_markers(path), find_markers(pixels)
+    assert (table.x_std_px > 1.1 * plain.x_std_px).all() and (table.x_px == plain.x_px).all()
+    from vision_torsion.session.targetrows import measure_target_markers
+
+    found, bare = measure_target_markers(path).columns, measure_target_markers(pixels).columns
+    assert found["x_px"] == bare["x_px"]
+    assert all(b > 1.1 * w for b, w in zip(found["x_std_px"], bare["x_std_px"]))

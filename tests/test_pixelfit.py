@@ -129,6 +129,35 @@ def test_result_does_not_depend_on_the_start(small_scene):
     assert abs(a.radius_px - b.radius_px) < 0.01
 
 
+@pytest.mark.parametrize("seed", [2, 5])
+def test_the_edge_width_converges_when_the_centre_starts_where_it_is(seed):
+    """A large, well blurred marker (r 130 px, blur 2.5 px, JPEG q90) fitted from its
+    true centre, radius and levels but the default starting width of 1.2 px ends
+    where a start at the right width ends: edge width within 0.02 px, edge residual
+    within 3 %.
+
+    The centre hardly moves from such a start, so a fit that stopped once the centre
+    had converged left the edge width at 2.44 px (2.52 px fitted from the right
+    width) and an edge residual 1.7 times the right one: images of a 20-MP colour
+    session were marked suspect for it. The two starts give slightly different
+    rings, hence 0.02 px and 3 % (0.01 px and 0.7 % over 12 seeds)."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    size, radius = 400, 130.0
+    cx, cy = size / 2 + rng.uniform(-0.5, 0.5), size / 2 + rng.uniform(-0.5, 0.5)
+    xs, ys = supersampled_grid(size, size)
+    image = area_image(np.hypot(xs - cx, ys - cy) < radius)
+    image = cv2.GaussianBlur(image, (0, 0), 2.5) + rng.normal(0.0, 3.0, image.shape)
+    encoded = cv2.imencode(".jpg", np.clip(np.rint(image), 0, 255).astype(np.uint8),
+                           [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
+    image = cv2.imdecode(encoded, cv2.IMREAD_UNCHANGED)
+    from_default = fit_disc(image, cx, cy, radius, edge_width=1.2, levels=(200.0, 40.0))
+    from_right = fit_disc(image, cx, cy, radius, edge_width=2.5)
+    assert abs(from_default.edge_width_px - from_right.edge_width_px) < 0.02
+    assert from_default.residual_rms_px < 1.03 * from_right.residual_rms_px
+
+
 def test_a_wire_across_the_edge_does_not_move_the_centre(small_scene):
     """A 3 px wire crossing the marker's edge on a chord: the centre stays within
     0.01 px of where the same image without the wire puts it (an unhandled wire
@@ -571,3 +600,77 @@ def test_markers_beside_a_surround_fitted_together_are_fitted_as_one_by_one():
         assert (many.x_px, many.y_px) == pytest.approx((one.x_px, one.y_px), abs=1e-9)
     assert [f.steep_cut for f in singles] == [True, True, False]
 
+
+
+def _jpeg_disc(seed, quality, *, size=200, radius=60.0):
+    """A dark disc (r `radius` px, blur 2.5 px, read noise 3 DN) at a random
+    sub-pixel centre, 8-bit, through a JPEG of `quality` (None: none); and its
+    centre."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    cx, cy = size / 2 + rng.uniform(-4, 4), size / 2 + rng.uniform(-4, 4)
+    xs, ys = supersampled_grid(size, size)
+    image = cv2.GaussianBlur(area_image(np.hypot(xs - cx, ys - cy) < radius), (0, 0), 2.5)
+    image = np.clip(np.rint(image + rng.normal(0.0, 3.0, image.shape)), 0, 255).astype(np.uint8)
+    if quality is not None:
+        encoded = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])[1]
+        image = cv2.imdecode(encoded, cv2.IMREAD_UNCHANGED)
+    return image, cx, cy
+
+
+@pytest.mark.parametrize("quality", [None, 75])
+def test_the_covariance_from_jpeg_blocks_is_honest(quality):
+    """Over 20 discs (40 centre coordinates), the RMS of error/σ with the covariance
+    taken from the 8x8 blocks (block_px=8) lies in 0.75-1.3, JPEG (quality 75) or
+    not; the white-noise covariance of the same fits is too small for the JPEG's
+    (1.73 here: each block's error is smooth, σ²(JᵀJ)⁻¹ takes it as independent).
+    0.75-1.3: the RMS of 40 standard normals has a spread of 0.11. The centre is
+    the same either way."""
+    white, blocks = [], []
+    for seed in range(20):
+        image, cx, cy = _jpeg_disc(seed, quality)
+        w = fit_disc(image, cx, cy, 60.0, edge_width=2.5)
+        b = fit_disc(image, cx, cy, 60.0, edge_width=2.5, block_px=8)
+        assert (b.x_px, b.y_px) == (w.x_px, w.y_px)
+        white += [(w.x_px - cx) ** 2 / w.cov[0, 0], (w.y_px - cy) ** 2 / w.cov[1, 1]]
+        blocks += [(b.x_px - cx) ** 2 / b.cov[0, 0], (b.y_px - cy) ** 2 / b.cov[1, 1]]
+    assert 0.75 < np.sqrt(np.mean(blocks)) < 1.3
+    if quality is not None:
+        assert np.sqrt(np.mean(white)) > 1.4
+
+
+def test_a_ring_over_few_blocks_keeps_the_white_noise_covariance():
+    """The centre of a marker of 5 px radius is informed by fewer than MIN_BLOCKS
+    8x8 blocks (about 4: those along its edge): its covariance is σ²(JᵀJ)⁻¹
+    whatever block_px says (so few blocks would leave the covariance as uncertain
+    as the correction; this one's came out 0.4x and 2.9x in x and y); a large
+    one's changes."""
+    from vision_torsion.pixelfit import MIN_BLOCKS
+
+    assert MIN_BLOCKS > 5
+    image, cx, cy = _jpeg_disc(1, 75, size=60, radius=5.0)
+    w = fit_disc(image, cx, cy, 5.0, edge_width=2.5)
+    b = fit_disc(image, cx, cy, 5.0, edge_width=2.5, block_px=8)
+    np.testing.assert_array_equal(b.cov, w.cov)
+    image, cx, cy = _jpeg_disc(1, 75)
+    w = fit_disc(image, cx, cy, 60.0, edge_width=2.5)
+    b = fit_disc(image, cx, cy, 60.0, edge_width=2.5, block_px=8)
+    assert not np.allclose(b.cov, w.cov, rtol=0.05)
+
+
+def test_markers_fitted_together_take_the_block_covariance_as_one_by_one():
+    """fit_discs with block_px gives fit_disc's block-robust covariance, to rounding."""
+    from vision_torsion.pixelfit import fit_discs, patch_extent
+
+    patches, starts = [], []
+    for seed in (3, 4):
+        image, cx, cy = _jpeg_disc(seed, 80)
+        patches.append(marker_patch(image, cx + 0.2, cy - 0.1, patch_extent(60.0, 2.5) + 1.0))
+        starts.append((cx + 0.2, cy - 0.1, 60.3, 200.0, 40.0))
+    for patch, (sx, sy, sr, b, f), many in zip(patches, starts, fit_discs(patches, starts, edge_width=2.5,
+                                                                            block_px=8)):
+        one = fit_disc(None, sx, sy, sr, edge_width=2.5, levels=(b, f), patch=patch, block_px=8)
+        white = fit_disc(None, sx, sy, sr, edge_width=2.5, levels=(b, f), patch=patch)
+        np.testing.assert_allclose(many.cov, one.cov, rtol=1e-6, atol=1e-15)
+        assert one.cov[0, 0] > 1.2 * white.cov[0, 0]

@@ -40,7 +40,7 @@ from __future__ import annotations
 import logging
 import os
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -92,12 +92,20 @@ class GreyImage:
         8, 12 or 16: the significant bits per sample.
     was_colour : bool
         True when the file held colour and was converted to grey.
+    jpeg_block_px : int
+        The side (px) of the blocks a JPEG's grey levels were compressed in, whose
+        errors are correlated within a block: 8 (the luma's blocks; also when
+        libjpeg-turbo gives a colour file's luma as its grey), 16 when OpenCV
+        converted a colour JPEG to grey (its chroma is subsampled in 16x16 blocks
+        at most). 0 for lossless files. The marker fits take their covariance
+        from these blocks (:mod:`vision_torsion.pixelfit`).
     """
 
     data: np.ndarray
     path: str
     bit_depth: int
     was_colour: bool = False
+    jpeg_block_px: int = 0
 
     @property
     def full_scale(self) -> float:
@@ -410,7 +418,7 @@ def decode_image(raw: bytes, *, name: str, bit_depth: int | None = None, keep_in
                 logger.info("%s: colour image converted to grey (BT.601 weights)", name)
             image = _to_grey(arr, name=name, kind=kind, raw=raw, bit_depth=bit_depth,
                              keep_integers=keep_integers)
-            return GreyImage(image.data, image.path, image.bit_depth, was_colour=colour)
+            return GreyImage(image.data, image.path, image.bit_depth, was_colour=colour, jpeg_block_px=8)
     buf = np.frombuffer(raw, dtype=np.uint8)
     try:
         arr = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
@@ -419,7 +427,10 @@ def decode_image(raw: bytes, *, name: str, bit_depth: int | None = None, keep_in
                              f"{_first_line(exc).split(') ', 1)[-1]})") from None
     if arr is None or arr.size == 0:
         raise ImageReadError(f"{name}: corrupt {kind.upper()} data (the decoder failed)")
-    return _to_grey(arr, name=name, kind=kind, raw=raw, bit_depth=bit_depth, keep_integers=keep_integers)
+    image = _to_grey(arr, name=name, kind=kind, raw=raw, bit_depth=bit_depth, keep_integers=keep_integers)
+    if kind == "jpeg":  # a kind simplejpeg does not decode (12-bit, CMYK, arithmetic coding)
+        return replace(image, jpeg_block_px=16 if image.was_colour else 8)
+    return image
 
 
 def _to_grey(arr: np.ndarray, *, name: str, kind: str, raw: bytes, bit_depth, keep_integers=False) -> GreyImage:

@@ -25,6 +25,7 @@ hidden or cut by an edge), ``low_contrast`` and ``fit_failed``; ``ok`` otherwise
 from __future__ import annotations
 
 import logging
+import os
 import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -40,7 +41,7 @@ from .detect import (
     is_coarse_disc,
 )
 from .errors import FitError, VisionTorsionError
-from .images import as_grey_array
+from .images import as_grey_array, load_image
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
 from .ring import MarkerPatch, fast_median, marker_patch, points_circularity
 from .settings import MeasureSettings
@@ -484,7 +485,8 @@ def _prepared_all(image, blobs: list[Blob], circles: np.ndarray, rows, edge_widt
 
 
 def fit_marker(
-    image, blob: Blob, *, fit: str = "pixels", max_iter: int = 10, edge_width: float = 1.2, neighbours=None
+    image, blob: Blob, *, fit: str = "pixels", max_iter: int = 10, edge_width: float = 1.2, neighbours=None,
+    block_px: int | None = None,
 ) -> Marker:
     """Fit one marker candidate to sub-pixel accuracy.
 
@@ -509,6 +511,11 @@ def fit_marker(
         default fit (``fit="pixels"``; dense dot grids). The edge-point fits use
         a narrower band and ignore it. A default fit that fails among them is made
         once more with the gaps to them split (:func:`crowded_patch`).
+    block_px : int, optional
+        The compression blocks' side (px) of a JPEG's grey levels
+        (:attr:`GreyImage.jpeg_block_px <vision_torsion.images.GreyImage.jpeg_block_px>`):
+        the default fit's covariance is then taken from them
+        (:func:`~vision_torsion.pixelfit.fit_disc`).
 
     Returns
     -------
@@ -517,10 +524,10 @@ def fit_marker(
         ``low_contrast`` / ``not_round`` / ``occluded`` with the reason.
     """
     if fit == "pixels":
-        marker = _fit_pixels(image, blob, edge_width, neighbours)
+        marker = _fit_pixels(image, blob, edge_width, neighbours, block_px=block_px)
         if marker.status == "fit_failed" and neighbours is not None and len(neighbours):
             # a dense grid: the neighbours' whole margins left too little; split the gaps
-            crowded = _fit_pixels(image, blob, edge_width, neighbours, crowded=True)
+            crowded = _fit_pixels(image, blob, edge_width, neighbours, crowded=True, block_px=block_px)
             if crowded.ok:
                 return crowded
         return marker
@@ -581,7 +588,7 @@ def fit_marker(
     )
 
 
-def _fit_pixels(image, blob: Blob, edge_width, neighbours, *, crowded=False) -> Marker:
+def _fit_pixels(image, blob: Blob, edge_width, neighbours, *, crowded=False, block_px=None) -> Marker:
     """The pixel-model fit of one candidate, its neighbours' pixels left out with
     their whole margins (:func:`excluding_neighbours`) or, `crowded`, each on its
     own side of the gap (:func:`crowded_patch`)."""
@@ -592,7 +599,7 @@ def _fit_pixels(image, blob: Blob, edge_width, neighbours, *, crowded=False) -> 
             cx, cy, r, levels = _start(patch, blob, crowded=True)
         else:
             patch, (cx, cy, r, levels) = _prepared(image, blob, edge_width, neighbours)
-        fitted = fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch)
+        fitted = fit_disc(image, cx, cy, r, edge_width=edge_width, levels=levels, patch=patch, block_px=block_px)
     except FitError as exc:
         return _failed(blob, exc)
     return _whole(_pixels_marker(fitted, crowded=crowded, patch=patch), image.shape)
@@ -937,7 +944,10 @@ def find_markers(
             "(settings already says how markers are found)",
             reason="conflicting_options",
         )
-    return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings))
+    if isinstance(image, (str, os.PathLike)):
+        image = load_image(image, keep_integers=True)
+    return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings,
+                                             block_px=getattr(image, "jpeg_block_px", 0) or None))
 
 
 def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, float]:
@@ -979,7 +989,8 @@ def find_candidates(img: np.ndarray, settings: MeasureSettings) -> list[Blob]:
 
 
 def find_marker_list(
-    img: np.ndarray, settings: MeasureSettings, *, enough=None, candidates: list[Blob] | None = None
+    img: np.ndarray, settings: MeasureSettings, *, enough=None, candidates: list[Blob] | None = None,
+    block_px: int | None = None,
 ) -> list[Marker]:
     """The work of :func:`find_markers` on a validated image, as a list of :class:`Marker`.
 
@@ -995,6 +1006,8 @@ def find_marker_list(
         when only the target pair is wanted (bolt holes need no sub-pixel fit).
     candidates : list of Blob, optional
         :func:`find_candidates` of this image and these settings, when already found.
+    block_px : int, optional
+        The image's JPEG block side (px), for the fits' covariance (:func:`fit_marker`).
 
     Notes
     -----
@@ -1011,13 +1024,14 @@ def find_marker_list(
     blobs = find_candidates(img, settings) if candidates is None else candidates
     circles = np.array([(b.x, b.y, b.radius) for b in blobs], dtype=np.float64).reshape(-1, 3)
     if enough is None and fit == "pixels" and len(blobs) > _BATCH_FROM:
-        return _fit_all(img, blobs, circles, (r_min, r_max))
+        return _fit_all(img, blobs, circles, (r_min, r_max), block_px)
     for i, blob in enumerate(blobs):
         if enough is not None and enough(markers, blob):
             break
         marker = _judge(blob, img.shape, r_min, r_max, fit)
         if marker is None:
-            marker = fit_marker(img, blob, fit=fit, edge_width=width, neighbours=neighbours_of(circles, i, width))
+            marker = fit_marker(img, blob, fit=fit, edge_width=width, neighbours=neighbours_of(circles, i, width),
+                                block_px=block_px)
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)
@@ -1029,7 +1043,7 @@ def find_marker_list(
 _BATCH_FROM = 2
 
 
-def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[Marker]:
+def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range, block_px=None) -> list[Marker]:
     """Every candidate judged and fitted with the pixel model, the fits vectorised
     across markers (:func:`~vision_torsion.pixelfit.fit_discs`).
 
@@ -1052,7 +1066,8 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
         middle = todo[len(todo) // 2]
         for i in dict.fromkeys((todo[0], middle)):
             todo.remove(i)
-            markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width))
+            markers[i] = fit_marker(img, blobs[i], edge_width=width, neighbours=neighbours_of(circles, i, width),
+                                    block_px=block_px)
             if markers[i].ok and markers[i].edge_width_px <= 0.5 * blobs[middle].radius:
                 width = markers[i].edge_width_px
                 break
@@ -1065,10 +1080,10 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range) -> list[
         patches.append(patch)
         starts.append((cx, cy, r, B, F))
         fitted.append(i)
-    for i, patch, fit in zip(fitted, patches, fit_discs(patches, starts, edge_width=width)):
+    for i, patch, fit in zip(fitted, patches, fit_discs(patches, starts, edge_width=width, block_px=block_px)):
         markers[i] = (_failed(blobs[i], fit) if isinstance(fit, FitError)
                       else _whole(_pixels_marker(fit, patch=patch), img.shape))
-    _refit_crowded(img, blobs, circles, markers, width)
+    _refit_crowded(img, blobs, circles, markers, width, block_px)
     return markers
 
 
@@ -1091,7 +1106,8 @@ def _maskable(circles: np.ndarray, no_disc) -> np.ndarray:
     return out
 
 
-def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float) -> None:
+def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float,
+                   block_px=None) -> None:
     """The candidates of `markers` whose fit failed and which have neighbours, fitted
     again with the gaps to them split (:func:`crowded_patch`), together; a marker
     is replaced only by an ``ok`` one (in place)."""
@@ -1113,7 +1129,7 @@ def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, w
         patches.append(patch)
         starts.append((cx, cy, r, B, F))
         fitted.append(i)
-    for i, fit in zip(fitted, fit_discs(patches, starts, edge_width=width)):
+    for i, fit in zip(fitted, fit_discs(patches, starts, edge_width=width, block_px=block_px)):
         if not isinstance(fit, FitError):
             marker = _whole(_pixels_marker(fit, crowded=True), img.shape)
             if marker.ok:

@@ -18,6 +18,7 @@ y downwards.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, fields
 from functools import lru_cache
 
@@ -25,7 +26,7 @@ import numpy as np
 
 from .detect import default_radius_range, detect_blobs
 from .errors import MarkerError
-from .images import as_grey_array
+from .images import as_grey_array, load_image
 from .markers import Marker, find_candidates, find_marker_list, is_frame
 from .settings import MeasureSettings
 
@@ -236,15 +237,19 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
         is_path = isinstance(image, (str, bytes)) or hasattr(image, "__fspath__")
         name = str(image) if is_path else getattr(image, "path", "image")
     enough = _enough_rule(settings)
+    if isinstance(image, (str, os.PathLike)):
+        image = load_image(image, keep_integers=True)
+    # a JPEG's compression blocks, for the fits' covariance (GreyImage.jpeg_block_px)
+    block_px = getattr(image, "jpeg_block_px", 0) or None
     img = as_grey_array(image, name=name, keep_integers=True)
     coarse = None
     if isinstance(candidates, PairCandidates):
         coarse, candidates = (candidates.blobs, None) if candidates.coarse else (None, candidates.blobs)
     if candidates is None and enough is not None and settings.radius_range is None:
-        quick = _coarse_pair(img, settings, enough, name, blobs=coarse)
+        quick = _coarse_pair(img, settings, enough, name, blobs=coarse, block_px=block_px)
         if quick is not None:
             return quick
-    markers = find_marker_list(img, settings, enough=enough, candidates=candidates)
+    markers = find_marker_list(img, settings, enough=enough, candidates=candidates, block_px=block_px)
     return select_pair(markers, pair=settings.pair, name=name)
 
 
@@ -302,7 +307,7 @@ def _enough_rule(settings: MeasureSettings):
     return {"largest": _pair_settled, "distinct": _distinct_settled}.get(settings.pair)
 
 
-def _coarse_pair(img, settings, enough, name, *, blobs=None):
+def _coarse_pair(img, settings, enough, name, *, blobs=None, block_px=None):
     """The target from candidates of 10 px and more (4x reduced detection; `blobs`
     when already found), or None when they do not settle it.
 
@@ -316,7 +321,8 @@ def _coarse_pair(img, settings, enough, name, *, blobs=None):
             return None
     try:
         pair = select_pair(
-            find_marker_list(img, settings, enough=enough, candidates=blobs), pair=settings.pair, name=name
+            find_marker_list(img, settings, enough=enough, candidates=blobs, block_px=block_px), pair=settings.pair,
+            name=name
         )
     except MarkerError:
         return None
