@@ -99,7 +99,7 @@ from .ring import (
     solve_lu,
 )
 
-__all__ = ["DiscFit", "fit_disc", "fit_discs", "MIN_BLOCKS"]
+__all__ = ["DiscFit", "fit_disc", "fit_discs", "MIN_BLOCKS", "BACKGROUND_SECTORS", "UNEVEN_BACKGROUND"]
 
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
@@ -158,6 +158,21 @@ _WIDTH_CONVERGED_PX = 0.01
 #: estimate's relative spread is about sqrt(2/G) (G blocks), 26 % in variance at
 #: 30. A marker has about as many along its edge as its radius in px.
 MIN_BLOCKS = 30
+#: Sectors of direction whose background residuals :attr:`DiscFit.background_step_dn`
+#: compares: eight, so that a step through or beside the centre, at any direction,
+#: leaves whole sectors on each side of it.
+BACKGROUND_SECTORS = 8
+#: Fewest background pixels a sector needs for that figure (the median of 10 noisy
+#: pixels scatters by 0.4 of their σ).
+_MIN_SECTOR_PX = 10
+#: Share of the marker's contrast |F - B| that :attr:`DiscFit.background_step_dn` must
+#: exceed for :attr:`DiscFit.lighting_shift_px` to be computed: the background under
+#: lighting the model follows leaves under 0.023 of the contrast on rendered grids
+#: (even, falloff, vignetting, blur) and a median of 0.009-0.031 on the eleven
+#: photographs of ``benchmarks/bench_photos.py`` (their noisiest dots up to 0.6, from
+#: the noise: their shift stays small); the shadow edges that moved rendered
+#: centres by over 0.4 px left 0.27-0.85, the GoPro dot 0.57 px off 0.19.
+UNEVEN_BACKGROUND = 0.05
 
 
 def patch_extent(radius, edge_width) -> float:
@@ -209,6 +224,22 @@ class DiscFit:
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
         shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
         not to its covariance.
+    background_step_dn : float
+        How uneven the background around the marker is beyond the fitted lighting
+        gradient (DN): the spread (largest minus smallest) of the median residuals of
+        the ring's background pixels (beyond the edge zone, neighbours' and cut pixels
+        left out) in :data:`BACKGROUND_SECTORS` sectors of direction about the centre.
+        A light or shadow edge across the marker, which the linear gradient cannot
+        follow, leaves a band of residuals along it. Sectors with fewer than
+        :data:`_MIN_SECTOR_PX` such pixels are left out; NaN when half of them are.
+    lighting_shift_px : float
+        When that spread exceeds :data:`UNEVEN_BACKGROUND` of the contrast |F - B|:
+        how far (px) the centre moves when the lighting may also vary quadratically
+        over the ring (one Gauss-Newton step from the fit); else NaN. A lighting
+        the model follows leaves it at the noise's level (under 0.01 px on rendered
+        and photographed dots); a shadow's or a light's edge across the marker moves
+        it by tenths of a pixel, and the centre then lies about 2-7 times as far
+        off (rendered grids, edges 0-30 px wide).
     """
 
     x_px: float
@@ -226,6 +257,8 @@ class DiscFit:
     circularity: float
     edge_noise_px: float = float("nan")
     steep_cut: bool = False
+    background_step_dn: float = float("nan")
+    lighting_shift_px: float = float("nan")
 
 
 class _Pixels:
@@ -446,14 +479,69 @@ def _last_examination(cuts, keep, new_keep) -> bool:
     return cuts == 3 or np.array_equal(keep, new_keep)
 
 
-def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> DiscFit:
+def _background_step(p, xs, ys, resid, u) -> float:
+    """:attr:`DiscFit.background_step_dn` of the fit `p` (8) from its pixels' image
+    coordinates `xs`, `ys` (px), residuals `resid` (DN) and edge coordinates `u`:
+    the spread of the median residual of the background pixels (u <= -3, beyond
+    the edge zone) over :data:`BACKGROUND_SECTORS` sectors of direction about the
+    centre, of the sectors with :data:`_MIN_SECTOR_PX` of them at least (NaN when
+    fewer than half the sectors have: a neighbour or a cut took the rest)."""
+    out = u <= -EDGE_ZONE
+    r = resid[out]
+    sector = np.arctan2(ys[out] - p[1], xs[out] - p[0])
+    sector += np.pi
+    sector *= BACKGROUND_SECTORS / (2.0 * np.pi)
+    sector = sector.astype(np.int64) % BACKGROUND_SECTORS
+    counts = np.bincount(sector, minlength=BACKGROUND_SECTORS)
+    full = counts >= _MIN_SECTOR_PX
+    if np.count_nonzero(full) < BACKGROUND_SECTORS // 2:
+        return float("nan")
+    # one sort by (sector, residual): each sector's values are then a run
+    ordered = r[np.lexsort((r, sector))]
+    ends = np.cumsum(counts)[full]
+    counts = counts[full]
+    lo, hi = ends - counts + (counts - 1) // 2, ends - counts + counts // 2
+    medians = 0.5 * (ordered[lo] + ordered[hi])
+    return float(medians.max() - medians.min())
+
+
+def _lighting_shift(p, nx, ny, resid, J, u) -> float:
+    """:attr:`DiscFit.lighting_shift_px` of the converged fit `p` (8): the centre's
+    move (px) in one Gauss-Newton step of the model with the lighting also
+    quadratic over the ring, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny²
+    (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`, `u`: the model at `p`);
+    NaN when that model is degenerate."""
+    M = normal_cdf(u)
+    M *= p[5] - p[4]
+    M += p[4]
+    full = np.concatenate([J, np.stack([nx * nx, nx * ny, ny * ny]) * M])
+    try:
+        step = np.linalg.solve(full @ full.T, full @ resid)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    return float(math.hypot(step[0], step[1]))
+
+
+def _background_check(p, xs, ys, resid, J, u, nx, ny) -> tuple:
+    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`) of the
+    fit `p` from its pixels (image coordinates `xs`, `ys`, lighting frame `nx`,
+    `ny`) and the model there (`resid`, `J`, `u`); the shift only when the step
+    exceeds :data:`UNEVEN_BACKGROUND` of the contrast (else NaN)."""
+    step = _background_step(p, xs, ys, resid, u)
+    if not step > UNEVEN_BACKGROUND * abs(p[5] - p[4]):
+        return step, float("nan")
+    return step, _lighting_shift(p, nx, ny, resid, J, u)
+
+
+def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None, background=None) -> DiscFit:
     """The :class:`DiscFit` of the converged parameters `p` (8) of `n` pixels of
     residual variance `sigma2` (DN²), after the checks every fit makes, in this
     order: the contrast against the noise (:func:`~vision_torsion.ring.check_contrast`),
     the covariance (``inverse()``: (JᵀJ)⁻¹; the block-robust one when ``meat()``
     gives :func:`_block_meat`'s sum, else σ²(JᵀJ)⁻¹), the radius against its σ
     (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
-    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError).
+    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError);
+    ``background()`` gives :func:`_background_check`.
 
     Raises
     ------
@@ -469,6 +557,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> Di
     if isinstance(found, FitError):
         raise found
     ex, ey, rms, circularity, noise = found
+    step, shift = (float("nan"), float("nan")) if background is None else background()
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -485,6 +574,8 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> Di
         circularity=circularity,
         edge_noise_px=noise,
         steep_cut=bool(steep_cut),
+        background_step_dn=step,
+        lighting_shift_px=shift,
     )
 
 
@@ -669,7 +760,8 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, bl
     sigma2 = ssr / max(n - 8, 1)
     return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(
         p[None], resid[None], J[None], u[None], [n], [ssr])[0], n=n, steep_cut=steep_cut,
-        meat=(lambda: _block_meat(px.xs, px.ys, resid, J, block_px)) if block_px else None)
+        meat=(lambda: _block_meat(px.xs, px.ys, resid, J, block_px)) if block_px else None,
+        background=lambda: _background_check(p, px.xs, px.ys, resid, J, u, px.nx, px.ny))
 
 
 class _Scratch(threading.local):
@@ -1045,8 +1137,10 @@ class _RowsFit:
             meat = (lambda: _block_meat(px.xs[k, :nk], px.ys[k, :nk], resid[k, :nk], Jm[k, :, :nk], block_px)
                     ) if block_px else None
             try:
-                out[self.live[k]] = _disc_fit(P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk,
-                                              steep_cut=self.steep_cut[k], meat=meat)
+                out[self.live[k]] = _disc_fit(
+                    P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk, steep_cut=self.steep_cut[k], meat=meat,
+                    background=lambda: _background_check(P[k], px.xs[k, :nk], px.ys[k, :nk], resid[k, :nk],
+                                                         Jm[k, :, :nk], u[k, :nk], px.nx[k, :nk], px.ny[k, :nk]))
             except FitError as exc:
                 failed[k] = exc
         for k, exc in failed.items():
