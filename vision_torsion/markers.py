@@ -854,8 +854,12 @@ def _uneven_light(f: DiscFit) -> Marker | None:
     quadratic over the ring: :attr:`~vision_torsion.pixelfit.DiscFit.lighting_shift_px`),
     else None. The fit's lighting is a plane; a shadow's or a light's edge across
     the marker is a step, which the plane follows only in part, and the misfit
-    pulls the centre."""
-    if not f.lighting_shift_px > UNEVEN_SHIFT_PX:
+    pulls the centre. Not judged on a fit that cut a surround as dark as the marker
+    from its ring (``steep_cut``, flagged with its own message): the cut region's
+    blurred flank stays in the background, uneven by construction, and the centre
+    is good to 0.1-0.3 px (0.07-0.13 px beside a card's edge, which the shift put at
+    0.23 px)."""
+    if f.steep_cut or not f.lighting_shift_px > UNEVEN_SHIFT_PX:
         return None
     return Marker(
         x_px=f.x_px,
