@@ -319,11 +319,11 @@ def test_a_first_loop_shot_missed_in_the_soft_zone_is_named_when_the_load_turns_
     assert m and "8" in m.group(1).split(" or "), found
 
 
-def shoot_two(tmp_path, **options):
-    """A two-orientation session of the bilinear gear (τc = 0.03 N·m) with `options`
+def shoot_two(tmp_path, *, seed=7, gear="bilinear τc=0.03", **options):
+    """A two-orientation session of `gear` (:data:`KINKED`) with `options`
     (capture_script's mistakes), watched: the session, the camera folder, the events."""
-    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=7,
-                                 response=KINKED["bilinear τc=0.03"], **options)
+    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=seed,
+                                 response=KINKED[gear], **options)
     camera = tmp_path / "camera"
     ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
     return tmp_path / "session", camera, watch(tmp_path / "session", camera, len(shots), 36)
@@ -505,11 +505,7 @@ def test_at_a_later_loops_turning_load_a_missed_shot_and_a_swap_that_look_alike_
     # stiff zone where loading and unloading by a step turn the gear alike: the photograph
     # turning back fits the pair exchanged and the first step back equally, so no swap
     # is claimed; the rows a missed shot fits are named, line 28 among them
-    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=80110, missed=26,
-                                 response=KINKED["bilinear τc=0.03"])
-    camera = tmp_path / "camera"
-    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
-    found = warnings(watch(tmp_path / "session", camera, len(shots), 36))
+    found = warnings(shoot_two(tmp_path, seed=80110, missed=26)[2])
     assert not [m for _, m, _ in found if "swapped" in m]
     (turn,) = [m for f, m, _ in found if f == "IMG_0028.png"]
     assert re.search(r"the load turned back a row early: .* at line (\d+ or )*28( or \d+)* ", turn)
@@ -557,10 +553,6 @@ def test_a_later_orientation_is_not_judged_against_a_loop_bound_a_row_early(tmp_
     # back a row early. The second orientation's steps are compared with the first's as
     # the named rows bind them, not as bound (its first half was called a missed shot
     # and a turn a row early)
-    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=303, missed=7,
-                                 response=KINKED["three-segment"])
-    camera = tmp_path / "camera"
-    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
-    found = warnings(watch(tmp_path / "session", camera, len(shots), 36))
+    found = warnings(shoot_two(tmp_path, seed=303, gear="three-segment", missed=7)[2])
     assert [f for f, _, _ in found] == ["IMG_0010.png"], found
     assert re.search(r"the load turned back a row early: .* at line (\d+ or )*9( or \d+)* ", found[0][1])
