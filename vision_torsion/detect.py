@@ -5,7 +5,9 @@ sub-pixel fit. The slowly varying background is estimated by a grey-level
 morphological closing (dark markers) or opening (bright markers) with a square
 window wider than the largest marker, which removes the markers but keeps lighting
 gradients and vignetting. Blobs are the connected regions of the background-flattened
-image above an Otsu threshold (never below five times the noise); each gets a
+image above an Otsu threshold (never below five times the noise); where that one
+level leaves evidence of uneven light, a second pass adds the candidates found with
+levels that follow the local contrast (:func:`detect_blobs`, Notes). Each blob gets a
 centre, an equivalent radius, an elongation and a flag for touching the border. A
 region that is no disc, too large for one or cut by the border is looked into at
 higher levels: a marker merged at the threshold with a surround as dark as itself
@@ -97,12 +99,19 @@ def _noise_sigma(img: np.ndarray) -> float:
     return float(1.4826 * fast_median(np.abs(d - fast_median(d))) / np.sqrt(2))
 
 
-def _background(small: np.ndarray, r_max_small: float, polarity: str) -> np.ndarray:
-    """Slowly varying background without the markers, at the detection scale.
+def _background(small: np.ndarray, r_max_small: float, polarity: str, *,
+                pad: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Slowly varying background without the markers, at the detection scale, and
+    the same at the coarse scale it was computed at.
 
     The closing (dark markers) or opening (bright) runs on a further reduced copy
     where the largest marker is about 6 px in radius, which keeps its cost
-    independent of the marker size; the result is interpolated back.
+    independent of the marker size; the result is interpolated back. OpenCV's
+    morphology leaves the window's part outside the image out, so where the light
+    rises into the image from its border the closing stays above it by the slope
+    times half the window (7 DN at the border of a bowed light, against 2 DN of
+    the noise's own bias inside); `pad` replicates the border outwards by half a
+    window first, which the closing then follows exactly.
     """
     q = int(max(1, 2 ** np.ceil(np.log2(max(r_max_small / 6.0, 1.0)))))
     h, w = small.shape
@@ -117,14 +126,19 @@ def _background(small: np.ndarray, r_max_small: float, polarity: str) -> np.ndar
     k = int(2 * np.ceil(r_max_small / q) + 3) | 1
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
     op = cv2.MORPH_CLOSE if polarity == "dark" else cv2.MORPH_OPEN
-    bg = cv2.morphologyEx(coarse, op, kernel, borderType=cv2.BORDER_REPLICATE)
+    if pad:
+        m = k // 2 + 1
+        bg = cv2.morphologyEx(cv2.copyMakeBorder(coarse, m, m, m, m, cv2.BORDER_REPLICATE), op, kernel)[m:-m, m:-m]
+    else:
+        bg = cv2.morphologyEx(coarse, op, kernel, borderType=cv2.BORDER_REPLICATE)
+    coarse_bg = bg
     if q > 1:
         # the envelope of the coarse copy, dilated once more so interpolation between
         # coarse pixels never cuts into a marker
         extra = cv2.getStructuringElement(cv2.MORPH_RECT, (3, 3))
         bg = (cv2.dilate if polarity == "dark" else cv2.erode)(bg, extra, borderType=cv2.BORDER_REPLICATE)
         bg = cv2.resize(bg, (wp, hp), interpolation=cv2.INTER_LINEAR)[:h, :w]
-    return bg
+    return bg, coarse_bg
 
 
 #: Coarse shape limits of a candidate (second moments of its thresholded pixels) that
@@ -226,16 +240,20 @@ def _own_core(blob: Blob, area: float, cut_disc) -> bool:
 def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[tuple[Blob, float]]:
     """Discs inside a region that is no disc (`sub`, its 0/1 mask at (x0, y0) of the
     reduced image; `diff` the background-flattened image, `level` its detection
-    level): the regions at the higher :data:`_SPLIT_LEVELS` that are whole discs
+    level, a number or an array of `diff`'s shape): the regions at the higher :data:`_SPLIT_LEVELS` that are whole discs
     (:func:`is_coarse_disc`, within the area `limits`, clear of the image border:
     :func:`_clear_of_border`), each taken at the lowest level where it is one and
     not again higher up, with its area (reduced px²)."""
     bh, bw = sub.shape
     box = diff[y0 : y0 + bh, x0 : x0 + bw]
-    peak = float(box[sub > 0].max())
+    inside = sub > 0
+    peak = float(box[inside].max())
+    if not np.isscalar(level):
+        level = level[y0 : y0 + bh, x0 : x0 + bw]
+    lowest = float(level[inside].min()) if not np.isscalar(level) else level
     found: list[tuple[Blob, float]] = []
     for k in _SPLIT_LEVELS:
-        if k * level >= peak:
+        if k * lowest >= peak:
             break
         inner = cv2.compare(box, k * level, cv2.CMP_GT) & (sub * 255)
         for contour in cv2.findContours(inner, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0]:
@@ -249,7 +267,8 @@ def _discs_within(diff, sub, x0, y0, level, f, shape, limits) -> list[tuple[Blob
     return found
 
 
-def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None) -> list[Blob]:
+def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None,
+                 local_levels: bool = True) -> list[Blob]:
     """Find marker candidates of one polarity.
 
     Parameters
@@ -262,11 +281,45 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         (smallest, largest) radius in px; blobs far outside it are dropped (under
         half the smallest area or over twice the largest), after a region too large
         is looked into for discs.
+    local_levels : bool
+        Follow the local contrast where the light is uneven (see Notes); False keeps
+        one detection level for the whole image.
 
     Returns
     -------
     list of Blob
         Candidates, largest first.
+
+    Notes
+    -----
+    **Local levels.** One level (Otsu's, on the background-flattened image) finds
+    markers whose contrast is within about 2:1 of the brightest ones: a dot in a
+    shadow, at the dim end of a light falloff or under a lamp's reflection that
+    clips the image stands below it, or merges with the reflection into one region
+    too large for a marker. When the first, global pass leaves evidence of uneven
+    light (such a region; a background that varies by more than a third of its
+    largest value and by more than 10 noise σ; or a disc-shaped candidate whose
+    peak is less than 1.5 times the level), a second pass follows the local
+    contrast:
+
+    - the background is estimated again with a window scaled from the largest
+      candidate of coarse disc shape found (radius R; a closing or opening of side
+      2·(1.5·R + 2) + 3 reduced px, never wider than the one of the largest
+      allowed radius), so it follows a shadow's edge or a reflection's slope within
+      a few marker sizes;
+    - the level at each pixel is half the local contrast, the largest flattened
+      value within R + 2 reduced px (so every pixel of a disc of radius up to R,
+      and its blurred edge, sees the disc's centre: at half its peak a blurred disc
+      is cut at its edge), never above the global level and never below
+      :data:`LOCAL_LEVEL_FLOOR` noise σ nor the global level over
+      :data:`LOCAL_LEVEL_RANGE`.
+
+    The candidates of the second pass whose discs overlap no disc-shaped candidate
+    of the first, and which stand out as the first pass's disc-shaped candidates do
+    (a relative contrast of at least half their median's, or a peak of at least a
+    third of it), are added to the first pass's candidates, which stay as they were
+    found: the local levels only add the markers the global level missed, not the
+    faint texture around a target.
     """
     r_min, r_max = radius_range if radius_range is not None else default_radius_range(image.shape)
     f = detection_reduction(r_min)
@@ -276,10 +329,8 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         # one 4x reduction and the same up to integer rounding
         small = cv2.resize(small, (small.shape[1] // 2, small.shape[0] // 2), interpolation=cv2.INTER_AREA)
     small = np.asarray(small, dtype=np.float32)  # integer images are reduced first, converted after
-    background = _background(small, r_max / f, polarity)
-    # OpenCV's float32 subtraction and maximum are numpy's to the bit, in fewer passes
-    diff = cv2.subtract(background, small) if polarity == "dark" else cv2.subtract(small, background)
-    top = float(cv2.minMaxLoc(diff)[1])
+    background, coarse_bg = _background(small, r_max / f, polarity)
+    diff, top = _flattened(small, background, polarity)
     if not top > 0:
         logger.info("no marker candidates: nothing in the image is %s than its surroundings (a constant image?)",
                     "darker" if polarity == "dark" else "brighter")
@@ -289,6 +340,158 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
     otsu, _ = cv2.threshold(scaled.astype(np.uint8), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
     noise = _noise_sigma(small)
     level = max(otsu * top / 255.0, 5.0 * noise)
+    limits = (max(0.5 * np.pi * (r_min / f) ** 2, 4), 2.0 * np.pi * (r_max / f) ** 2)
+    blobs, peaks, too_large = _blobs_at(diff, level, f, r_min, limits)
+    if local_levels and (too_large or _uneven_light(coarse_bg, peaks, level, noise)):
+        discs = [b.radius / f for b in blobs if is_coarse_disc(b) and not b.touches_border]
+        R = max(discs) if discs else r_min / f
+        background, _ = _background(small, min(1.5 * R + 2.0, r_max / f), polarity, pad=True)
+        diff, top = _flattened(small, background, polarity)
+        if top > 0:
+            levels = _local_levels(diff, level, noise, int(np.ceil(R + 2.0)))
+            new = _apart(_blobs_at(diff, levels, f, r_min, limits, taken=_cores(blobs, f, diff.shape))[0], blobs)
+            new = _contrasted(new, blobs, diff, small, f, polarity)
+            logger.debug("uneven light: local detection levels %.3g-%.3g (global %.3g), %d more candidates",
+                         float(levels.min()), float(levels.max()), level, len(new))
+            blobs += new
+    if not blobs:
+        logger.info("no marker candidates: no %s blob of radius %g-%g px stands out from the background "
+                    "by more than %.3g (5x the noise %.3g)", polarity, r_min, r_max, level, noise)
+    blobs.sort(key=lambda b: -b.radius)
+    return blobs
+
+
+#: The local detection level is never below this many noise σ ...
+LOCAL_LEVEL_FLOOR = 5.0
+#: ... nor below the global level divided by this. Otsu's level lies near 0.4 of the
+#: strongest markers' contrast, so markers down to a tenth of it are found (a 4:1
+#: light falloff with a shadow of 40 % of the light at its dim end), and no fainter
+#: texture of an empty surround far from any marker.
+LOCAL_LEVEL_RANGE = 8.0
+#: Evidence of uneven light after the global pass: the background (the image with
+#: the markers closed or opened away, at the background's coarse scale) varies by
+#: more than this share of its largest value ...
+_UNEVEN_BACKGROUND = 1.0 / 3.0
+#: ... and by more than this many noise σ; or a candidate of disc shape peaks less
+#: than :data:`_DIM_PEAK` times the global level above the background (its dimmer
+#: neighbours, if any, fall below the level).
+_UNEVEN_NOISE = 10.0
+_DIM_PEAK = 1.5
+
+
+def _uneven_light(coarse_bg: np.ndarray, peaks: list[float], level: float, noise: float) -> bool:
+    """True when the global pass leaves evidence of uneven light
+    (:data:`_UNEVEN_BACKGROUND`, :data:`_UNEVEN_NOISE`, :data:`_DIM_PEAK`): the
+    background varies, or a disc-shaped candidate (its flattened peak in `peaks`)
+    stands barely above the global `level`."""
+    lo, hi = cv2.minMaxLoc(coarse_bg)[:2]
+    if hi - lo > _UNEVEN_BACKGROUND * hi and hi - lo > _UNEVEN_NOISE * noise:
+        return True
+    return bool(peaks) and min(peaks) < _DIM_PEAK * level
+
+
+def _apart(blobs: list[Blob], found: list[Blob]) -> list[Blob]:
+    """The candidates of `blobs` whose disc (centre, equivalent radius) overlaps
+    that of no candidate of disc shape in `found`: the markers the local levels
+    found and the global level did not (a candidate found by both is kept as the
+    global level found it)."""
+    discs = np.array([(b.x, b.y, b.radius) for b in found if is_coarse_disc(b)]).reshape(-1, 3)
+    if not len(discs) or not blobs:
+        return blobs
+    from scipy.spatial import cKDTree  # here: only uneven light needs it
+
+    tree = cKDTree(discs[:, :2])
+    reach = float(discs[:, 2].max())
+    out = []
+    for b in blobs:
+        near = tree.query_ball_point((b.x, b.y), b.radius + reach)
+        if all(math.hypot(b.x - discs[j, 0], b.y - discs[j, 1]) > b.radius + discs[j, 2] for j in near):
+            out.append(b)
+    return out
+
+
+#: A candidate of the second pass is kept when it stands out as the first pass's
+#: disc-shaped candidates do (their medians): a relative contrast (over the brighter
+#: side, :func:`_contrasts`) of at least half theirs, which light that multiplies the
+#: scene (a falloff, vignetting, a shadow) leaves as it is (the test scenes' dots
+#: found only by local levels: 0.98-1.2 of the median); or a flattened peak of at
+#: least a third of theirs, for light added to the scene (a reflection that clips
+#: the paper: 0.35-0.43). The faint texture of a table or a dome beside a target
+#: (a GoPro photo: 0.08-0.3 of the median peak) and the noise of a clipped
+#: reflection (0.05-0.08) are left out.
+_MIN_RELATIVE_SHARE = 0.5
+_MIN_PEAK_SHARE = 1.0 / 3.0
+
+
+def _contrasts(blobs: list[Blob], diff: np.ndarray, small: np.ndarray, f: int, polarity: str) -> np.ndarray:
+    """(peak, relative contrast) of each of `blobs`: the largest flattened value
+    (`diff`) within 1 reduced px of its centre (`small`, `diff` reduced `f` times),
+    and that over the brighter side's level there (the background for dark markers,
+    the marker for bright ones)."""
+    h, w = diff.shape
+    out = np.empty((len(blobs), 2))
+    for k, b in enumerate(blobs):
+        i = min(max(round((b.y - (f - 1) / 2) / f), 1), h - 2)
+        j = min(max(round((b.x - (f - 1) / 2) / f), 1), w - 2)
+        peak = float(diff[i - 1 : i + 2, j - 1 : j + 2].max())
+        bright = float(small[i, j]) + (peak if polarity == "dark" else 0.0)
+        out[k] = peak, (peak / bright if bright > 0 else np.inf)
+    return out
+
+
+def _contrasted(new: list[Blob], found: list[Blob], diff, small, f: int, polarity: str) -> list[Blob]:
+    """The candidates of `new` that stand out as the disc-shaped candidates of
+    `found` do (:data:`_MIN_RELATIVE_SHARE`, :data:`_MIN_PEAK_SHARE`); all of them
+    when `found` has no such candidate."""
+    ref = _contrasts([b for b in found if is_coarse_disc(b)], diff, small, f, polarity)
+    if not len(ref) or not new:
+        return new
+    peak, relative = np.median(ref, axis=0)
+    mine = _contrasts(new, diff, small, f, polarity)
+    keep = (mine[:, 1] >= _MIN_RELATIVE_SHARE * relative) | (mine[:, 0] >= _MIN_PEAK_SHARE * peak)
+    return [b for b, k in zip(new, keep) if k]
+
+
+def _local_levels(diff: np.ndarray, level: float, noise: float, half: int) -> np.ndarray:
+    """Detection level at each pixel of the flattened image `diff` (see
+    :func:`detect_blobs`, Notes): half the largest value within `half` reduced px,
+    clipped to [max(:data:`LOCAL_LEVEL_FLOOR`·`noise`, `level` /
+    :data:`LOCAL_LEVEL_RANGE`), `level`]."""
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * half + 1, 2 * half + 1))
+    local = cv2.dilate(diff, kernel, borderType=cv2.BORDER_REPLICATE)
+    local *= 0.5
+    floor = max(LOCAL_LEVEL_FLOOR * noise, level / LOCAL_LEVEL_RANGE)
+    return np.clip(local, min(floor, level), level, out=local)
+
+
+def _flattened(small: np.ndarray, background: np.ndarray, polarity: str) -> tuple[np.ndarray, float]:
+    """The markers' side of `small` above its `background` (DN, ≥ 0 where they
+    stand out), and its largest value."""
+    # OpenCV's float32 subtraction and maximum are numpy's to the bit, in fewer passes
+    diff = cv2.subtract(background, small) if polarity == "dark" else cv2.subtract(small, background)
+    return diff, float(cv2.minMaxLoc(diff)[1])
+
+
+def _cores(blobs: list[Blob], f: int, shape) -> np.ndarray:
+    """A 0/1 mask of the reduced image (`f` times, of `shape`) holding the middle of
+    each disc-shaped candidate of `blobs`: its disc at half its radius (at least its
+    centre's pixel)."""
+    mask = np.zeros(shape, np.uint8)
+    for b in blobs:
+        if is_coarse_disc(b):
+            centre = (round((b.x - (f - 1) / 2) / f), round((b.y - (f - 1) / 2) / f))
+            cv2.circle(mask, centre, round(0.5 * b.radius / f), 1, thickness=-1)
+    return mask
+
+
+def _blobs_at(diff: np.ndarray, level, f: int, r_min: float, limits, *,
+              taken: np.ndarray | None = None) -> tuple[list[Blob], list[float], bool]:
+    """The candidates of the flattened image `diff` (reduced `f` times) above
+    `level` (a number, or an array of `diff`'s shape), the flattened peak of each
+    whole candidate of disc shape (reduced area within `limits`), and whether a
+    region was too large for a marker. A region whose bounding box's middle pixel
+    is set in `taken` (:func:`_cores`) is a candidate found before: skipped."""
+    a_min, a_max = limits
     # 255 where diff > level (the blobs' outlines are the same as from a 0/1 mask)
     mask = cv2.compare(diff, level, cv2.CMP_GT)
     if r_min / f >= _MIN_REDUCED_RADIUS_2X:
@@ -296,33 +499,34 @@ def detect_blobs(image: np.ndarray, *, polarity: str = "dark", radius_range=None
         # 1.5 reduced px in radius keeps its core through the 3x3 opening)
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    a_min, a_max = max(0.5 * np.pi * (r_min / f) ** 2, 4), 2.0 * np.pi * (r_max / f) ** 2
-    blobs = []
+    blobs, peaks, too_large = [], [], False
     for contour in contours:
-        _, _, bw, bh = cv2.boundingRect(contour)
+        bx, by, bw, bh = cv2.boundingRect(contour)
         if bw * bh < a_min:
             continue  # too small even to fill its box
+        if taken is not None and taken[by + bh // 2, bx + bw // 2]:
+            continue
         region = _region(contour)
-        blob, area = _blob(*region, f, small.shape)
+        blob, area = _blob(*region, f, diff.shape)
         cut_disc = None
         if a_min <= area <= a_max:
             blobs.append(blob)
             if is_coarse_disc(blob):
                 if not blob.touches_border:
+                    sub, x0, y0 = region
+                    peaks.append(cv2.minMaxLoc(diff[y0 : y0 + sub.shape[0], x0 : x0 + sub.shape[1]], sub)[1])
                     continue
                 cut_disc = (blob, area)  # its own core higher up is no other marker
         elif area < a_min:
             continue
+        else:
+            too_large = True
         # no disc, too large for one, or cut by the border: a marker merged at this
         # level with its surround or a neighbour is looked for higher up
-        for inner, inner_area in _discs_within(diff, *region, level, f, small.shape, (a_min, a_max)):
+        for inner, inner_area in _discs_within(diff, *region, level, f, diff.shape, limits):
             # the core of a disc cut by the border is that disc, whose blurred edge the
             # border cuts (fitted, a 10 px dot blurred 2.5 px and 2 px from the border
             # came out 0.2 px off): it stays one row, border
             if not _own_core(inner, inner_area, cut_disc):
                 blobs.append(inner)
-    if not blobs:
-        logger.info("no marker candidates: no %s blob of radius %g-%g px stands out from the background "
-                    "by more than %.3g (5x the noise %.3g)", polarity, r_min, r_max, level, noise)
-    blobs.sort(key=lambda b: -b.radius)
-    return blobs
+    return blobs, peaks, too_large

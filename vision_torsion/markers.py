@@ -19,7 +19,9 @@ x to the right, y downwards.
 Failure modes (reported per marker in the ``status`` column, with a ``message``):
 ``border`` (cut by the image border), ``too_small``, ``too_large``, ``not_round``,
 ``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
-hidden or cut by an edge), ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
+hidden or cut by an edge), ``near_edge`` (a candidate beside it that is no marker
+lay over its edge, and fitted with those pixels it is not ``ok``),
+``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
 from __future__ import annotations
@@ -1083,8 +1085,83 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range, block_px
     for i, patch, fit in zip(fitted, patches, fit_discs(patches, starts, edge_width=width, block_px=block_px)):
         markers[i] = (_failed(blobs[i], fit) if isinstance(fit, FitError)
                       else _whole(_pixels_marker(fit, patch=patch), img.shape))
-    _refit_crowded(img, blobs, circles, markers, width, block_px)
+    crowded = _refit_crowded(img, blobs, circles, markers, width, block_px)
+    _refit_unmasked(img, blobs, circles, markers, width, crowded, block_px)
     return markers
+
+
+#: Statuses of a candidate that turned out to be no marker nor any object whose
+#: pixels a neighbouring marker's fit must leave out: specks of noise or JPEG
+#: blocks found beside a blurred dot, too faint or too small to fit.
+_NO_OBJECT = ("fit_failed", "low_contrast", "too_small")
+
+
+def _no_object(marker: Marker, blob: Blob, own_radius: float) -> bool:
+    """True when the candidate `blob`, judged or fitted as `marker`, is no object a
+    marker of radius `own_radius` (px) must be fitted without (:data:`_NO_OBJECT`),
+    or a region cut by the border more than 1.5 times that radius (a vignetted
+    border's dark band: its coarse circle, from the part inside the frame, runs
+    far from its pixels)."""
+    if marker.status in _NO_OBJECT:
+        return True
+    return marker.status == "border" and blob.radius > 1.5 * own_radius
+
+
+def _refit_unmasked(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float, crowded,
+                    block_px=None) -> None:
+    """Each ``ok`` marker of `markers` whose fitted edge zone held pixels left out for
+    a candidate that turned out to be no object (:func:`_no_object`), fitted again
+    without leaving those out (in place): the ``ok`` refit replaces it; else the
+    marker is ``near_edge`` with the refit's reason (:data:`UNMASKED_MESSAGE`). The
+    markers fitted among close neighbours (`crowded`, indices) are left as they are;
+    `block_px` is the JPEG block size the fits take (:func:`fit_marker`).
+
+    The pixels of the dots around it were left out before any was fitted, each for
+    its coarse circle (:func:`excluding_neighbours`). A speck beside a blurred JPEG
+    dot is a candidate too, and its mask takes a part of the dot's own edge: the fit
+    then rests on the rest of an edge that is no perfect blurred circle, and the
+    asymmetry check is not made beside a neighbour (:func:`_occluded`); such dots
+    came out 0.6-1.3 px off, ``ok``. Without those masks the fit sees the whole edge
+    and its own checks judge what lies there (an occluder cut, the asymmetry)."""
+    # the candidates that may be no object, and the markers near them (near_candidates'
+    # rule, against those columns only: on a dense grid most markers have none)
+    suspects = np.flatnonzero([m.status in _NO_OBJECT or m.status == "border" for m in markers])
+    rows = np.setdiff1d(np.flatnonzero([m.ok for m in markers]), np.asarray(list(crowded), dtype=np.int64))
+    if not suspects.size or not rows.size:
+        return
+    for k in range(0, rows.size, 256):  # 256 markers at a time: a few MB at most
+        x, y, r = circles[rows[k : k + 256]].T[:, :, None]
+        reach = candidate_extent(r, width) + neighbour_reach(circles[suspects, 2], width)
+        near = (np.abs(circles[suspects, 0] - x) < reach) & (np.abs(circles[suspects, 1] - y) < reach)
+        for i, flags in zip(rows[k : k + 256].tolist(), near):
+            m = markers[i]
+            drop = [j for j in suspects[flags].tolist() if _no_object(markers[j], blobs[j], m.radius_px)]
+            if not drop:
+                continue
+            nb = circles[drop]
+            apart = np.hypot(nb[:, 0] - m.x_px, nb[:, 1] - m.y_px)
+            if not np.any(apart < m.radius_px + 3.0 * m.edge_width_px + 1.0 + neighbour_reach(nb[:, 2], width)):
+                continue  # their masks stay off its edge zone
+            keep = near_candidates(circles, np.array([i]), width)[0]
+            keep[drop] = False
+            again = fit_marker(img, blobs[i], edge_width=width, neighbours=circles[keep], block_px=block_px)
+            markers[i] = again if again.ok else Marker(
+                x_px=m.x_px,
+                y_px=m.y_px,
+                radius_px=m.radius_px,
+                edge_width_px=m.edge_width_px,
+                status="near_edge",
+                message=UNMASKED_MESSAGE.format(reason=again.message),
+            )
+
+
+#: The message of a marker fitted ``ok`` with a candidate's pixels left out that took
+#: part of its edge, which fitted without leaving them out is not ``ok``
+#: (:func:`_refit_unmasked`).
+UNMASKED_MESSAGE = (
+    "a candidate beside it that is no marker (a speck, a faint blob, a border region) lay over its edge; "
+    "fitted with those pixels: {reason}"
+)
 
 
 def _maskable(circles: np.ndarray, no_disc) -> np.ndarray:
@@ -1107,13 +1184,14 @@ def _maskable(circles: np.ndarray, no_disc) -> np.ndarray:
 
 
 def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float,
-                   block_px=None) -> None:
+                   block_px=None) -> list[int]:
     """The candidates of `markers` whose fit failed and which have neighbours, fitted
     again with the gaps to them split (:func:`crowded_patch`), together; a marker
-    is replaced only by an ``ok`` one (in place)."""
+    is replaced only by an ``ok`` one (in place). Returns the indices replaced."""
     failed = np.array([i for i, m in enumerate(markers) if m.status == "fit_failed"], dtype=np.int64)
+    replaced: list[int] = []
     if failed.size == 0:
-        return
+        return replaced
     near = near_candidates(circles, failed, width)
     patches, starts, fitted = [], [], []
     for k, i in enumerate(failed.tolist()):
@@ -1134,3 +1212,5 @@ def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, w
             marker = _whole(_pixels_marker(fit, crowded=True), img.shape)
             if marker.ok:
                 markers[i] = marker
+                replaced.append(i)
+    return replaced

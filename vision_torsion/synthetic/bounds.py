@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import CameraMapping, marker_centres_disk, marker_centres_image
-from .render import light_field, paint_circle
+from .render import paint_circle, reflection, scene_light
 from .scene import Scene
 
 __all__ = ["centre_covariance_bound", "angle_bound_deg", "target_angle_bound_deg"]
@@ -51,11 +51,9 @@ def _marker_patch(scene: Scene, mapping, params, box):
         paint_circle(sub, mapping, X - x0, Y - y0, r, F)
     else:
         paint_circle(sub, Shifted(), X, Y, r, F)
-    lt = scene.lighting
-    if lt.gradient_x or lt.gradient_y or lt.vignetting:
-        sub *= light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting)[
-            y0:y1, x0:x1
-        ]
+    light = scene_light(scene)
+    if light is not None:
+        sub *= light[y0:y1, x0:x1]
     s = scene.optics.blur_sigma_px
     if s > 0:
         sub = cv2.GaussianBlur(sub, (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT)
@@ -92,7 +90,11 @@ def centre_covariance_bound(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
         mu = _marker_patch(scene, mapping, p0, box)
         var = nz.read_noise_dn**2 + 1.0 / 12.0
         if nz.shot_noise:
-            var = var + np.clip(mu, 0, None) / nz.electrons_per_dn
+            # a lamp's reflection adds shot noise, not signal (the bound leaves out
+            # where it clips the image)
+            glare = (reflection(scene, *np.mgrid[box[1]:box[3], box[0]:box[2]][::-1])
+                     if scene.lighting.reflection_dn else 0.0)
+            var = var + np.clip(mu + glare, 0, None) / nz.electrons_per_dn
         var = np.broadcast_to(var, mu.shape).ravel()
         J = np.empty((mu.size, 5))
         for k in range(5):

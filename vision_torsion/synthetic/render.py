@@ -36,6 +36,8 @@ __all__ = [
     "circle_distance_fn",
     "paint_circle",
     "light_field",
+    "scene_light",
+    "reflection",
 ]
 
 
@@ -156,19 +158,46 @@ def paint_circle(canvas, mapping, cx, cy, r, level, *, n_sub=8):
 
 
 @functools.lru_cache(maxsize=8)
-def light_field(width, height, gx, gy, vignetting):
+def light_field(width, height, gx, gy, vignetting, shadow=1.0, shadow_angle_deg=0.0, shadow_offset_px=0.0,
+                shadow_edge_px=0.0):
     """The relative illumination (1 at the image centre) of a `width` x `height` px
     image as float32, read-only (cached): linear gradients `gx`, `gy` (relative
     change across the image's width and height) times 1 - `vignetting`·ρ², ρ the
-    distance from the centre over the half-diagonal."""
+    distance from the centre over the half-diagonal, times the shadow of
+    :class:`~vision_torsion.synthetic.scene.LightingSpec` (`shadow` < 1)."""
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
     light = 1 + gx * (xs - width / 2) / width + gy * (ys - height / 2) / height
     if vignetting:
         half_diag2 = (width / 2) ** 2 + (height / 2) ** 2
         rho2 = ((xs - (width - 1) / 2) ** 2 + (ys - (height - 1) / 2) ** 2) / half_diag2
         light *= 1 - vignetting * rho2
+    if shadow < 1:
+        # signed distance into the shade (y grows downwards: the angle is as displayed)
+        a = np.deg2rad(shadow_angle_deg)
+        depth = (xs - (width - 1) / 2) * np.cos(a) - (ys - (height - 1) / 2) * np.sin(a) - shadow_offset_px
+        shade = np.clip(depth / max(shadow_edge_px, 1e-9) + 0.5, 0.0, 1.0)
+        light *= 1 - (1 - shadow) * shade
     light.setflags(write=False)
     return light
+
+
+def scene_light(scene: Scene) -> np.ndarray | None:
+    """The scene's relative illumination (:func:`light_field` of its
+    :class:`~vision_torsion.synthetic.scene.LightingSpec`), or None for even light."""
+    lt = scene.lighting
+    if not (lt.gradient_x or lt.gradient_y or lt.vignetting or lt.shadow < 1):
+        return None
+    return light_field(scene.image.width, scene.image.height, lt.gradient_x, lt.gradient_y, lt.vignetting,
+                       lt.shadow, lt.shadow_angle_deg, lt.shadow_offset_px, lt.shadow_edge_px)
+
+
+def reflection(scene: Scene, xs, ys) -> np.ndarray:
+    """The light (DN) a lamp's reflection adds at the pixels (`xs`, `ys`) (arrays of
+    x and y in px), before blur and clipping
+    (:class:`~vision_torsion.synthetic.scene.LightingSpec`)."""
+    lt = scene.lighting
+    return lt.reflection_dn * np.exp(-((xs - lt.reflection_x) ** 2 + (ys - lt.reflection_y) ** 2)
+                                     / (2 * lt.reflection_sigma_px**2))
 
 
 def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
@@ -200,9 +229,11 @@ def render_ideal(scene: Scene, angle_deg: float = 0.0) -> np.ndarray:
         identity = CameraMapping(scene.replace(optics={"tilt_deg": 0.0, "radial_k1": 0.0}))
         for x, y, r in dust_specks(scene):
             paint_circle(canvas, identity, x, y, r, d.dust_level, n_sub=4)
-    lt = scene.lighting
-    if lt.gradient_x or lt.gradient_y or lt.vignetting:
-        canvas *= light_field(W, H, lt.gradient_x, lt.gradient_y, lt.vignetting)
+    light = scene_light(scene)
+    if light is not None:
+        canvas *= light
+    if scene.lighting.reflection_dn:
+        canvas += reflection(scene, *np.mgrid[0:H, 0:W][::-1])
     sigma = scene.optics.blur_sigma_px
     if sigma > 0:
         canvas = cv2.GaussianBlur(canvas, (0, 0), sigmaX=sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT)

@@ -13,7 +13,9 @@ output bit depth, angles in degrees counter-clockwise as displayed)::
                        distances_px
     [optics]           blur_sigma_px, tilt_deg, tilt_axis_deg, focal_length_px, radial_k1
     [noise]            read_noise_dn, shot_noise, electrons_per_dn, jpeg_quality
-    [lighting]         gradient_x, gradient_y, vignetting
+    [lighting]         gradient_x, gradient_y, vignetting, shadow, shadow_angle_deg,
+                       shadow_offset_px, shadow_edge_px, reflection_dn, reflection_x,
+                       reflection_y, reflection_sigma_px
     [distractors]      bolt_holes, bolt_hole_radius_px, bolt_circle_px, bolt_level,
                        wire, wire_angle_deg, wire_offset_px, wire_width_px, wire_level,
                        dust, dust_radius_px, dust_level, dust_seed
@@ -122,15 +124,34 @@ class NoiseSpec:
 
 @dataclass(frozen=True)
 class LightingSpec:
-    """Illumination: linear gradient (relative change across the frame in x and y) and vignetting.
+    """Illumination: linear gradient (relative change across the frame in x and y),
+    vignetting, a shadow, and a lamp's reflection.
 
-    The light factor is ``(1 + gx·(x-W/2)/W + gy·(y-H/2)/H) · (1 - v·ρ²)``, with ρ the
-    distance from the image centre divided by the half diagonal.
+    The light factor is ``(1 + gx·(x-W/2)/W + gy·(y-H/2)/H) · (1 - v·ρ²) · S``, with ρ
+    the distance from the image centre divided by the half diagonal, and S the
+    shadow: ``shadow`` (the relative light in the shade, 1 for none) beyond a
+    straight edge whose normal points ``shadow_angle_deg`` (counter-clockwise as
+    displayed from +x) into the shade and which passes ``shadow_offset_px`` from the
+    image centre along that normal; the light changes linearly across a penumbra
+    ``shadow_edge_px`` wide centred on the edge. The reflection of a lamp adds light
+    that does not depend on the surface's reflectance (a glossy print's specular
+    highlight): a Gaussian of peak ``reflection_dn`` (DN) and σ
+    ``reflection_sigma_px`` at (``reflection_x``, ``reflection_y``) px, added after the
+    light factor; where it pushes the image past the top of the bit depth the
+    quantisation clips it, which takes the markers' contrast away there.
     """
 
     gradient_x: float = 0.0
     gradient_y: float = 0.0
     vignetting: float = 0.0
+    shadow: float = 1.0
+    shadow_angle_deg: float = 0.0
+    shadow_offset_px: float = 0.0
+    shadow_edge_px: float = 0.0
+    reflection_dn: float = 0.0
+    reflection_x: float = 0.0
+    reflection_y: float = 0.0
+    reflection_sigma_px: float = 100.0
 
 
 @dataclass(frozen=True)
@@ -372,6 +393,14 @@ def validate_scene(scene: Scene, *, where: str = "") -> None:
         raise SceneError(f"{p}[noise] jpeg_quality must be 0 (off) or 1..100")
     if nz.jpeg_quality and im.bit_depth != 8:
         raise SceneError(f"{p}[noise] jpeg_quality needs [image] bit_depth = 8")
+    lt = scene.lighting
+    if not 0 < lt.shadow <= 1:
+        raise SceneError(f"{p}[lighting] shadow must be within (0, 1] (the relative light in the shade), "
+                         f"got {lt.shadow}")
+    if lt.shadow_edge_px < 0 or lt.reflection_dn < 0:
+        raise SceneError(f"{p}[lighting] shadow_edge_px and reflection_dn must not be negative")
+    if lt.reflection_sigma_px <= 0:
+        raise SceneError(f"{p}[lighting] reflection_sigma_px must be positive, got {lt.reflection_sigma_px}")
     d = scene.distractors
     if d.bolt_holes < 0 or d.dust < 0:
         raise SceneError(f"{p}[distractors] bolt_holes and dust must not be negative")

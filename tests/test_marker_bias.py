@@ -1,0 +1,170 @@
+"""A marker beside something dark whose blurred edge reaches into its ring: a blurred
+neighbour, a large dark region, a candidate that is no marker over its edge. Each
+marker is found ``ok`` close to its true centre, or is not ``ok``: never ``ok`` more
+than 0.5 px off (issue 31).
+
+Truth comes from images rendered here by exact sub-pixel area coverage (4 x 4 per
+pixel: dark discs at 40 DN on 200 DN), blurred by a Gaussian of the given σ, with
+2 DN of seeded noise, at non-integer centres.
+"""
+
+import cv2
+import numpy as np
+import pytest
+from helpers import area_image, ellipse_mask, supersampled_grid
+
+from vision_torsion.detect import Blob
+from vision_torsion.markers import UNMASKED_MESSAGE, find_candidates, find_marker_list, find_markers
+from vision_torsion.settings import MeasureSettings
+
+#: The issue's bound: an ``ok`` centre is never further than this from the truth (px).
+BOUND_PX = 0.5
+
+
+def _render(shape, dots, *, blur, seed, region=None):
+    """8-bit image of dark discs ((centre, radius) each) and the dark sub-pixels
+    `region(xs, ys)` flags, blurred by `blur` px, with 2 DN of noise."""
+    xs, ys = supersampled_grid(*shape)
+    dark = np.zeros(xs.shape, bool)
+    for centre, radius in dots:
+        dark |= ellipse_mask(xs, ys, centre, radius)
+    if region is not None:
+        dark |= region(xs, ys)
+    img = cv2.GaussianBlur(area_image(dark), (0, 0), blur)
+    img += np.random.default_rng(seed).normal(0.0, 2.0, shape)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _nearest(table, centre):
+    """The row of `table` nearest `centre` and its distance from it (px)."""
+    d = np.hypot(table["x_px"] - centre[0], table["y_px"] - centre[1])
+    return table.loc[d.idxmin()], float(d.min())
+
+
+CENTRE = (60.3, 60.6)
+
+
+@pytest.mark.parametrize(
+    "radius, blur, gap",
+    [(6.0, 3.5, 4.0), (6.0, 3.5, 8.0), (10.0, 3.5, 2.0), (10.0, 3.5, 4.0), (6.0, 2.0, 2.0), (6.0, 1.0, 2.0),
+     pytest.param(6.0, 3.5, 2.0, marks=pytest.mark.xfail(strict=True, reason=(
+         "not solved: the neighbour's blurred edge beyond its mask (made for the 1.2 px start "
+         "width) pulls the dot 0.5-0.65 px, ok; masks for its own width fix it but move the "
+         "outer dots of blurred grids more (0.34 -> 0.55 px)")))],
+)
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_blurred_dot_beside_a_neighbour_is_never_ok_far_off(radius, blur, gap, seed):
+    """A dot beside another `gap` px away, both blurred `blur` px: the neighbour's
+    pixels are left out of the fit, its blurred edge beyond them reaches in. ``ok``
+    within the bound (found: 0.01-0.15 px), or not ``ok``."""
+    neighbour = (CENTRE[0] + 2 * radius + gap, CENTRE[1])
+    img = _render((120, 140 + int(2 * radius + gap)), [(CENTRE, radius), (neighbour, radius)], blur=blur, seed=seed)
+    row, err = _nearest(find_markers(img), CENTRE)
+    assert row["status"] != "ok" or err < BOUND_PX
+
+
+def _region_scene(radius, blur, gap, seed):
+    """A dot at CENTRE and a dark rectangle (rows 20-100) from `gap` px beyond its edge
+    to the image's right border, both blurred by `blur` px."""
+    edge = CENTRE[0] + radius + gap
+    return _render((120, 160), [(CENTRE, radius)], blur=blur, seed=seed,
+                   region=lambda xs, ys: (xs > edge) & (ys > 20) & (ys < 100))
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not solved: a dark region's blurred edge reaching the dot's edge, which the model's "
+    "constant-plus-gradient background cannot follow, pulls the dot 2.7-3 px (and 0.3-1.7 px at "
+    "gaps of 2-6 px), ok, with nothing in its edge points or residuals that sets it apart from "
+    "the photographed dots"))
+def test_a_dot_2_px_from_a_dark_region_blurred_3_5_px_is_not_ok_far_off():
+    """The case the issue names, the worst of the rendered sweep: ``ok`` within the
+    bound, or not ``ok``."""
+    row, err = _nearest(find_markers(_region_scene(6.0, 3.5, 2.0, 3)), CENTRE)
+    assert row["status"] != "ok" or err < BOUND_PX
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "not solved: an occluder 15 DN darker than the background over 2 px of the dot's edge "
+    "hides a chord and moves the centre 0.51 px; the edge's third harmonic (0.27 px) stays "
+    "under the occlusion limit, which the photographed dots' own shapes need (they reach "
+    "0.2-0.3 px, within 0.1 px of the ML fit)"))
+def test_a_slightly_darker_occluder_over_a_dot_edge_is_not_ok_far_off():
+    """A region at 185 DN (background 200 DN, blurred 1.5 px) over 2 px of a 10 px
+    dot's edge: ``ok`` within the bound, or not ``ok``."""
+    img = _render((200, 300), [((100.3, 100.6), 10.0), ((60.2, 175.4), 10.0)], blur=1.0, seed=3)
+    yy, xx = np.mgrid[0:200, 0:300]
+    region = cv2.GaussianBlur(((xx >= 108.3) & (yy < 150) & (yy > 40)).astype(float), (0, 0), 1.5)
+    img = np.clip(img * (1 - region) + 185.0 * region, 0, 255).astype(np.uint8)
+    row, err = _nearest(find_markers(img), (100.3, 100.6))
+    assert row["status"] != "ok" or err < BOUND_PX
+
+
+def _jpeg_grid(seed):
+    """A 5 x 4 grid of dots of radius 7 px 45 px apart, blurred 3 px, JPEG at quality
+    30 (blocky, irregular edges, as a compressed photo's), and their centres."""
+    centres = np.array([(40.3 + 45 * i, 40.6 + 40 * j) for j in range(4) for i in range(5)])
+    img = _render((200, 260), [(c, 7.0) for c in centres], blur=3.0, seed=seed)
+    ok, data = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 30])
+    assert ok
+    return cv2.imdecode(data, cv2.IMREAD_GRAYSCALE), centres
+
+
+@pytest.mark.parametrize("offset", [0.0, 2.0, 4.0])
+def test_a_speck_candidate_over_a_dot_edge_takes_none_of_its_pixels(offset):
+    """A speck of noise beside a blurred JPEG dot is a candidate too small to be a
+    marker (``too_small``); its pixels were left out of the dot's fit, which took part
+    of the dot's own edge, and the rest of an irregular edge moved the centre (by up to
+    0.31 px here; GoPro fisheye photo: 0.6-1.3 px, ``ok``). Now such a candidate takes
+    no pixels: every dot's centre is the one found without it, to 0.01 px (found: up
+    to 0.007 px; the refit is the single fit, and the start width may differ)."""
+    img, centres = _jpeg_grid(3)
+    settings = MeasureSettings()
+    blobs = find_candidates(img, settings)
+    angle = np.random.default_rng(7).uniform(0.0, 2.0 * np.pi, len(centres))
+    specks = [Blob(x=x + (7.0 + offset) * np.cos(a), y=y + (7.0 + offset) * np.sin(a), radius=1.5,
+                   elongation=1.0, fill=1.0, touches_border=False) for (x, y), a in zip(centres, angle)]
+    clean = find_marker_list(img, settings, candidates=blobs)
+    beside = find_marker_list(img, settings, candidates=blobs + specks)
+    assert {m.status for m in beside[len(blobs):]} == {"too_small"}
+    for m, n in zip(clean, beside):
+        assert m.ok and n.ok
+        assert np.hypot(m.x_px - n.x_px, m.y_px - n.y_px) < 0.01
+
+
+@pytest.mark.parametrize("over, reason", [(3.0, "the edge is not symmetric about the centre"),
+                                          (4.0, "edge is not circular")])
+def test_an_occluder_a_speck_candidate_hid_is_seen(over, reason):
+    """A clip at the background's level over `over` px of a 10 px dot's edge, and a
+    speck candidate (``too_small``) on it: the speck's mask took the clip's pixels
+    from the fit, which came out ``ok`` 0.4-0.7 px off. Fitted without that mask, the
+    dot is ``occluded`` (3 px) or ``not_round`` (4 px), so it is ``near_edge`` with that
+    reason."""
+    dots = [((100.3, 100.6), 10.0), ((60.2, 175.4), 10.0), ((220.7, 60.2), 10.0)]
+    img = _render((200, 300), dots, blur=1.0, seed=3)
+    yy, xx = np.mgrid[0:200, 0:300]
+    clip = cv2.GaussianBlur(((xx >= 110.3 - over) & (xx < 160) & (yy > 40) & (yy < 150)).astype(float), (0, 0), 1.5)
+    img = np.clip(img * (1 - clip) + 200.0 * clip, 0, 255).astype(np.uint8)
+    settings = MeasureSettings()
+    speck = Blob(x=112.0, y=100.6, radius=1.5, elongation=1.0, fill=1.0, touches_border=False)
+    markers = find_marker_list(img, settings, candidates=find_candidates(img, settings) + [speck])
+    dot = min(markers, key=lambda m: np.hypot(m.x_px - 100.3, m.y_px - 100.6))
+    assert dot.status == "near_edge"
+    assert dot.message.startswith(UNMASKED_MESSAGE.split("{")[0] + reason)
+    assert sorted(m.status for m in markers) == ["near_edge", "ok", "ok", "too_small"]
+
+
+@pytest.mark.parametrize("radius, blur, gap", [(6.0, 1.0, 6.0), (6.0, 2.0, 6.0), (6.0, 3.5, 8.0),
+                                               (10.0, 3.5, 6.0), (10.0, 1.0, 3.0)])
+def test_clean_grids_lose_no_dot(radius, blur, gap):
+    """Grids of alike dots `gap` px apart, blurred 1-3.5 px, nothing else in the
+    image: every dot ``ok`` (none ``near_edge``), within the bound (found: up to
+    0.09 px; 0.34 px on the grid's outer dots of radius 10 px 6 px apart blurred
+    3.5 px, whose neighbours' blurred edges reach in from one side only)."""
+    pitch = 2 * radius + gap
+    centres = np.array([(30.3 + pitch * i, 30.6 + pitch * j) for j in range(5) for i in range(6)])
+    shape = (int(60 + 4 * pitch), int(60 + 5 * pitch))
+    table = find_markers(_render(shape, [(c, radius) for c in centres], blur=blur, seed=3))
+    assert (table["status"] == "ok").all()
+    ok = table[table["status"] == "ok"]
+    d = np.hypot(ok["x_px"].to_numpy()[:, None] - centres[:, 0], ok["y_px"].to_numpy()[:, None] - centres[:, 1])
+    assert d.min(axis=0).max() < BOUND_PX
