@@ -44,7 +44,11 @@ A tick:
    that image (its step is already two planned steps in one against the same steps
    elsewhere); the photograph next in line for the last row, out of line there while
    the one before it fits as the last row's, is the next orientation's reference:
-   the missed shot is decided and it binds to that reference.
+   the missed shot is decided and it binds to that reference. Where the load turns
+   back a row early and a missed shot fits several rows of the branch (a soft zone
+   the loop has not shown yet), those rows are named, and the photographs after it
+   are checked as each of them binds them: a warning after it is said when every
+   one gives it, so the shift already said is not said again as new mistakes.
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
@@ -867,8 +871,7 @@ class Watcher:
             trials.append((step_misfit(trial, step_torque_nm=self.step_torque, earlier=loops), trial, found))
         if not trials:
             return [w for w in warns if w.index <= k], points
-        trials.sort(key=lambda t: t[0])
-        _, best, found = trials[0]
+        _, best, found = min(trials, key=lambda t: t[0])
         kept = [w for w in found if all(any((v.index, v.kind) == (w.index, w.kind) for v in t[2]) for t in trials)]
         return [w for w in warns if w.index <= k] + kept, best if len(best) == len(points) else points
 
