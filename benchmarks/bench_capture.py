@@ -27,6 +27,11 @@ photograph) and then bound (``bind_session``). Counted:
   ``--skip FILE --missing LINE`` for a forgotten piece; shoot again for a bump or a
   blur; ``set angle_sign``);
 - bind found: its fix or diagnosis says the same (the same patterns);
+- watch later: a mistake not found so, said later with the right diagnosis and
+  fix (on the mistake's photograph or the next: a forgotten piece decided by the
+  step after the next), or a missed shot whose row ``watch`` names among those that
+  fit when the load turns back a row early (the fix: ``bind`` after the
+  orientation); that line is not counted as false;
 - watch false: warnings on other photographs, plus warnings withdrawn; "standing":
   the photographs still warned about at the end; bind false: on clean sessions,
   anything bind says at all;
@@ -223,7 +228,7 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO, 
            "process_refused": refused,
            "watch_said": [e.message for e in warned], "bind_said": bind_text + list(res.warnings)}
     if said is None:
-        out.update(watch_detected=None, bind_detected=None, watch_false=len(warned) + withdrawn,
+        out.update(watch_detected=None, bind_detected=None, watch_later=None, watch_false=len(warned) + withdrawn,
                    watch_standing=len({e.file for e in warned} - gone),
                    bind_false=len(bind_text) + len(res.warnings))
         return out
@@ -233,8 +238,13 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO, 
     out["watch_detected"] = any(e.file in near and re.search(said, e.message)
                                 and names.index(last[id(e)]) <= at + 1 for e in warned)
     out["bind_detected"] = any(re.search(fixed, t) for t in bind_text)
-    out["watch_false"] = sum(1 for e in warned if e.file not in near) + withdrawn
-    out["watch_standing"] = len({e.file for e in warned if e.file not in near} - gone)
+    # a missed shot's row named among those that fit where the load turned back a row early
+    named = {id(e) for e in warned if kind == "missed shot"
+             and re.search(rf"turned back a row early: .* at line (\d+ or )*{row + 2}( or \d+)* ", e.message)}
+    out["watch_later"] = not out["watch_detected"] and (bool(named) or any(
+        e.file in near and re.search(said, e.message) for e in warned))
+    out["watch_false"] = sum(1 for e in warned if e.file not in near and id(e) not in named) + withdrawn
+    out["watch_standing"] = len({e.file for e in warned if e.file not in near and id(e) not in named} - gone)
     out["bind_false"] = 0
     return out
 
@@ -242,7 +252,7 @@ def one_session(gear: str, kind: str, seed: int, steps: int, target: str = TWO, 
 def table(rows) -> None:
     """Per mistake (and, where the sessions hold several loops, per loop the
     mistake is in: the first orientation's or a later one's) the counts."""
-    print(f"{'mistake':<34} {'sessions':>8} {'watch found':>11} {'bind found':>10} "
+    print(f"{'mistake':<34} {'sessions':>8} {'watch found':>11} {'watch later':>11} {'bind found':>10} "
           f"{'watch false':>11} {'standing':>8} {'bind false':>10}")
     split = any(r["orientations"] > 1 for r in rows)
     for kind in MISTAKES:
@@ -253,7 +263,9 @@ def table(rows) -> None:
             label = f"{kind} ({loop} loop)" if split and kind != "clean" else kind
             found_w = "—" if kind == "clean" else f"{sum(r['watch_detected'] for r in sel)}/{len(sel)}"
             found_b = "—" if kind == "clean" else f"{sum(r['bind_detected'] for r in sel)}/{len(sel)}"
-            print(f"{label:<34} {len(sel):>8} {found_w:>11} {found_b:>10} {sum(r['watch_false'] for r in sel):>11} "
+            later = "—" if kind == "clean" else str(sum(r["watch_later"] for r in sel))
+            print(f"{label:<34} {len(sel):>8} {found_w:>11} {later:>11} {found_b:>10} "
+                  f"{sum(r['watch_false'] for r in sel):>11} "
                   f"{sum(r['watch_standing'] for r in sel):>8} {sum(r['bind_false'] for r in sel):>10}")
     photos = sum(r["photos"] for r in rows)
     refused = sorted({str(r["process_refused"]) for r in rows if r["process_refused"]})
@@ -267,7 +279,8 @@ def table(rows) -> None:
     for r in rows:
         if r["mistake"] != "clean" and not (r["watch_detected"] and r["bind_detected"]):
             print(f"  not caught: {r['gear']}, {r['mistake']} at row {r['row']} ({r['loop']} loop, seed {r['seed']}): "
-                  f"watch {r['watch_detected']}, bind {r['bind_detected']}")
+                  f"watch {r['watch_detected']}{' (said later)' if r['watch_later'] else ''}, "
+                  f"bind {r['bind_detected']}")
 
 
 def main(argv=None) -> int:

@@ -319,11 +319,11 @@ def test_a_first_loop_shot_missed_in_the_soft_zone_is_named_when_the_load_turns_
     assert m and "8" in m.group(1).split(" or "), found
 
 
-def shoot_two(tmp_path, **options):
-    """A two-orientation session of the bilinear gear (τc = 0.03 N·m) with `options`
+def shoot_two(tmp_path, *, seed=7, gear="bilinear τc=0.03", **options):
+    """A two-orientation session of `gear` (:data:`KINKED`) with `options`
     (capture_script's mistakes), watched: the session, the camera folder, the events."""
-    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=7,
-                                 response=KINKED["bilinear τc=0.03"], **options)
+    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=seed,
+                                 response=KINKED[gear], **options)
     camera = tmp_path / "camera"
     ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
     return tmp_path / "session", camera, watch(tmp_path / "session", camera, len(shots), 36)
@@ -484,17 +484,18 @@ def test_a_piece_forgotten_right_after_the_first_loops_kink_is_not_called_a_miss
     assert not [w for w, _ in said if w.kind == "large_step"]
 
 
+def soft_gear(torque_nm):
+    """The paper's bilinear gear with τc = 0.15 N·m: soft over the whole loop but
+    where the load turns back (the angle in rad)."""
+    return bilinear_response(torque_nm, k_u=4.4, k_l=0.3, tau_c=0.15)
+
+
 def test_a_first_loop_shot_missed_before_the_soft_zone_is_not_taken_for_a_swap_at_the_turn(tmp_path):
     # bilinear τc = 0.15 N·m (soft all the way on loading): row 4 missed. At the turning load
     # the last photograph turns back as the first step back from a turning load does; the
     # pair exchanged would leave a stiff step in the soft zone: no swap is claimed, the
     # rows a missed shot fits are named
-    spec = SessionSpec(max_torque_nm=0.07848, orientations_deg=(0.0,))
-    plan, shots = capture_script(SCENE, spec, tmp_path / "session", seed=70165, missed=4,
-                                 response=lambda t: bilinear_response(t, k_u=4.4, k_l=0.3, tau_c=0.15))
-    camera = tmp_path / "camera"
-    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
-    found = warnings(watch(tmp_path / "session", camera, len(shots)))
+    found = warnings(watch(*shoot(tmp_path, {"missed": 4, "response": soft_gear}, seed=70165)))
     assert not [m for _, m, _ in found if "swapped" in m]
     (turn,) = [m for f, m, _ in found if f == "IMG_0010.png"]
     assert re.search(r"the load turned back a row early: .* at line (\d+ or )*6( or \d+)* ", turn)
@@ -505,11 +506,7 @@ def test_at_a_later_loops_turning_load_a_missed_shot_and_a_swap_that_look_alike_
     # stiff zone where loading and unloading by a step turn the gear alike: the photograph
     # turning back fits the pair exchanged and the first step back equally, so no swap
     # is claimed; the rows a missed shot fits are named, line 28 among them
-    plan, shots = capture_script(SCENE, TWO_ORIENTATIONS, tmp_path / "session", seed=80110, missed=26,
-                                 response=KINKED["bilinear τc=0.03"])
-    camera = tmp_path / "camera"
-    ScriptedCamera(camera, [s.png for s in shots]).run(chunk_delay_s=0, photo_delay_s=0)
-    found = warnings(watch(tmp_path / "session", camera, len(shots), 36))
+    found = warnings(shoot_two(tmp_path, seed=80110, missed=26)[2])
     assert not [m for _, m, _ in found if "swapped" in m]
     (turn,) = [m for f, m, _ in found if f == "IMG_0028.png"]
     assert re.search(r"the load turned back a row early: .* at line (\d+ or )*28( or \d+)* ", turn)
@@ -526,3 +523,48 @@ def test_an_extra_shot_after_a_steep_step_does_not_make_that_step_a_missed_shot(
     bound = points[:i + 1] + [extra] + [StepPoint(PLANNED[j + 1], p.angle_deg, p.angle_std_deg)
                                         for j, p in enumerate(points[i + 1:-1], start=i + 1)]
     assert [(w.index, w.kind) for w, _ in live(bound)] == [(i + 1, "no_movement")]
+
+
+def test_after_the_load_turned_back_a_row_early_the_shift_is_not_said_again(tmp_path):
+    # bilinear τc = 0.05 N·m: row 8 (line 10) missed in the first loop's soft zone. At the
+    # turning load watch names the rows a missed shot fits; the photographs after it are
+    # a row early, and compared with the plan's rows as bound the step into the next soft
+    # zone (IMG_0014.png) looked like a second missed shot: it is checked bound a row
+    # later, as the named rows say
+    session, camera, n = shoot(tmp_path, {"missed": 8, "response": KINKED["bilinear τc=0.05"]}, seed=92101)
+    found = warnings(watch(session, camera, n))
+    assert [(f, when) for f, _, when in found] == [("IMG_0010.png", "IMG_0010.png")], found
+    assert re.search(r"the load turned back a row early: .* at line (\d+ or )*10( or \d+)* ", found[0][1])
+
+
+def test_after_the_load_turned_back_a_row_early_a_second_mistake_is_still_said(tmp_path):
+    # the same session with an extra shot after row 13 as well (IMG_0014.png, the load of
+    # line 15 photographed twice): said at its photograph with its fix, and nothing else
+    session, camera, n = shoot(tmp_path, {"missed": 8, "extra_after": 13, "response": KINKED["bilinear τc=0.05"]},
+                               seed=92101)
+    found = warnings(watch(session, camera, n))
+    assert [(f, when) for f, _, when in found] == [("IMG_0010.png", "IMG_0010.png"),
+                                                   ("IMG_0014.png", "IMG_0014.png")], found
+    assert re.search(r"no movement.*an extra shot.*; fix: vision-torsion bind \S+ \S+ --skip IMG_0014\.png$",
+                     found[1][1])
+
+
+def test_a_later_orientation_is_not_judged_against_a_loop_bound_a_row_early(tmp_path):
+    # three-segment gear, row 7 (line 9) missed in the first orientation: its load turns
+    # back a row early. The second orientation's steps are compared with the first's as
+    # the named rows bind them, not as bound (its first half was called a missed shot
+    # and a turn a row early)
+    found = warnings(shoot_two(tmp_path, seed=303, gear="three-segment", missed=7)[2])
+    assert [f for f, _, _ in found] == ["IMG_0010.png"], found
+    assert re.search(r"the load turned back a row early: .* at line (\d+ or )*9( or \d+)* ", found[0][1])
+
+
+def test_a_piece_forgotten_on_the_first_step_into_the_soft_zone_is_said_one_photograph_later(tmp_path):
+    # bilinear τc = 0.15 N·m (soft from zero on): row 6 (-1 piece, the first step after the
+    # stiff turn) one piece short, in the first loop: half the zone's step, then one and a
+    # half (3×, like a gear whose compliance peaks there), then the zone's own step, their
+    # mean: a forgotten piece, said on its photograph when the step after the next is in
+    found = warnings(watch(*shoot(tmp_path, {"forgotten": 6, "response": soft_gear}, seed=90236)))
+    assert [(f, when) for f, _, when in found] == [("IMG_0007.png", "IMG_0009.png")], found
+    assert re.search(r"0\.50× the steps after it .* the next step makes up for it: a weight piece forgotten on a "
+                     r"pan.*; fix: vision-torsion bind \S+ \S+ --skip IMG_0007\.png --missing 8$", found[0][1])

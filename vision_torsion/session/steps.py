@@ -32,7 +32,11 @@ An out-of-line step is decided with the step after it, by which explains both:
   (against the same steps elsewhere: the next step's excess is this one's
   shortfall within 30 %; against the previous step: the next step's compliance ≥
   1.8× this one's, a dip no single kink makes). At the end of a branch the first
-  step back tells: it starts half a step early;
+  step back tells: it starts half a step early. On the first step after a kink
+  (a jump beyond 4×, where nothing in the loop has shown the steps yet) the half
+  step is taken for the kink and the one and a half for the gear: the step after
+  them tells, going on at their mean (within 8 %) while they are 3× apart
+  (within 20 %): said then, on the step it happened at;
 - a missed shot (two planned steps in one: every later file shows the load of the
   row after its own): the step's excess over the same step elsewhere in the loop
   is the next planned step there (within 30 %), and the next photograph shows the
@@ -68,7 +72,7 @@ half-loop is judged as its second half is, and a kink seen there is expected, no
 a mistake. In the first half-loop of the session's first orientation nothing has
 shown the steps yet: a mistake where the gear's stiffness changes by more than the
 mistake's signature (a missed shot inside a soft zone or at the switch, a piece
-forgotten on a kinked step) looks like the gear there, and cannot be told from it
+forgotten on the step of the switch) looks like the gear there, and cannot be told from it
 until the load reverses (the load turning back a row early, which ``watch`` names
 with the rows that fit; against the same step in the second half, in ``bind``).
 These are warnings for the person at the rig, not a
@@ -274,6 +278,13 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None, plan_after=N
         if state.direction != direction:
             state.new_branch(direction)  # the load reversed: a new branch
         nxt = steps[k + 1] if k + 1 < len(steps) and state.single(steps[k + 1].d_tau) else None
+        forgot = None if state.after_warning else _forgotten_after_kink(s, state)
+        if forgot is not None:  # said on the step it happened at; the step making up for it is no reference
+            out.append(forgot)
+            state.flagged.update({forgot.index, state.run[-1][0].index})
+            state.accept(s)
+            state.before = None
+            continue
         if k + 1 == len(steps) and open_end and state.out_of_line(s):
             # a missed shot's signature already: said now, undecided (not on the step after a
             # warning, which makes up for that mistake)
@@ -288,6 +299,7 @@ def _scan(points, step_torque_nm, open_end, prior=None, known=None, plan_after=N
             state.accept(s)
         else:
             out.append(warn)
+            state.run = []
             state.after_warning = True
             state.flagged.add(s.index)
             state.shifted = state.shifted or (warn.decided and warn.kind in ("no_movement", "large_step"))
@@ -339,12 +351,16 @@ class _State:
         self.flagged: set = set()  # image indices of the steps warned about
         self.shifted = False  # an extra or missed shot decided: the later files are bound a row off
         self.after_warning = False  # the step after a mistake makes up for it: no reference
+        # the steps of this branch that fitted one after another, each with whether the same
+        # step elsewhere in the loop (or an earlier loop) was known to compare it with
+        self.run: list = []
 
     def single(self, d_tau) -> bool:
         return 0.5 < abs(d_tau) / self.step < 2.5
 
     def new_branch(self, direction) -> None:
         self.local, self.before, self.direction, self.after_warning = None, None, direction, False
+        self.run = []
 
     def place(self, span):
         a, b = (round(abs(t) / self.step, 3) for t in span)
@@ -412,10 +428,14 @@ class _State:
     def accept(self, s) -> None:
         if not self.after_warning and round(abs(s.d_tau) / self.step) != 1:
             self.before = self.local = None  # across a gap (a row without a photograph): no reference
+            self.run = []
         elif not self.after_warning:
+            self.run.append((s, self.same_step(s) is not None))
             self.before, self.local = self.local, s.compliance
             if not self.shifted:  # (check_steps looks at the rest again, bound with the fix)
                 self.seen.setdefault(self.place(s.span), {})[s.index] = s.compliance
+        else:
+            self.run = []
         self.after_warning = False
 
 
@@ -536,6 +556,35 @@ def _row_early(s, nxt, state, e, same) -> bool:
     swap_e, _ = state.expected(nxt)
     swapped = abs(math.log(-nxt.d_theta / swap_e)) if swap_e is not None and swap_e != 0 else math.inf
     return missed < math.log(_SAME_TOL) and missed < swapped
+
+
+def _forgotten_after_kink(s, state) -> StepWarning | None:
+    """A weight piece forgotten on the first step after a kink, decided at the
+    step after the one that made up for it (`s`), where nothing in the loop has
+    shown these steps yet: the forgotten step (``a``: half a step, the first
+    after a compliance jump beyond 4×) and the next (``b``: one and a half) are
+    3× apart within 20 %, and `s` goes on at their mean within 8 % (the zone's
+    own compliance: the two steps are two of it, split a half step early). A
+    switch inside ``a`` gives ``b`` the zone's compliance and ``a`` a part of
+    it, whose mean with ``b`` is less than ``b``, not 3× ``a`` (a gear whose
+    compliance peaks at ``b`` falls further after it). The warning of ``a``, or
+    None."""
+    if len(state.run) < 3 or state.expected(s)[1]:
+        return None
+    (p, _), (a, a_same), (b, b_same) = state.run[-3:]
+    if a_same or b_same or not (p.index < a.index < b.index < s.index) or not state.single(a.d_tau):
+        return None
+    ca, cb = a.compliance, b.compliance
+    if 1 / _KINK <= ca / p.compliance <= _KINK or cb / ca <= 0:
+        return None
+    zone = (ca + cb) / 2
+    if (s.compliance / zone <= 0 or abs(math.log(cb / ca / 3)) > math.log(_SUM_TOL)
+            or abs(math.log(s.compliance / zone)) > math.log(_SAME_FIT)):
+        return None
+    return _warning(a, "small_step", ca / zone,
+                    f"step out of line: Δangle {a.d_theta:+.4f}° is {ca / zone:.2f}× the steps after it "
+                    f"({zone * a.d_tau:+.4f}° each: the step after the next shows it) and the next step makes up "
+                    "for it: a weight piece forgotten on a pan (or taken off too early)")
 
 
 def _two_in_one(s, state) -> StepWarning | None:

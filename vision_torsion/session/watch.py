@@ -44,7 +44,11 @@ A tick:
    that image (its step is already two planned steps in one against the same steps
    elsewhere); the photograph next in line for the last row, out of line there while
    the one before it fits as the last row's, is the next orientation's reference:
-   the missed shot is decided and it binds to that reference.
+   the missed shot is decided and it binds to that reference. Where the load turns
+   back a row early and a missed shot fits several rows of the branch (a soft zone
+   the loop has not shown yet), those rows are named, and the photographs after it
+   are checked as each of them binds them: a warning after it is said when every
+   one gives it, so the shift already said is not said again as new mistakes.
 5. The live page ``OUT_DIR/live.html`` (:mod:`.live`) is rewritten atomically (then
    its stamp ``live-stamp.js``: an open page reloads within 0.25 s), and
    ``binding.json`` (unless every file is under its planned name) every few
@@ -231,7 +235,9 @@ class Watcher:
         # extra (-1 each) shots: rows no photograph takes, photographs that belong before
         self.shift: dict[float, int] = {}
         self.overflow: dict[float, int] = {}  # orientation -> its photographs set aside so far
-        self.turned_early: set[int] = set()  # positions where the load turned back a row early
+        # position where the load turned back a row early -> positions of the photographs whose
+        # rows a missed shot fits (the files from one of them on are a row early)
+        self.turned_early: dict[int, list[int]] = {}
         # orientation -> (its photograph that shows its last row's load, the next orientation's
         # reference that came after it): a shot missed at the orientation's second-to-last row
         self.ended_early: dict[float, tuple[int, int]] = {}
@@ -631,8 +637,13 @@ class Watcher:
                                 earlier=loops, plan_after=after)
         # a missed shot's signature is said before the next photograph only where that one may
         # never come or be the next orientation's (the second-to-last row): elsewhere it decides
-        warns = [self._turned_early(ok, points, w, loops) for w in warns
-                 if not w.awaiting_next or self._second_to_last(ok[w.index])]
+        warns = [w for w in warns if not w.awaiting_next or self._second_to_last(ok[w.index])]
+        turn = next((k for k, p in enumerate(ok) if p in self.turned_early), None)
+        warns = [self._turned_early(ok, points, w, loops) if turn is None or w.index <= turn else w
+                 for w in warns]
+        turn = next((k for k, p in enumerate(ok) if p in self.turned_early), None)
+        if turn is not None:
+            warns, points = self._after_turn(ok, points, warns, turn, loops, open_end)
         if orientation in self.ended_early:
             warns = self._ended_early(orientation, ok, points, warns)
         loops.append(points)
@@ -811,23 +822,58 @@ class Watcher:
         start = k - 1  # the branch's first photograph after the pre-load
         while start > 2 and (self.torques[ok[start - 1]] - self.torques[ok[start - 2]]) * way > 0:
             start -= 1
-        fits = []
-        for j in range(start, k + 1):  # the photograph of the row bound at ok[j] was never taken
-            trial = points[:j] + [StepPoint(self.torques[ok[i] + 1], p.angle_deg, p.angle_std_deg)
-                                  for i, p in enumerate(points[j:k + 1], start=j)]
-            if not check_steps(trial, step_torque_nm=self.step_torque, open_end=True, hindsight=False,
-                               earlier=loops):
-                fits.append(str(self.bound[ok[j]].row.line))
+        fits = [j for j in range(start, k + 1)  # the photograph of the row bound at ok[j] was never taken
+                if not check_steps(self._row_early_from(ok, points, j)[:k + 1], step_torque_nm=self.step_torque,
+                                   open_end=True, hindsight=False, earlier=loops)]
         if not fits:
             return warning
-        self.turned_early.add(pos)  # the files are a row early from some row of this branch on
+        self.turned_early[pos] = [ok[j] for j in fits]  # the files are a row early from one of them on
         fix = shlex.join(["vision-torsion", "bind", str(self.session.folder), str(self.camera)])
+        lines = " or ".join(str(self.bound[ok[j]].row.line) for j in fits)
         return dataclasses.replace(warning, message=(
             f"the load turned back a row early: Δangle {warning.delta_angle_deg:+.4f}° for a planned torque "
             f"step of {warning.delta_torque_nm:+.5f} N·m: a missed shot in this branch, at line "
-            f"{' or '.join(fits)} (the steps the loop has shown so far fit each; where the gear's stiffness "
+            f"{lines} (the steps the loop has shown so far fit each; where the gear's stiffness "
             f"changes, the double step looks like its neighbours until the same steps come again); fix: after "
             f"this orientation `{fix}` names the row (--missing LINE) against the rest of the loop"))
+
+    def _row_early_from(self, ok, points, j) -> list[StepPoint]:
+        """`points` (of the photographs bound at `ok`) with the row of ``ok[j]``
+        not photographed: from it on each shows the next row's load (those whose
+        next row is not of their orientation left out)."""
+        o = self.rows[ok[j]].orientation_deg
+        return points[:j] + [StepPoint(self.torques[ok[i] + 1], p.angle_deg, p.angle_std_deg)
+                             for i, p in enumerate(points[j:], start=j)
+                             if ok[i] + 1 < len(self.rows) and self.rows[ok[i] + 1].orientation_deg == o]
+
+    def _after_turn(self, ok, points, warns, k, loops, open_end):
+        """The step warnings after the photograph ``ok[k]`` at which the load turned
+        back a row early (:meth:`_turned_early`), and the step points to compare
+        later orientations with. Its files are a row early from one of the rows
+        named there on: the steps after it are checked bound that way (else each
+        is compared with the wrong row's step, and the double step, already said,
+        shows again as new mistakes). A warning after it is kept when every named
+        row gives it (an independent mistake: the rows differ only before the
+        turn), with the message of the row whose binding fits the loop best
+        (:func:`~.steps.step_misfit`), whose points are returned."""
+        from .steps import step_misfit
+
+        o = self.rows[ok[k]].orientation_deg
+        trials = []
+        for j in (ok.index(c) for c in self.turned_early[ok[k]] if c in ok):
+            trial = self._row_early_from(ok, points, j)
+            last = ok[len(trial) - 1] + (len(trial) > j)  # the row the newest photograph shows
+            after = [self.torques[i] for i in range(last + 1, len(self.rows))
+                     if self.rows[i].orientation_deg == o and self.rows[i].line not in self.missing]
+            found = [w for w in check_steps(trial, step_torque_nm=self.step_torque, open_end=open_end,
+                                            hindsight=False, earlier=loops, plan_after=after)
+                     if w.index > k and (not w.awaiting_next or self._second_to_last(ok[w.index] + 1))]
+            trials.append((step_misfit(trial, step_torque_nm=self.step_torque, earlier=loops), trial, found))
+        if not trials:
+            return [w for w in warns if w.index <= k], points
+        _, best, found = min(trials, key=lambda t: t[0])
+        kept = [w for w in found if all(any((v.index, v.kind) == (w.index, w.kind) for v in t[2]) for t in trials)]
+        return [w for w in warns if w.index <= k] + kept, best if len(best) == len(points) else points
 
     def bind_fix(self, *options: str) -> str:
         """"fix: " and the ``vision-torsion bind`` command line with `options`."""
