@@ -8,7 +8,9 @@ a shadow over half the frame with a third of the light, a lamp's reflection that
 clips the paper. With the defaults every dot must come out ``ok`` within 0.5 px of
 its true centre (the issue's limit for an ``ok`` dot against an independent fit;
 the fits here are 0.03-0.4 px off, the most on the shadow's edge and in the
-clipped reflection), and no ``ok`` marker may lie anywhere else.
+clipped reflection), or, on the shadow's edge, ``near_edge`` for the uneven
+background there (:data:`~vision_torsion.markers.UNEVEN_LIGHT_MESSAGE`), and no
+``ok`` marker may lie anywhere else.
 """
 
 from pathlib import Path
@@ -19,8 +21,8 @@ from scipy.spatial import cKDTree
 
 import vision_torsion
 from vision_torsion.detect import detect_blobs
-from vision_torsion.errors import SceneError
-from vision_torsion.markers import find_markers
+from vision_torsion.errors import MarkerError, SceneError
+from vision_torsion.markers import UNEVEN_LIGHT_MESSAGE, find_markers
 from vision_torsion.pair import measure_pair
 from vision_torsion.report.session_report import demo_scene
 from vision_torsion.synthetic import Scene, load_scene, render
@@ -70,10 +72,15 @@ def test_uneven_light_grid_found_in_full(case):
     assert _found(detect_blobs(rendered.image, polarity=polarity, local_levels=False), rendered.centres, radius) < n
     assert _found(detect_blobs(rendered.image, polarity=polarity), rendered.centres, radius) == n
     table = find_markers(rendered.image, polarity=polarity)
+    # every dot, and nothing else, accepted; on the shadow's edge a dot may be
+    # near_edge for the uneven background there (2 of 165 are)
+    uneven = table["status"].eq("near_edge") & table["message"].str.startswith(UNEVEN_LIGHT_MESSAGE.split("{")[0])
+    assert uneven.sum() <= (2 if "shadow" in case else 0)
     ok = table[table["status"] == "ok"][["x_px", "y_px"]].to_numpy()
-    assert len(ok) == n  # every dot, and nothing else, accepted
-    d = cKDTree(ok).query(rendered.centres)[0]
-    assert d.max() < 0.5
+    assert len(ok) + uneven.sum() == n
+    dots = np.concatenate([ok, table[uneven][["x_px", "y_px"]].to_numpy()])
+    assert len(set(cKDTree(dots).query(rendered.centres)[1])) == n  # one each
+    assert cKDTree(rendered.centres).query(ok)[0].max() < 0.5
 
 
 @pytest.mark.parametrize("polarity", ["dark", "bright"])
@@ -97,15 +104,24 @@ def test_uneven_light_still_picks_the_right_pair_among_distractors(lighting):
     4:1 falloff or a half-frame shadow: the pair measured is the two markers at
     every angle (a distractor found at a lower local level never takes a marker's
     place; with one global level the marker in the shade is missed at -25° and
-    the pair is ambiguous). 1.5 px: the identity, not the fit, is tested here; a
-    marker straddling the shadow's 30 px penumbra at -70° is fitted 1.0 px off
-    (0.5 px from the global level's start), which the pixel fit's lighting plane
-    cannot model; the nearest distractor is 100 px away."""
+    the pair is ambiguous). 1.5 px: the identity, not the fit, is tested here; the
+    nearest distractor is 100 px away. Under the shadow at -70° both markers
+    straddle its 30 px penumbra, which the pixel fit's lighting plane cannot model
+    (one was fitted 1.0 px off, ``ok``): both are ``near_edge`` for the uneven
+    background, and the pair is not measured."""
     scene = load_scene(Path(vision_torsion.__file__).parent / "synthetic" / "scenes" / "distractors.toml")
     scene = scene.replace(lighting=lighting, disk={"background_level": 150.0}, markers={"level": 30.0},
                           distractors={"bolt_level": 25.0, "wire_level": 45.0, "dust_level": 90.0})
     for i, angle in enumerate((-70.0, -25.0, 5.0, 42.5, 70.0)):
         rendered = render(scene, angle, seed=600 + i)
+        if angle == -70.0 and "shadow" in lighting:
+            table = find_markers(rendered.image)
+            d = cKDTree(table[["x_px", "y_px"]].to_numpy()).query(rendered.centres)
+            assert list(table["status"].to_numpy()[d[1]]) == ["near_edge", "near_edge"]
+            assert all(m.startswith(UNEVEN_LIGHT_MESSAGE.split("{")[0]) for m in table["message"].to_numpy()[d[1]])
+            with pytest.raises(MarkerError):
+                measure_pair(rendered.image)
+            continue
         pair = measure_pair(rendered.image)
         found = np.array([[m.x_px, m.y_px] for m in pair.markers])
         assert cKDTree(found).query(rendered.centres)[0].max() < 1.5, angle

@@ -20,7 +20,8 @@ Failure modes (reported per marker in the ``status`` column, with a ``message``)
 ``border`` (cut by the image border), ``too_small``, ``too_large``, ``not_round``,
 ``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
 hidden or cut by an edge), ``near_edge`` (a candidate beside it that is no marker
-lay over its edge, and fitted with those pixels it is not ``ok``),
+lay over its edge, and fitted with those pixels it is not ``ok``; or a shadow's or
+a light's edge crosses it, which the fit's lighting gradient cannot follow),
 ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
@@ -63,6 +64,8 @@ __all__ = [
     "candidate_patch",
     "crowded_patch",
     "CROWDED_MESSAGE",
+    "UNEVEN_LIGHT_MESSAGE",
+    "UNEVEN_SHIFT_PX",
     "edge_asymmetry_px",
     "excluding_neighbours",
     "near_candidates",
@@ -821,6 +824,55 @@ STEEP_CUT_MESSAGE = (
 )
 
 
+#: Centre move (px) under a lighting also quadratic over the ring
+#: (:attr:`~vision_torsion.pixelfit.DiscFit.lighting_shift_px`, computed where the
+#: background is uneven) beyond which a marker is ``near_edge``
+#: (:func:`_uneven_light`). Under lighting the model follows the move stays at the
+#: noise's level (at most 0.003 px on rendered grids under even light, a 4:1
+#: falloff, vignetting or blur; a median of 0.001 px on the photographed dots); a
+#: shadow's edge (a third of the light, 0-30 px wide) across a rendered dot moved
+#: its centre 0.4-1.2 px off and this 0.14-0.45 px, the GoPro dot 0.57 px off the ML
+#: fit 0.64 px. Of the eleven photographs' ok dots 16 in about 16000 exceed it
+#: (within 0.1-0.33 px of the ML fit: dots on the vignetted border and a light's
+#: edge).
+UNEVEN_SHIFT_PX = 0.1
+
+
+#: The message of a ``near_edge`` marker across which the background is not even
+#: (:func:`_uneven_light`).
+UNEVEN_LIGHT_MESSAGE = (
+    "the background is not even across the marker (a shadow or light edge crosses it): its levels differ by "
+    "{step:.0f} DN ({share:.0%} of the contrast) beyond the fitted lighting gradient, and a lighting curved over "
+    "the marker moves the centre by {shift:.2f} px (allowed {allowed} px); the centre may be off by several times "
+    "that"
+)
+
+
+def _uneven_light(f: DiscFit) -> Marker | None:
+    """Status ``near_edge`` for a fit whose background is not even across the marker
+    (its centre moves by over :data:`UNEVEN_SHIFT_PX` under a lighting also
+    quadratic over the ring: :attr:`~vision_torsion.pixelfit.DiscFit.lighting_shift_px`),
+    else None. The fit's lighting is a plane; a shadow's or a light's edge across
+    the marker is a step, which the plane follows only in part, and the misfit
+    pulls the centre. Not judged on a fit that cut a surround as dark as the marker
+    from its ring (``steep_cut``, flagged with its own message): the cut region's
+    blurred flank stays in the background, uneven by construction, and the centre
+    is good to 0.1-0.3 px (0.07-0.13 px beside a card's edge, which the shift put at
+    0.23 px)."""
+    if f.steep_cut or not f.lighting_shift_px > UNEVEN_SHIFT_PX:
+        return None
+    return Marker(
+        x_px=f.x_px,
+        y_px=f.y_px,
+        radius_px=f.radius_px,
+        edge_width_px=f.edge_width_px,
+        status="near_edge",
+        message=UNEVEN_LIGHT_MESSAGE.format(
+            step=f.background_step_dn, share=f.background_step_dn / abs(f.foreground_dn - f.background_dn),
+            shift=f.lighting_shift_px, allowed=UNEVEN_SHIFT_PX),
+    )
+
+
 #: The message of an ``ok`` marker fitted with its neighbours' gaps split
 #: (:func:`crowded_patch`): their blurred edges share its background ring.
 CROWDED_MESSAGE = (
@@ -835,7 +887,8 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     :func:`_oblique`; then ``ok``, with the ellipse's residual and a message);
     ``occluded`` when the circle or ellipse is asymmetric about its centre
     (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
-    out of `patch` reach its edge zone); `crowded`: fitted with
+    out of `patch` reach its edge zone); ``near_edge`` when the background is not
+    even across it (:func:`_uneven_light`); `crowded`: fitted with
     :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
     circ = f.circularity
     rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
@@ -848,6 +901,9 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     occluded = None if crowded else _occluded(f, patch)
     if occluded is not None:
         return occluded
+    uneven = _uneven_light(f)
+    if uneven is not None:
+        return uneven
     if oblique is not None:
         ratio, rms = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "

@@ -99,7 +99,7 @@ from .ring import (
     solve_lu,
 )
 
-__all__ = ["DiscFit", "fit_disc", "fit_discs", "MIN_BLOCKS"]
+__all__ = ["DiscFit", "fit_disc", "fit_discs", "MIN_BLOCKS", "BACKGROUND_SECTORS", "UNEVEN_BACKGROUND"]
 
 #: Centre step (px) below which the fit counts as settled and outliers are first looked for.
 _SETTLED_PX = 0.05
@@ -158,6 +158,24 @@ _WIDTH_CONVERGED_PX = 0.01
 #: estimate's relative spread is about sqrt(2/G) (G blocks), 26 % in variance at
 #: 30. A marker has about as many along its edge as its radius in px.
 MIN_BLOCKS = 30
+#: Sectors of direction whose background residuals :attr:`DiscFit.background_step_dn`
+#: compares: the eight octants, so that a step through or beside the centre, at any
+#: direction, leaves whole sectors on each side of it.
+BACKGROUND_SECTORS = 8
+#: Fewest background pixels a sector needs for that figure (the mean of 10 noisy
+#: pixels scatters by 0.3 of their σ).
+_MIN_SECTOR_PX = 10
+#: Pixels of a ring (about) that :attr:`DiscFit.background_step_dn` samples at most
+#: (some 40 background pixels an octant: their mean scatters by 0.16 of their σ).
+_BACKGROUND_SAMPLE = 600
+#: Share of the marker's contrast |F - B| that :attr:`DiscFit.background_step_dn` must
+#: exceed for :attr:`DiscFit.lighting_shift_px` to be computed: the background under
+#: lighting the model follows leaves under 0.023 of the contrast on rendered grids
+#: (even, falloff, vignetting, blur) and a median of 0.009-0.031 on the eleven
+#: photographs of ``benchmarks/bench_photos.py`` (their noisiest dots up to 0.6, from
+#: the noise: their shift stays small); the shadow edges that moved rendered
+#: centres by over 0.4 px left 0.27-0.85, the GoPro dot 0.57 px off 0.19.
+UNEVEN_BACKGROUND = 0.05
 
 
 def patch_extent(radius, edge_width) -> float:
@@ -209,6 +227,23 @@ class DiscFit:
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
         shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
         not to its covariance.
+    background_step_dn : float
+        How uneven the background around the marker is beyond the fitted lighting
+        gradient (DN): the spread (largest minus smallest) of the mean residuals of
+        the ring's background pixels (beyond the edge zone, neighbours' and cut pixels
+        left out) in the :data:`BACKGROUND_SECTORS` octants of direction about the
+        centre.
+        A light or shadow edge across the marker, which the linear gradient cannot
+        follow, leaves a band of residuals along it. Sectors with fewer than
+        :data:`_MIN_SECTOR_PX` such pixels are left out; NaN when half of them are.
+    lighting_shift_px : float
+        When that spread exceeds :data:`UNEVEN_BACKGROUND` of the contrast |F - B|:
+        how far (px) the centre moves when the lighting may also vary quadratically
+        over the ring (one Gauss-Newton step from the fit); else NaN. A lighting
+        the model follows leaves it at the noise's level (under 0.01 px on rendered
+        and photographed dots); a shadow's or a light's edge across the marker moves
+        it by tenths of a pixel, and the centre then lies about 2-7 times as far
+        off (rendered grids, edges 0-30 px wide).
     """
 
     x_px: float
@@ -226,6 +261,8 @@ class DiscFit:
     circularity: float
     edge_noise_px: float = float("nan")
     steep_cut: bool = False
+    background_step_dn: float = float("nan")
+    lighting_shift_px: float = float("nan")
 
 
 class _Pixels:
@@ -446,14 +483,83 @@ def _last_examination(cuts, keep, new_keep) -> bool:
     return cuts == 3 or np.array_equal(keep, new_keep)
 
 
-def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> DiscFit:
+def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
+    """:attr:`DiscFit.background_step_dn` of each row of fits `P` (M x 8) from their
+    pixels' image coordinates `xs`, `ys` (px), residuals `resid` (DN) and edge
+    coordinates `u` (rows of N; `valid`: flags of a row's pixels, not its padding):
+    the spread of the mean residual of the background pixels (u <= -3, beyond the
+    edge zone) over the eight octants of direction about the centre, of the
+    octants with :data:`_MIN_SECTOR_PX` of them at least (NaN when fewer than half
+    have: a neighbour or a cut took the rest); rings wider than about
+    :data:`_BACKGROUND_SAMPLE` pixels sampled evenly. All rows at once, in a few
+    array passes: a photograph's grid has hundreds of small markers."""
+    # a large marker's ring (thousands of pixels) is sampled: every k-th pixel,
+    # spread over the ring in raster order, leaves each octant some hundreds
+    step = max(1, xs.shape[1] // _BACKGROUND_SAMPLE)
+    if step > 1:
+        xs, ys, resid, u = xs[:, ::step], ys[:, ::step], resid[:, ::step], u[:, ::step]
+        valid = None if valid is None else valid[:, ::step]
+    m = xs.shape[0]
+    # the octant of each pixel's direction (OpenCV's vectorised atan2, to 0.3°;
+    # its 2π is the last octant's); the pixels that are no background go to a
+    # ninth bin of their row
+    octant = cv2.phase(xs - P[:, :1], ys - P[:, 1:2]).reshape(xs.shape)
+    octant *= (8.0 - 1e-9) / (2.0 * np.pi)
+    octant = octant.astype(np.int64)
+    other = u > -EDGE_ZONE
+    if valid is not None:
+        other |= ~valid
+    np.putmask(octant, other, 8)
+    if m > 1:
+        octant += np.arange(0, 9 * m, 9)[:, None]
+    counts = np.bincount(octant.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
+    means = np.bincount(octant.ravel(), resid.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
+    full = counts >= _MIN_SECTOR_PX
+    means /= np.maximum(counts, 1)
+    means[~full] = np.nan
+    # fmax/fmin pass over NaN
+    spread = np.fmax.reduce(means, axis=1) - np.fmin.reduce(means, axis=1)
+    spread[np.count_nonzero(full, axis=1) < BACKGROUND_SECTORS // 2] = np.nan
+    return spread
+
+
+def _lighting_shift(p, nx, ny, resid, J, u) -> float:
+    """:attr:`DiscFit.lighting_shift_px` of the converged fit `p` (8): the centre's
+    move (px) in one Gauss-Newton step of the model with the lighting also
+    quadratic over the ring, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny²
+    (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`, `u`: the model at `p`);
+    NaN when that model is degenerate."""
+    M = normal_cdf(u)
+    M *= p[5] - p[4]
+    M += p[4]
+    full = np.concatenate([J, np.stack([nx * nx, nx * ny, ny * ny]) * M])
+    try:
+        step = np.linalg.solve(full @ full.T, full @ resid)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    return float(math.hypot(step[0], step[1]))
+
+
+def _background_check(p, step, resid, J, u, nx, ny) -> tuple:
+    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`) of the
+    fit `p` whose background step is `step` (DN, :func:`_background_steps`), from
+    its pixels' lighting frame `nx`, `ny` and the model there (`resid`, `J`, `u`):
+    the shift only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
+    (else NaN)."""
+    if not step > UNEVEN_BACKGROUND * abs(p[5] - p[4]):
+        return step, float("nan")
+    return step, _lighting_shift(p, nx, ny, resid, J, u)
+
+
+def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None, background=None) -> DiscFit:
     """The :class:`DiscFit` of the converged parameters `p` (8) of `n` pixels of
     residual variance `sigma2` (DN²), after the checks every fit makes, in this
     order: the contrast against the noise (:func:`~vision_torsion.ring.check_contrast`),
     the covariance (``inverse()``: (JᵀJ)⁻¹; the block-robust one when ``meat()``
     gives :func:`_block_meat`'s sum, else σ²(JᵀJ)⁻¹), the radius against its σ
     (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
-    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError).
+    (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError);
+    ``background()`` gives :func:`_background_check`.
 
     Raises
     ------
@@ -469,6 +575,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> Di
     if isinstance(found, FitError):
         raise found
     ex, ey, rms, circularity, noise = found
+    step, shift = (float("nan"), float("nan")) if background is None else background()
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -485,6 +592,8 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None) -> Di
         circularity=circularity,
         edge_noise_px=noise,
         steep_cut=bool(steep_cut),
+        background_step_dn=step,
+        lighting_shift_px=shift,
     )
 
 
@@ -669,7 +778,10 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, bl
     sigma2 = ssr / max(n - 8, 1)
     return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(
         p[None], resid[None], J[None], u[None], [n], [ssr])[0], n=n, steep_cut=steep_cut,
-        meat=(lambda: _block_meat(px.xs, px.ys, resid, J, block_px)) if block_px else None)
+        meat=(lambda: _block_meat(px.xs, px.ys, resid, J, block_px)) if block_px else None,
+        background=lambda: _background_check(p, float(_background_steps(p[None], px.xs[None], px.ys[None],
+                                                                           resid[None], u[None])[0]),
+                                             resid, J, u, px.nx, px.ny))
 
 
 class _Scratch(threading.local):
@@ -1035,6 +1147,7 @@ class _RowsFit:
         else:
             diagnostics = _edge_diagnostics(P[good], resid[good], Jm[good], u[good], px.n[good].tolist(),
                                             self.ssr[good].tolist())
+        steps = _background_steps(P, px.xs, px.ys, resid, u, px.mask)
         try:
             inverses = np.linalg.inv(A[good])
         except np.linalg.LinAlgError:
@@ -1045,8 +1158,10 @@ class _RowsFit:
             meat = (lambda: _block_meat(px.xs[k, :nk], px.ys[k, :nk], resid[k, :nk], Jm[k, :, :nk], block_px)
                     ) if block_px else None
             try:
-                out[self.live[k]] = _disc_fit(P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk,
-                                              steep_cut=self.steep_cut[k], meat=meat)
+                out[self.live[k]] = _disc_fit(
+                    P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk, steep_cut=self.steep_cut[k], meat=meat,
+                    background=lambda: _background_check(P[k], float(steps[k]), resid[k, :nk], Jm[k, :, :nk],
+                                                         u[k, :nk], px.nx[k, :nk], px.ny[k, :nk]))
             except FitError as exc:
                 failed[k] = exc
         for k, exc in failed.items():
