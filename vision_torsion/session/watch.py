@@ -718,6 +718,16 @@ class Watcher:
         return (pos + 1 < len(self.rows) and self.rows[pos + 1].orientation_deg == o
                 and (pos + 2 == len(self.rows) or self.rows[pos + 2].orientation_deg != o))
 
+    def _measured(self, orientation: float) -> list[int] | None:
+        """The positions of `orientation`'s photographs from its reference on, in
+        capture order, that the last tick measured (a marker pair and an angle);
+        None while its reference has no marker pair."""
+        ref = self._reference(orientation)
+        if ref is None or self.bound[ref].pair is None:
+            return None
+        return [p for p in sorted(self.bound, key=self.order.index) if self.rows[p].orientation_deg == orientation
+                and p >= ref and self.bound[p].pair is not None and self.bound[p].result is not None]
+
     def _earlier_points(self, orientation: float) -> list[list[StepPoint]]:
         """The step points of the orientations photographed before `orientation`
         (their angles as the last tick measured them)."""
@@ -725,12 +735,9 @@ class Watcher:
         for o in dict.fromkeys(self.rows[p].orientation_deg for p in self.order):
             if o == orientation:
                 break
-            ref = self._reference(o)
-            if ref is not None and self.bound[ref].pair is not None:
-                out.append(self._points([p for p in sorted(self.bound, key=self.order.index)
-                                         if self.rows[p].orientation_deg == o and p >= ref
-                                         and self.bound[p].pair is not None
-                                         and self.bound[p].result is not None]))
+            ok = self._measured(o)
+            if ok is not None:
+                out.append(self._points(ok))
         return out
 
     def _next_reference(self, pos: int, shot) -> int:
@@ -753,13 +760,10 @@ class Watcher:
                 or self.rows[pos + 1].phase != "reference" or row.orientation_deg in self.ended_early):
             return pos
         o = row.orientation_deg
+        ok = self._measured(o)
+        if ok is None or len(ok) < 3 or ok[-1] != pos - 1:
+            return pos
         ref = self._reference(o)
-        if ref is None or self.bound[ref].pair is None:
-            return pos
-        ok = [p for p in sorted(self.bound, key=self.order.index) if self.rows[p].orientation_deg == o
-              and p >= ref and self.bound[p].pair is not None and self.bound[p].result is not None]
-        if len(ok) < 3 or ok[-1] != pos - 1:
-            return pos
         points, loops = self._points(ok), self._earlier_points(o)
         last = points[-1]
         new = pair_angle(self.bound[ref].pair, shot.pair, near_deg=self.sign * last.angle_deg)
