@@ -180,6 +180,14 @@ def test_a_stalled_file_fails_its_row_in_process(rig):
     assert "truncated PNG" in res.failures[0][1] and "reference image" in res.failures[1][1]
 
 
+#: What watch says when the photograph bound to the plan's line 3 (IMG_0002.png) is
+#: replaced after it was measured.
+SECOND_REPLACED = (
+    "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
+    "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
+    "old result is dropped")
+
+
 def test_a_reshot_under_the_same_name_is_measured_again(rig):
     folder, cam, plan, photos = rig
     put(cam, "IMG_0001.png", photos[plan.rows[0]["image"]])
@@ -192,10 +200,7 @@ def test_a_reshot_under_the_same_name_is_measured_again(rig):
         (cam / "IMG_0002.png").write_bytes(cv2.imencode(".png", draw_target(7.0))[1].tobytes())
         os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
         events = run(w, clock)
-        assert messages(events, "replaced") == [
-            "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
-            "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
-            "old result is dropped"]
+        assert messages(events, "replaced") == [SECOND_REPLACED]
         assert [e.file for e in events if e.kind == "shot"] == ["IMG_0002.png"]
         (point,) = [p for p in w.live_points() if p.file == "IMG_0002.png"]
         assert point.angle_deg == w.bound[1].angle != before
@@ -600,10 +605,7 @@ def test_a_bound_photo_replaced_by_an_over_size_file_fails_its_row(rig):
         sparse(cam / "IMG_0002.png", MAX_IMAGE_FILE_BYTES + 1)
         os.utime(cam / "IMG_0002.png", (1.8e9, 1.8e9))
         events = run(w, clock)
-        assert messages(events, "replaced") == [
-            "IMG_0002.png changed after it was measured (a re-shot, or a file written late): "
-            "measured again for line 3: orientation 0, cycle 1, positive_unloading, step 0; its "
-            "old result is dropped"]
+        assert messages(events, "replaced") == [SECOND_REPLACED]
         # the old angle is not kept for a file that is no longer that image
         assert np.isnan(w.bound[1].angle)
         assert w.bound[1].own == [f"not read: IMG_0002.png: {MAX_IMAGE_FILE_BYTES + 1} bytes, larger than an "
