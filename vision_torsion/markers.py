@@ -1274,11 +1274,11 @@ def _refit_crowded(img, blobs: list[Blob], circles: np.ndarray, markers: list, w
     return replaced
 
 
-#: Share of a neighbour's contrast its fitted blurred edge keeps at a marker's own
-#: edge (Φ(-gap/s), gap the px between the two fitted edges, s the neighbour's
-#: fitted edge width) above which the marker is fitted again with that edge taken
-#: off its pixels (:func:`_refit_beside_blurred`): 1 %, a gap under 2.3 edge widths.
-NEIGHBOUR_TAIL = 0.01
+#: Gap (px between two fitted edges) under which a neighbour's blurred edge, in its
+#: own edge widths s, keeps over 1 % of its contrast at a marker's edge (Φ(-2.33) =
+#: 0.01): the marker is then fitted again with that edge taken off its pixels
+#: (:func:`_refit_beside_blurred`).
+NEIGHBOUR_TAIL_WIDTHS = 2.33
 
 #: The message of a marker whose fit with its neighbours' blurred edges taken off
 #: its pixels (:func:`_refit_beside_blurred`) is not ``ok``.
@@ -1301,7 +1301,7 @@ def _neighbour_edges(patch: MarkerPatch, edges: np.ndarray) -> MarkerPatch:
 def _refit_beside_blurred(img, blobs: list[Blob], circles: np.ndarray, markers: list, width: float,
                           block_px=None) -> None:
     """Each ``ok`` marker of `markers` with an ``ok`` neighbour whose fitted blurred
-    edge keeps over :data:`NEIGHBOUR_TAIL` of its contrast at the marker's edge,
+    edge keeps over 1 % of its contrast at the marker's edge (:func:`_blurred_pairs`),
     fitted again (together, in place) with the neighbours' fitted edges taken off
     its pixels (:func:`_neighbour_edges`): the refit replaces it when ``ok``, else
     the marker is ``near_edge`` with the refit's reason
@@ -1313,29 +1313,23 @@ def _refit_beside_blurred(img, blobs: list[Blob], circles: np.ndarray, markers: 
     not follow: a blurred dot 2 px beside another came out 0.5-0.65 px off, ``ok``
     (0.2 px with the neighbour's edge taken off). Each neighbour's own fit gives its
     edge, in one pass: the neighbours' fits carry some of the same pull."""
-    ok = np.array([m.ok and np.isfinite(m.edge_width_px) for m in markers], bool)
-    if np.count_nonzero(ok) < 2:
+    rows = np.flatnonzero([m.ok and np.isfinite(m.edge_width_px) for m in markers])
+    if rows.size < 2:
         return
-    fitted = np.array([(m.x_px, m.y_px, m.radius_px, m.edge_width_px, m.contrast_dn) if k else (np.nan,) * 5
-                       for m, k in zip(markers, ok)])
-    rows = np.flatnonzero(ok)
-    todo, tails = [], []
-    for k in range(0, rows.size, 256):  # 256 markers at a time: a few MB at most
-        near = near_candidates(circles, rows[k : k + 256], width) & ok
-        for i, flags in zip(rows[k : k + 256].tolist(), near):
-            nb = fitted[flags]
-            gap = np.hypot(nb[:, 0] - fitted[i, 0], nb[:, 1] - fitted[i, 1]) - nb[:, 2] - fitted[i, 2]
-            if np.any(normal_cdf(-gap / nb[:, 3]) > NEIGHBOUR_TAIL):
-                todo.append(i)
-                tails.append(nb)
+    fitted = np.array([(markers[i].x_px, markers[i].y_px, markers[i].radius_px, markers[i].edge_width_px,
+                        markers[i].contrast_dn) for i in rows])
+    tails: dict[int, list[int]] = {}
+    for a, b in _blurred_pairs(fitted):
+        tails.setdefault(int(rows[a]), []).append(int(b))
+    todo = sorted(tails)
     if not todo:
         return
     patches, starts, refit = [], [], []
-    for i, prepared, nb in zip(todo, _prepared_all(img, [blobs[i] for i in todo], circles, todo, width), tails):
+    for i, prepared in zip(todo, _prepared_all(img, [blobs[i] for i in todo], circles, todo, width)):
         if isinstance(prepared, FitError):
             continue
         patch, (cx, cy, r, (B, F)) = prepared
-        patches.append(_neighbour_edges(patch, nb))
+        patches.append(_neighbour_edges(patch, fitted[tails[i]]))
         starts.append((cx, cy, r, B, F))
         refit.append(i)
     for i, patch, fit in zip(refit, patches, fit_discs(patches, starts, edge_width=width, block_px=block_px)):
@@ -1343,3 +1337,25 @@ def _refit_beside_blurred(img, blobs: list[Blob], circles: np.ndarray, markers: 
                  else _whole(_pixels_marker(fit, patch=patch), img.shape))
         markers[i] = again if again.ok else _near_edge(markers[i], BLURRED_NEIGHBOUR_MESSAGE.format(
             reason=again.message))
+
+
+def _blurred_pairs(fitted: np.ndarray):
+    """The pairs (a, b) of rows of `fitted` (fitted markers' x, y, radius, edge width
+    in px, and contrast) whose fitted edges are less than
+    :data:`NEIGHBOUR_TAIL_WIDTHS` of b's edge width apart: b's blurred edge keeps
+    over 1 % of its contrast at a's. Swept along x (sorted), all rows at once per
+    offset in that order: a photograph's grid has thousands of markers."""
+    order = np.argsort(fitted[:, 0], kind="stable")
+    f = fitted[order]
+    reach = 2.0 * f[:, 2].max() + NEIGHBOUR_TAIL_WIDTHS * f[:, 3].max()
+    pairs = []
+    for k in range(1, len(f)):
+        a, b = f[:-k], f[k:]
+        close = b[:, 0] - a[:, 0] < reach
+        if not close.any():
+            break  # x sorted: farther offsets are farther apart
+        gap = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]) - a[:, 2] - b[:, 2]
+        for one, other, s in ((order[:-k], order[k:], b[:, 3]), (order[k:], order[:-k], a[:, 3])):
+            hit = close & (gap < NEIGHBOUR_TAIL_WIDTHS * s)
+            pairs.extend(zip(one[hit].tolist(), other[hit].tolist()))
+    return pairs
