@@ -1074,7 +1074,9 @@ def find_marker_list(
     vectorised across markers (:func:`~vision_torsion.pixelfit.fit_discs`, the same
     fit as :func:`~vision_torsion.pixelfit.fit_disc` to rounding): a photograph of a
     dot grid has hundreds of small markers. With `enough`, one by one, as each
-    answer may end the search.
+    answer may end the search. Without `enough`, a marker beside a neighbour whose
+    fitted blurred edge reaches its own is then fitted again with that edge taken
+    off its pixels (:func:`_refit_beside_blurred`).
     """
     r_min, r_max = _radius_range(img, settings)
     fit = settings.fit
@@ -1094,6 +1096,8 @@ def find_marker_list(
             if marker.ok:
                 width = marker.edge_width_px
         markers.append(marker)
+    if enough is None and fit == "pixels":
+        _refit_beside_blurred(img, blobs, circles, markers, width, block_px)
     return markers
 
 
