@@ -92,8 +92,9 @@ def _region_scene(radius, blur, gap, seed):
     "not solved: a dark region's blurred edge reaching the dot's edge, which the model's "
     "constant-plus-gradient background cannot follow, pulls the dot 3.0 px (0.58 px at a 4 px "
     "gap, 0.30 at 6), ok. Leaving out a quarter of the ring (or a pair of opposite quarters) "
-    "moves its centre 1.2-1.9 px, but photographed dots within 0.2 px of the ML fit move by up to "
-    "0.7-5.7 px so, at as many noise σ"))
+    "moves its centre 1.2-1.9 px (7-16 noise σ), but photographed dots within 0.35 px of the ML "
+    "fit move as much (up to 1-8 px, 16-30 σ): their edges are no model edge all round; and no "
+    "pixel of the background beyond the fitted edge is left at the marker's level"))
 def test_a_dot_2_px_from_a_dark_region_blurred_3_5_px_is_not_ok_far_off():
     """The case the issue names, the worst of the rendered sweep: ``ok`` within the
     bound, or not ``ok``."""
