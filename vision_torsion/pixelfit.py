@@ -519,7 +519,7 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     means[~full] = np.nan
     # fmax/fmin pass over NaN
     spread = np.fmax.reduce(means, axis=1) - np.fmin.reduce(means, axis=1)
-    spread[np.count_nonzero(full, axis=1) < BACKGROUND_SECTORS // 2] = np.nan
+    spread[full.sum(axis=1) < BACKGROUND_SECTORS // 2] = np.nan
     return spread
 
 
@@ -926,10 +926,16 @@ def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
     g_cos, g_sin, g = flat.take(jat), flat.take(jat + size), flat.take(jat + 2 * size)
     rz = resid.reshape(-1).take(at)
     psi = np.arctan2(g_sin, g_cos)
-    dark = P[:, 5] < P[:, 4]
-    if dark.any():
-        psi += np.pi * dark[zr]
-    where = ((psi + np.pi) * (per_row / (2 * np.pi))).astype(np.int64) % per_row
+    if m == 1:
+        if P[0, 5] < P[0, 4]:
+            psi += np.pi
+    else:
+        dark = P[:, 5] < P[:, 4]
+        if dark.any():
+            psi += np.pi * dark[zr]
+    psi += np.pi
+    psi *= per_row / (2 * np.pi)
+    where = psi.astype(np.int64) % per_row
     if m > 1:
         where += zr * width
     den, num, cs, sn = (np.bincount(where, w, minlength=m * width) for w in (g * g, g * rz, g * g_cos, g * g_sin))
@@ -953,7 +959,7 @@ def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
     zone_n = [at.size] if m == 1 else np.bincount(zr, minlength=m).tolist()
     ends = list(accumulate([sel.size] if m == 1 else np.bincount(sr, minlength=m).tolist()))
     starts = [0] + ends[:-1]
-    need = sectors_needed(np.array(n_sec)).tolist()
+    need = [sectors_needed(n_sec[0])] if m == 1 else sectors_needed(np.array(n_sec)).tolist()
     out = []
     for k, (lo, hi, R, n_k, ssr_k) in enumerate(zip(starts, ends, radii, n, ssr)):
         kept = hi - lo
