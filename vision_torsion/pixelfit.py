@@ -272,8 +272,11 @@ class _Pixels:
         self.index = index
         self.xs, self.ys = patch.coordinates(index)
         self.vals = patch.values.take(index)
-        self.nx = (self.xs - x0) / r0
-        self.ny = (self.ys - y0) / r0
+        # in place: the same values as (xs - x0) / r0, one array less each
+        self.nx = np.subtract(self.xs, x0)
+        self.nx /= r0
+        self.ny = np.subtract(self.ys, y0)
+        self.ny /= r0
 
     def subset(self, keep):
         out = object.__new__(_Pixels)

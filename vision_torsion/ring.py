@@ -57,6 +57,10 @@ __all__ = [
 INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
 
+#: Abramowitz & Stegun 7.1.26's p for erf, scaled to Φ's argument (u/√2).
+_CDF_P = 0.3275911 / np.sqrt(2.0)
+
+
 def normal_cdf(u, gauss=None):
     """Standard normal distribution function Φ(u), to 1e-7 (Abramowitz & Stegun 7.1.26).
 
@@ -74,7 +78,7 @@ def normal_cdf(u, gauss=None):
     # in place: on a few thousand values each numpy call costs about as much as
     # its arithmetic
     t = np.abs(u)
-    t *= 0.3275911 / np.sqrt(2.0)
+    t *= _CDF_P
     t += 1.0
     np.reciprocal(t, out=t)
     tail = t * 0.5307027145
