@@ -179,10 +179,12 @@ _BACKGROUND_SAMPLE = 600
 #: exceed for :attr:`DiscFit.lighting_shift_px` to be computed: the background under
 #: lighting the model follows leaves under 0.023 of the contrast on rendered grids
 #: (even, falloff, vignetting, blur) and a median of 0.009-0.031 on the eleven
-#: photographs of ``benchmarks/bench_photos.py`` (their noisiest dots up to 0.6, from
-#: the noise: their shift stays small); the shadow edges that moved rendered
-#: centres by over 0.4 px left 0.27-0.85, the GoPro dot 0.57 px off 0.19.
-UNEVEN_BACKGROUND = 0.05
+#: photographs of ``benchmarks/bench_photos.py``; the shadow edges that moved
+#: rendered centres by over 0.1 px left 0.09-0.85 (``benchmarks/bench_light_edge.py``),
+#: the GoPro dot 0.57 px off 0.19. Below 0.1 the curved lighting's terms, odd about
+#: the centre, take up an uneven print or optics around a photographed dot instead
+#: (a move of 0.3-0.6 px on UCL right 0's dots of 15 px radius at 0.05-0.09).
+UNEVEN_BACKGROUND = 0.1
 
 
 def patch_extent(radius, edge_width) -> float:
@@ -243,14 +245,18 @@ class DiscFit:
         A light or shadow edge across the marker, which the linear gradient cannot
         follow, leaves a band of residuals along it. Sectors with fewer than
         :data:`_MIN_SECTOR_PX` such pixels are left out; NaN when half of them are.
-    lighting_shift_px : float
+    lighting_shift_px, lighting_shift_std_px : float
         When that spread exceeds :data:`UNEVEN_BACKGROUND` of the contrast |F - B|:
-        how far (px) the centre moves when the lighting may also vary quadratically
-        over the ring (one Gauss-Newton step from the fit); else NaN. A lighting
-        the model follows leaves it at the noise's level (under 0.01 px on rendered
-        and photographed dots); a shadow's or a light's edge across the marker moves
-        it by tenths of a pixel, and the centre then lies about 2-7 times as far
-        off (rendered grids, edges 0-30 px wide).
+        how far (px) the centre moves under the lighting the ring's pixels away
+        from the edge zone show when it may also curve, quadratically and with a
+        gradient that changes with the distance from the centre
+        (:func:`_lighting_shift`), and that move's standard deviation from the
+        pixel noise (px); else NaN. A lighting the model follows leaves it at the
+        noise's level; a shadow's or a light's edge across the marker leaves the
+        centre 0.5-2.2 times that move off (5-95 %; rendered markers of 8-35 px
+        radius, edges 0-30 px wide 0-45 px from the centre,
+        ``benchmarks/bench_light_edge.py``), a hard edge near the marker's rim
+        a quarter of it (0.13 px for a move of 0.57 px).
     """
 
     x_px: float
@@ -270,6 +276,7 @@ class DiscFit:
     steep_cut: bool = False
     background_step_dn: float = float("nan")
     lighting_shift_px: float = float("nan")
+    lighting_shift_std_px: float = float("nan")
 
 
 class _Pixels:
@@ -530,32 +537,68 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     return spread
 
 
-def _lighting_shift(p, nx, ny, resid, J, u) -> float:
-    """:attr:`DiscFit.lighting_shift_px` of the converged fit `p` (8): the centre's
-    move (px) in one Gauss-Newton step of the model with the lighting also
-    quadratic over the ring, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny²
-    (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`, `u`: the model at `p`);
-    NaN when that model is degenerate."""
-    M = normal_cdf(u)
-    M *= p[5] - p[4]
-    M += p[4]
-    full = np.concatenate([J, np.stack([nx * nx, nx * ny, ny * ny]) * M])
+def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
+    """(:attr:`DiscFit.lighting_shift_px`, :attr:`DiscFit.lighting_shift_std_px`) of a
+    converged fit: how far (px) the centre moves when the lighting may also
+    curve, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny² + (dx·nx + dy·ny)·(ρ - 1)
+    with ρ = √(nx² + ny²) (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`,
+    `u`: the fitted model, `M` its unlit image B + (F - B)·Φ(u)), the added terms'
+    coefficients taken from the residuals of the pixels away from the edge zone
+    only; and that move's standard deviation (px) from the pixel noise alone; NaNs
+    when those terms are degenerate.
+
+    The quadratic terms are even about the centre, the centre's derivatives odd:
+    they cannot see a shadow's edge through the centre, whose first harmonic about
+    the centre rises to its full size within a few px of the edge's line and then
+    stays, unlike a gradient's, which grows with the radius. The gradient fitted
+    to the ring misses it at the marker's edge, which moves the centre; the
+    (ρ - 1) terms, fitted to the background beyond the edge zone and the inside,
+    measure that miss, and the centre's linear response to it is the move (an
+    edge through the centre: 0.1-1.1 px off, the quadratic move under 0.04 px;
+    rendered). The edge zone gives no evidence: an edge that is not the model's
+    (sharpening, an asymmetric blur) leaves misfits there that these terms,
+    collinear with the centre, would take up. The noise is σ² g (Qᵀ Q)⁻¹ gᵀ along
+    the move, g the centre's response to the terms and Q their part the fit's own
+    parameters leave, on those pixels (σ² their residual variance)."""
+    rho = np.hypot(nx, ny) - 1.0
+    curved = np.stack([nx * nx, nx * ny, ny * ny, nx * rho, ny * rho]) * M
     try:
-        step = np.linalg.solve(full @ full.T, full @ resid)
+        inv = np.linalg.inv(J @ J.T)
+        # the curved terms as the residuals hold them (what the fit's own
+        # parameters leave of them), on the pixels away from the edge zone: an
+        # edge that is not the model's (sharpening, an asymmetric blur) leaves
+        # misfits there that these terms, collinear with the centre, would take up
+        left = curved - (curved @ J.T) @ inv @ J
+        off = ~in_edge_zone(u)
+        lo = left[:, off]
+        weights = np.linalg.inv(lo @ lo.T)
     except np.linalg.LinAlgError:
-        return float("nan")
-    return float(math.hypot(step[0], step[1]))
+        return float("nan"), float("nan")
+    # the centre's response to the lighting those pixels show
+    gain = (inv @ (J @ curved.T))[:2]
+    move = gain @ (weights @ (lo @ resid[off]))
+    shift = math.hypot(move[0], move[1])
+    if not shift > 0:
+        return shift, float("nan")
+    along = move / shift
+    sigma2 = float(resid[off] @ resid[off]) / max(int(np.count_nonzero(off)) - 13, 1)
+    var = sigma2 * float(along @ gain @ weights @ gain.T @ along)
+    return float(shift), math.sqrt(max(var, 0.0))
 
 
 def _background_check(p, step, resid, J, u, nx, ny) -> tuple:
-    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`) of the
+    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`,
+    :attr:`DiscFit.lighting_shift_std_px`) of the
     fit `p` whose background step is `step` (DN, :func:`_background_steps`), from
     its pixels' lighting frame `nx`, `ny` and the model there (`resid`, `J`, `u`):
-    the shift only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
-    (else NaN)."""
+    the shifts only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
+    (else NaNs)."""
     if not step > UNEVEN_BACKGROUND * abs(p[5] - p[4]):
-        return step, float("nan")
-    return step, _lighting_shift(p, nx, ny, resid, J, u)
+        return step, float("nan"), float("nan")
+    M = normal_cdf(u)
+    M *= p[5] - p[4]
+    M += p[4]
+    return (step, *_lighting_shift(nx, ny, resid, J, u, M))
 
 
 def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, background=None) -> DiscFit:
@@ -584,7 +627,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, 
     if isinstance(found, FitError):
         raise found
     ex, ey, rms, circularity, noise = found
-    step, shift = (float("nan"), float("nan")) if background is None else background()
+    step, shift, shift_std = (float("nan"),) * 3 if background is None else background()
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -603,6 +646,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, 
         steep_cut=bool(steep_cut),
         background_step_dn=step,
         lighting_shift_px=shift,
+        lighting_shift_std_px=shift_std,
     )
 
 
