@@ -554,7 +554,7 @@ def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
     to the ring misses it at the marker's edge, which moves the centre; the
     (ρ - 1) terms, fitted to the background beyond the edge zone and the inside,
     measure that miss, and the centre's linear response to it is the move (an
-    edge through the centre: 0.1-1.1 px off, the quadratic move under 0.04 px;
+    edge through the centre: 0.1-1.1 px off, the quadratic move under 0.06 px;
     rendered). The edge zone gives no evidence: an edge that is not the model's
     (sharpening, an asymmetric blur) leaves misfits there that these terms,
     collinear with the centre, would take up. The noise is σ² g (Qᵀ Q)⁻¹ gᵀ along
