@@ -33,8 +33,15 @@ G/(G-1)·(n-1)/(n-8) (G blocks, n pixels); it is σ²(JᵀJ)⁻¹ in expectation
 errors are white (scatter/σ 1.04, 1.03 and 0.99 without JPEG, at quality 90 and
 75 on the marker above). A ring whose centre is informed by fewer than
 :data:`MIN_BLOCKS` blocks (counted by their shares of the information, (Σw)²/Σw²:
-the blocks along the edge) keeps σ²(JᵀJ)⁻¹: so few would give a covariance as
-uncertain as the correction.
+the blocks along the edge; markers under ~30 px radius), whose few g gᵀ would
+give a covariance as uncertain as the correction, takes the sandwich
+(JᵀJ)⁻¹ JΩJᵀ (JᵀJ)⁻¹ of a noise model instead: independent between blocks, and
+within one a covariance Ω that depends on the lag between two pixels only, its
+values the residuals' mean products at each lag over all the blocks along the
+edge, corrected for what the fit absorbs of them (:func:`_lag_covariance`).
+On rendered rings of markers of 5-30 px radius at quality 75-95 the centres'
+scatter is then 0.9-1.1x their σ (1.2-1.7x with σ²(JᵀJ)⁻¹;
+``benchmarks/bench_jpeg_sigma.py``).
 The fit converges once a step moves the centre by less than 1e-3 px and the edge
 width by less than 0.01 px. The ring of pixels is the edge zone ±3s, 0.5 px more
 inside and 7.5 px more of background, which pins the lighting plane away from the
@@ -172,10 +179,12 @@ _BACKGROUND_SAMPLE = 600
 #: exceed for :attr:`DiscFit.lighting_shift_px` to be computed: the background under
 #: lighting the model follows leaves under 0.023 of the contrast on rendered grids
 #: (even, falloff, vignetting, blur) and a median of 0.009-0.031 on the eleven
-#: photographs of ``benchmarks/bench_photos.py`` (their noisiest dots up to 0.6, from
-#: the noise: their shift stays small); the shadow edges that moved rendered
-#: centres by over 0.4 px left 0.27-0.85, the GoPro dot 0.57 px off 0.19.
-UNEVEN_BACKGROUND = 0.05
+#: photographs of ``benchmarks/bench_photos.py``; the shadow edges that moved
+#: rendered centres by over 0.1 px left 0.09-0.85 (``benchmarks/bench_light_edge.py``),
+#: the GoPro dot 0.57 px off 0.19. Below 0.1 the curved lighting's terms, odd about
+#: the centre, take up an uneven print or optics around a photographed dot instead
+#: (a move of 0.3-0.6 px on UCL right 0's dots of 15 px radius at 0.05-0.09).
+UNEVEN_BACKGROUND = 0.1
 
 
 def patch_extent(radius, edge_width) -> float:
@@ -236,14 +245,18 @@ class DiscFit:
         A light or shadow edge across the marker, which the linear gradient cannot
         follow, leaves a band of residuals along it. Sectors with fewer than
         :data:`_MIN_SECTOR_PX` such pixels are left out; NaN when half of them are.
-    lighting_shift_px : float
+    lighting_shift_px, lighting_shift_std_px : float
         When that spread exceeds :data:`UNEVEN_BACKGROUND` of the contrast |F - B|:
-        how far (px) the centre moves when the lighting may also vary quadratically
-        over the ring (one Gauss-Newton step from the fit); else NaN. A lighting
-        the model follows leaves it at the noise's level (under 0.01 px on rendered
-        and photographed dots); a shadow's or a light's edge across the marker moves
-        it by tenths of a pixel, and the centre then lies about 2-7 times as far
-        off (rendered grids, edges 0-30 px wide).
+        how far (px) the centre moves under the lighting the ring's pixels away
+        from the edge zone show when it may also curve, quadratically and with a
+        gradient that changes with the distance from the centre
+        (:func:`_lighting_shift`), and that move's standard deviation from the
+        pixel noise (px); else NaN. A lighting the model follows leaves it at the
+        noise's level; a shadow's or a light's edge across the marker leaves the
+        centre 0.5-2.2 times that move off (5-95 %; rendered markers of 8-35 px
+        radius, edges 0-30 px wide 0-45 px from the centre,
+        ``benchmarks/bench_light_edge.py``), a hard edge near the marker's rim
+        a quarter of it (0.13 px for a move of 0.57 px).
     """
 
     x_px: float
@@ -263,6 +276,7 @@ class DiscFit:
     steep_cut: bool = False
     background_step_dn: float = float("nan")
     lighting_shift_px: float = float("nan")
+    lighting_shift_std_px: float = float("nan")
 
 
 class _Pixels:
@@ -526,40 +540,77 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     return spread
 
 
-def _lighting_shift(p, nx, ny, resid, J, u) -> float:
-    """:attr:`DiscFit.lighting_shift_px` of the converged fit `p` (8): the centre's
-    move (px) in one Gauss-Newton step of the model with the lighting also
-    quadratic over the ring, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny²
-    (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`, `u`: the model at `p`);
-    NaN when that model is degenerate."""
-    M = normal_cdf(u)
-    M *= p[5] - p[4]
-    M += p[4]
-    full = np.concatenate([J, np.stack([nx * nx, nx * ny, ny * ny]) * M])
+def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
+    """(:attr:`DiscFit.lighting_shift_px`, :attr:`DiscFit.lighting_shift_std_px`) of a
+    converged fit: how far (px) the centre moves when the lighting may also
+    curve, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny² + (dx·nx + dy·ny)·(ρ - 1)
+    with ρ = √(nx² + ny²) (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`,
+    `u`: the fitted model, `M` its unlit image B + (F - B)·Φ(u)), the added terms'
+    coefficients taken from the residuals of the pixels away from the edge zone
+    only; and that move's standard deviation (px) from the pixel noise alone; NaNs
+    when those terms are degenerate.
+
+    The quadratic terms are even about the centre, the centre's derivatives odd:
+    they cannot see a shadow's edge through the centre, whose first harmonic about
+    the centre rises to its full size within a few px of the edge's line and then
+    stays, unlike a gradient's, which grows with the radius. The gradient fitted
+    to the ring misses it at the marker's edge, which moves the centre; the
+    (ρ - 1) terms, fitted to the background beyond the edge zone and the inside,
+    measure that miss, and the centre's linear response to it is the move (an
+    edge through the centre: 0.1-1.1 px off, the quadratic move under 0.06 px;
+    rendered). The edge zone gives no evidence: an edge that is not the model's
+    (sharpening, an asymmetric blur) leaves misfits there that these terms,
+    collinear with the centre, would take up. The noise is σ² g (Qᵀ Q)⁻¹ gᵀ along
+    the move, g the centre's response to the terms and Q their part the fit's own
+    parameters leave, on those pixels (σ² their residual variance)."""
+    rho = np.hypot(nx, ny) - 1.0
+    curved = np.stack([nx * nx, nx * ny, ny * ny, nx * rho, ny * rho]) * M
     try:
-        step = np.linalg.solve(full @ full.T, full @ resid)
+        inv = np.linalg.inv(J @ J.T)
+        # the curved terms as the residuals hold them (what the fit's own
+        # parameters leave of them), on the pixels away from the edge zone: an
+        # edge that is not the model's (sharpening, an asymmetric blur) leaves
+        # misfits there that these terms, collinear with the centre, would take up
+        left = curved - (curved @ J.T) @ inv @ J
+        off = ~in_edge_zone(u)
+        lo = left[:, off]
+        weights = np.linalg.inv(lo @ lo.T)
     except np.linalg.LinAlgError:
-        return float("nan")
-    return float(math.hypot(step[0], step[1]))
+        return float("nan"), float("nan")
+    # the centre's response to the lighting those pixels show
+    gain = (inv @ (J @ curved.T))[:2]
+    move = gain @ (weights @ (lo @ resid[off]))
+    shift = math.hypot(move[0], move[1])
+    if not shift > 0:
+        return shift, float("nan")
+    along = move / shift
+    sigma2 = float(resid[off] @ resid[off]) / max(int(np.count_nonzero(off)) - 13, 1)
+    var = sigma2 * float(along @ gain @ weights @ gain.T @ along)
+    return float(shift), math.sqrt(max(var, 0.0))
 
 
 def _background_check(p, step, resid, J, u, nx, ny) -> tuple:
-    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`) of the
+    """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`,
+    :attr:`DiscFit.lighting_shift_std_px`) of the
     fit `p` whose background step is `step` (DN, :func:`_background_steps`), from
     its pixels' lighting frame `nx`, `ny` and the model there (`resid`, `J`, `u`):
-    the shift only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
-    (else NaN)."""
+    the shifts only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
+    (else NaNs)."""
     if not step > UNEVEN_BACKGROUND * abs(p[5] - p[4]):
-        return step, float("nan")
-    return step, _lighting_shift(p, nx, ny, resid, J, u)
+        return step, float("nan"), float("nan")
+    M = normal_cdf(u)
+    M *= p[5] - p[4]
+    M += p[4]
+    return (step, *_lighting_shift(nx, ny, resid, J, u, M))
 
 
-def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None, background=None) -> DiscFit:
+def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, background=None) -> DiscFit:
     """The :class:`DiscFit` of the converged parameters `p` (8) of `n` pixels of
     residual variance `sigma2` (DN²), after the checks every fit makes, in this
     order: the contrast against the noise (:func:`~vision_torsion.ring.check_contrast`),
-    the covariance (``inverse()``: (JᵀJ)⁻¹; the block-robust one when ``meat()``
-    gives :func:`_block_meat`'s sum, else σ²(JᵀJ)⁻¹), the radius against its σ
+    the covariance (``inverse()``: (JᵀJ)⁻¹; the block-robust one when
+    ``block_cov(inverse())`` gives :func:`_block_covariance`'s, else σ²(JᵀJ)⁻¹), the
+    radius against its σ
     (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
     (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError);
     ``background()`` gives :func:`_background_check`.
@@ -571,14 +622,15 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None, backg
     """
     check_contrast(p[5] - p[4], sigma2)
     inv = inverse()
-    blocks = None if meat is None else meat()
-    cov = sigma2 * inv if blocks is None else inv @ blocks @ inv
+    cov = None if block_cov is None else block_cov(inv)
+    if cov is None:
+        cov = sigma2 * inv
     check_radius(p[2], cov[2, 2])
     found = diagnostics()
     if isinstance(found, FitError):
         raise found
     ex, ey, rms, circularity, noise = found
-    step, shift = (float("nan"), float("nan")) if background is None else background()
+    step, shift, shift_std = (float("nan"),) * 3 if background is None else background()
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -597,6 +649,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, meat=None, backg
         steep_cut=bool(steep_cut),
         background_step_dn=step,
         lighting_shift_px=shift,
+        lighting_shift_std_px=shift_std,
     )
 
 
@@ -621,13 +674,19 @@ def _inverse(A, *, lapack=False):
     return inverse
 
 
-def _block_meat(xs, ys, resid, J, block_px: int):
-    """Σ g gᵀ (8 x 8) over the `block_px` x `block_px` blocks of the image's grid
-    (block edges at multiples of `block_px` from its top-left pixel) that the pixels
-    at (`xs`, `ys`) (image px, N) cover, g = Σ_block J·r of their residuals `resid`
-    (N) and Jacobian `J` (8 x N), times G/(G-1)·(n-1)/(n-8); None when fewer than
-    :data:`MIN_BLOCKS` blocks inform the centre (see the module docstring)."""
+def _block_covariance(xs, ys, resid, J, block_px: int, inv):
+    """The covariance (px², and the other parameters' units) of a fit whose pixels'
+    errors are independent between the `block_px` x `block_px` blocks of the image's
+    grid (block edges at multiples of `block_px` from its top-left pixel), from the
+    pixels at (`xs`, `ys`) (image px, N), their residuals `resid` (N), the Jacobian
+    `J` (8 x N) and `inv` = (JᵀJ)⁻¹: the sandwich ``inv @ meat @ inv``, the meat
+    Σ g gᵀ over the blocks (g = Σ_block J·r) times G/(G-1)·(n-1)/(n-8) (G blocks, n
+    pixels) when :data:`MIN_BLOCKS` blocks or more inform the centre, else
+    :func:`_lag_covariance` (its 3 x 3 of x, y, R); None for 8 pixels or fewer
+    (see the module docstring)."""
     n = resid.size
+    if n <= 8:
+        return None
     bx = np.floor_divide(xs, block_px).astype(np.int64)
     by = np.floor_divide(ys, block_px).astype(np.int64)
     bx -= bx.min()
@@ -637,11 +696,105 @@ def _block_meat(xs, ys, resid, J, block_px: int):
     # share of the centre's information, (Σ w)² / Σ w²
     info = np.bincount(ids, weights=J[0] * J[0] + J[1] * J[1])
     informing = info.sum() ** 2 / max(float(info @ info), 1e-300)
-    if informing < MIN_BLOCKS or n <= 8:
-        return None
+    if informing < MIN_BLOCKS:
+        return _lag_covariance(xs, ys, resid, J, block_px, inv)
     blocks = int(np.count_nonzero(np.bincount(ids)))
     g = np.stack([np.bincount(ids, weights=J[j] * resid) for j in range(J.shape[0])])
-    return (g @ g.T) * (blocks / (blocks - 1) * (n - 1) / (n - 8))
+    return inv @ ((g @ g.T) * (blocks / (blocks - 1) * (n - 1) / (n - 8))) @ inv
+
+
+def _lag_index(block_px: int) -> np.ndarray:
+    """(b², b²) index |dy|·b + |dx| of the lag (dx, dy) between the pixels of one
+    b x b block (in raster order), b = `block_px`."""
+    y, x = np.divmod(np.arange(block_px * block_px), block_px)
+    return np.abs(y[None, :] - y[:, None]) * block_px + np.abs(x[None, :] - x[:, None])
+
+
+def _psd(matrix):
+    """The symmetric `matrix` with its negative eigenvalues set to 0: the nearest
+    covariance matrix (in the Frobenius norm)."""
+    values, vectors = np.linalg.eigh(matrix)
+    return (vectors * np.maximum(values, 0.0)) @ vectors.T
+
+
+#: Rounds of :func:`_lag_covariance`'s correction of the lag covariances for the
+#: residuals' loss to the fit; each leaves about the share of the error the fit
+#: absorbs of the previous one's (~0.4 on a 5 px disc blurred 2.5 px, less on
+#: larger or sharper ones).
+_LAG_ROUNDS = 3
+
+
+def _lag_covariance(xs, ys, resid, J, block_px: int, inv, *, project=False):
+    """The 3 x 3 covariance (px²) of (x, y, R) of a fit on the pixels at (`xs`, `ys`)
+    (image px, N), with residuals `resid` (N), Jacobian `J` (8 x N) and
+    `inv` = (JᵀJ)⁻¹, when the pixels' errors are independent between the
+    `block_px` x `block_px` blocks of the image's grid and, within one, have a
+    covariance Ω that depends on the lag between two pixels only: the sandwich
+    (JᵀJ)⁻¹ JΩJᵀ (JᵀJ)⁻¹. None when that is not positive.
+
+    The noise model of a JPEG: each block is quantised alone, its DCT coefficients'
+    errors independent, so that within a block the covariance of two pixels,
+    averaged over their places, depends on |dx| and |dy| only. γ(|dx|, |dy|) is
+    the mean of r_p·r_q over the pairs of pixels at that lag within one block, each
+    block's pairs weighted by the block's share of the centre's information
+    (Σ ∂I/∂cx² + ∂I/∂cy² over its pixels): the blocks along the edge carry the
+    centre, and their error (the edge's own quantisation) is larger than a flat
+    block's, whose fine detail the quantiser sets to zero. Pooled over the blocks
+    and the pairs at each lag, γ is as steady on a ring of a few blocks as σ²,
+    where the sum of g gᵀ over those blocks (:func:`_block_covariance`) is not.
+
+    Residuals are not errors: r = (I - H)e (H = Jᵀ(JᵀJ)⁻¹J), and on a small marker
+    the fit absorbs much of an error smooth over a block (a third, on a 5 px disc
+    blurred 2.5 px). The lag means are corrected for that (the expectation of
+    r_p·r_q is that of (I - H)Ω(I - H), linear in γ): :data:`_LAG_ROUNDS` rounds of
+    γ ← (observed + its expected loss under the last γ) / pairs. Ω is the lag
+    covariances as they come, whose noise the sandwich averages; when that gives a
+    variance of x, y or R that is not positive (a γ of a few blocks need not be a
+    covariance), each round's Ω is projected on the covariance matrices
+    (:func:`_psd`, `project`), which biases it up a little."""
+    b = int(block_px)
+    nb = b * b
+    bx = np.floor_divide(xs, b).astype(np.int64)
+    by = np.floor_divide(ys, b).astype(np.int64)
+    ids = (by - by.min()) * (int(bx.max() - bx.min()) + 1) + (bx - bx.min())
+    ids = (np.cumsum(np.bincount(ids) > 0) - 1)[ids]  # the blocks the ring touches, numbered 0 … G-1
+    g = int(ids.max()) + 1
+    at = ids * nb + ((ys - by * b) * b + (xs - bx * b)).astype(np.int64)  # block, then its pixel
+    rows = np.zeros((2 + J.shape[0], g * nb))  # residual, presence, Jacobian: block-major rows
+    rows[0, at], rows[1, at], rows[2:, at] = resid, 1.0, J
+    rows = rows.reshape(rows.shape[0], g, nb)
+    r, present, jb = rows[0], rows[1], rows[2:]
+    weight = np.bincount(ids, weights=J[0] * J[0] + J[1] * J[1], minlength=g)
+    lag = _lag_index(b)
+    flat = lag.ravel()
+    observed = np.bincount(flat, ((r * weight[:, None]).T @ r).ravel(), minlength=nb)
+    pairs = np.bincount(flat, ((present * weight[:, None]).T @ present).ravel(), minlength=nb)
+    # a lag no pair of a weighted block has takes no covariance
+    some = pairs > 1e-12 * pairs.max()
+    pairs = np.where(some, pairs, 1.0)
+    gamma = np.where(some, observed / pairs, 0.0)
+    k = jb.shape[0]
+    jflat = jb.reshape(k, g * nb)
+    # the blocks of the residual products that count (the centre's information's),
+    # their Jacobian and that times their weight
+    edge = np.flatnonzero(weight > 1e-9 * weight.max())
+    j_edge = jb[:, edge].reshape(k, edge.size * nb)
+    weighted = (jb[:, edge] * weight[None, edge, None]).reshape(k * edge.size, nb)
+    for done in range(_LAG_ROUNDS + 1):
+        omega = _psd(gamma[lag]) if project else gamma[lag]
+        j_omega = (jb @ omega) * present  # JΩ within each block, on the ring's pixels
+        cov = inv @ (j_omega.reshape(k, g * nb) @ jflat.T) @ inv
+        if done == _LAG_ROUNDS:
+            break
+        # the weighted lag sums of HΩ + ΩH - HΩH (H = Jᵀ inv J; HΩH = Jᵀ cov J),
+        # what the residual products lose: h + hᵀ with h = Σ w Jᵀ(inv JΩ - cov J / 2)
+        h = weighted.T @ (inv @ j_omega[:, edge].reshape(k, -1) - 0.5 * (cov @ j_edge)).reshape(k * edge.size, nb)
+        lost = np.bincount(flat, (h + h.T).ravel(), minlength=nb)
+        gamma = np.where(some, (observed + lost) / pairs, 0.0)
+    cov = cov[:3, :3]
+    if np.all(np.diag(cov) > 0):
+        return cov
+    return None if project else _lag_covariance(xs, ys, resid, J, block_px, inv, project=True)
 
 
 def fit_disc(
@@ -781,7 +934,7 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, bl
     sigma2 = ssr / max(n - 8, 1)
     return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(
         p[None], resid[None], J[None], u[None], [n], [ssr])[0], n=n, steep_cut=steep_cut,
-        meat=(lambda: _block_meat(px.xs, px.ys, resid, J, block_px)) if block_px else None,
+        block_cov=(lambda inv: _block_covariance(px.xs, px.ys, resid, J, block_px, inv)) if block_px else None,
         background=lambda: _background_check(p, float(_background_steps(p[None], px.xs[None], px.ys[None],
                                                                            resid[None], u[None])[0]),
                                              resid, J, u, px.nx, px.ny))
@@ -1164,11 +1317,12 @@ class _RowsFit:
         for j, k in enumerate(good):
             inverse = (lambda: _inverse(A[k], lapack=True)) if inverses is None else (lambda: inverses[j])
             nk = px.n[k]
-            meat = (lambda: _block_meat(px.xs[k, :nk], px.ys[k, :nk], resid[k, :nk], Jm[k, :, :nk], block_px)
-                    ) if block_px else None
+            block_cov = (lambda inv: _block_covariance(px.xs[k, :nk], px.ys[k, :nk], resid[k, :nk],
+                                                       Jm[k, :, :nk], block_px, inv)) if block_px else None
             try:
                 out[self.live[k]] = _disc_fit(
-                    P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk, steep_cut=self.steep_cut[k], meat=meat,
+                    P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk, steep_cut=self.steep_cut[k],
+                    block_cov=block_cov,
                     background=lambda: _background_check(P[k], float(steps[k]), resid[k, :nk], Jm[k, :, :nk],
                                                          u[k, :nk], px.nx[k, :nk], px.ny[k, :nk]))
             except FitError as exc:
