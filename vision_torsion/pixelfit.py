@@ -323,12 +323,17 @@ def _evaluate(p, px, J=None):
     # (it was a fifth of a model evaluation)
     cv2.exp(gauss, gauss)
     Phi = normal_cdf(u, gauss)
-    L = px.nx * gx
-    L += px.ny * gy
-    L += 1.0
     M = Phi * (F - B)
     M += B
-    resid = px.vals - L * M
+    if not isinstance(gx, np.ndarray) and gx == 0.0 and gy == 0.0:
+        # flat lighting (a fit's start): L = nx·0 + ny·0 + 1 is exactly 1
+        L = 1.0
+        resid = px.vals - M
+    else:
+        L = px.nx * gx
+        L += px.ny * gy
+        L += 1.0
+        resid = px.vals - L * M
     g = np.multiply(L, gauss, out=J[2])  # dI/dR
     g *= (F - B) * INV_SQRT_2PI / s
     np.maximum(d, 1e-9, out=d)
