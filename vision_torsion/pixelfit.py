@@ -534,8 +534,14 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     np.putmask(octant, other, 8)
     if m > 1:
         octant += np.arange(0, 9 * m, 9)[:, None]
-    counts = np.bincount(octant.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
-    means = np.bincount(octant.ravel(), resid.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
+    counts = np.bincount(octant.ravel(), minlength=9 * m)
+    means = np.bincount(octant.ravel(), resid.ravel(), minlength=9 * m)
+    if m == 1:
+        # one fit's eight octants as floats: the same divisions, max and min, without
+        # the rows' small array passes
+        full = [t / c for t, c in zip(means.tolist()[:8], counts.tolist()[:8]) if c >= _MIN_SECTOR_PX]
+        return np.array([max(full) - min(full) if len(full) >= BACKGROUND_SECTORS // 2 else np.nan])
+    counts, means = counts.reshape(m, 9)[:, :8], means.reshape(m, 9)[:, :8]
     full = counts >= _MIN_SECTOR_PX
     means /= np.maximum(counts, 1)
     means[~full] = np.nan
