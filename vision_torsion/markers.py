@@ -848,10 +848,12 @@ STEEP_CUT_MESSAGE = (
 #: and by over half of :data:`STEEP_CUT_PX`, before the marker is ``near_edge``
 #: (:func:`_steep_edge_bent`): 0.2-3.0 times on rendered shadow edges whose fits
 #: were within 0.4 px, 7-15 times (0.4-0.6 px) on those 0.37-1.5 px off; 1.2-1.8
-#: times on the photographed round dots of the discorpy sets; 6 times but 0.15 px
-#: beside a rendered card's edge (0.07-0.13 px off). A bend of the edge by an RMS
-#: of e moves the centre by up to about √2·e (its first harmonic).
-STEEP_EDGE_NOISE_TIMES = 4.0
+#: times on the photographed round dots of the discorpy sets; 5.0-5.3 times (0.5 px)
+#: on two dots beside the dark line along a UCL frame's edge (one 0.18 px from the
+#: ML fit); 6 times but 0.15 px beside a rendered card's edge (0.07-0.13 px off). A
+#: bend of the edge by an RMS of e moves the centre by up to about √2·e (its first
+#: harmonic).
+STEEP_EDGE_NOISE_TIMES = 6.0
 
 #: The message of a ``near_edge`` marker whose cut surround bent its edge
 #: (:func:`_steep_edge_bent`).
