@@ -15,9 +15,11 @@ fit's lighting shift and its noise (``lighting_shift_std_px``; NaN before it exi
 
 Counted: accurate markers (error under 0.1 px) the uneven-light rule flags (false
 flags); harmful ones (error over 0.2 px) that come out ``ok`` with no caveat (missed;
-a ``steep_cut`` fit's message says "up to 0.3 px", so those within 0.3 px count as
-caveated); between 0.1 and 0.2 px either is accepted. Candidates that do not fit
-(the shadow's own edge taken for a marker, ``fit_failed``) are counted apart.
+a ``steep_cut`` fit's message says "up to 0.4 px",
+:data:`~vision_torsion.markers.STEEP_CUT_PX`, so those within it count as caveated);
+between 0.1 and 0.2 px either is accepted. Also: every ``ok`` marker over 0.5 px off,
+and the ``steep_cut`` fits flagged (all, and the accurate ones). Candidates that do
+not fit (the shadow's own edge taken for a marker, ``fit_failed``) are counted apart.
 Prints the table of the flagged or harmful cases and the counts; writes
 ``benchmarks/results/light_edge.json``.
 """
@@ -42,10 +44,13 @@ from vision_torsion.synthetic import Scene, render  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "light_edge.json"
 PREFIX = markers.UNEVEN_LIGHT_MESSAGE.split("{")[0]
+BENT_PREFIX = markers.STEEP_EDGE_MESSAGE.split("{")[0]
 #: Errors (px) below which a centre is accurate, above which it is harmful.
 ACCURATE_PX, HARMFUL_PX = 0.1, 0.2
 #: Error (px) a steep_cut fit's message admits.
-STEEP_PX = 0.3
+STEEP_PX = markers.STEEP_CUT_PX
+#: Error (px) beyond which no marker may be ``ok`` (issue 31's must-reach on photographs).
+FAR_PX = 0.5
 
 
 def edge_scene(radius: float, distance: float, width: float, shade: float, angle: float = 20.0):
@@ -82,6 +87,7 @@ def measure(radius, distance, width, shade, seed) -> dict:
     return {"radius_px": radius, "distance_px": distance, "width_px": width, "shade": shade,
             "error_px": float(err.min()), "status": row["status"],
             "uneven": bool(str(row["message"]).startswith(PREFIX)),
+            "bent": bool(str(row["message"]).startswith(BENT_PREFIX)),
             "steep_cut": bool(same and fit.steep_cut),
             "shift_px": float(fit.lighting_shift_px) if same else float("nan"),
             "shift_std_px": float(getattr(fit, "lighting_shift_std_px", float("nan"))) if same else float("nan")}
@@ -93,13 +99,17 @@ def counts(rows) -> dict:
     ok = np.array([r["status"] == "ok" for r in rows])
     uneven = np.array([r["uneven"] for r in rows])
     steep = np.array([r["steep_cut"] for r in rows])
+    bent = np.array([r.get("bent", False) for r in rows])
     caveat = steep & (err <= STEEP_PX)
     harmful = err > HARMFUL_PX
     return {"cases": len(rows), "accurate": int((err < ACCURATE_PX).sum()),
             "false_flags": int(((err < ACCURATE_PX) & uneven).sum()), "harmful": int(harmful.sum()),
             "missed": int((harmful & ok & ~caveat).sum()),
             "missed_steep_cut": int((harmful & ok & ~caveat & steep).sum()),
-            "uneven_flags": int(uneven.sum()), "not_fitted": int((~ok & ~uneven & harmful).sum())}
+            "uneven_flags": int(uneven.sum()), "not_fitted": int((~ok & ~uneven & ~bent & harmful).sum()),
+            "ok_far": int((ok & (err > FAR_PX)).sum()), "ok_far_steep_cut": int((ok & (err > FAR_PX) & steep).sum()),
+            "steep_cut_flagged": int((steep & ~ok).sum()),
+            "accurate_steep_cut_flagged": int((steep & ~ok & (err < ACCURATE_PX)).sum())}
 
 
 def main(argv=None) -> int:
@@ -121,7 +131,7 @@ def main(argv=None) -> int:
         if r["error_px"] > ACCURATE_PX or r["uneven"]:
             print(f"{r['radius_px']:4.0f} {r['distance_px']:4.0f} {r['width_px']:3.0f} {r['shade']:5.2f} "
                   f"{r['error_px']:6.3f} {r['status']:>10} {r['uneven']!s:>6} {r['steep_cut']!s:>5} "
-                  f"{r['shift_px']:6.3f} {r['shift_std_px']:6.3f}")
+                  f"{r['shift_px']:6.3f} {r['shift_std_px']:6.3f}{'  bent edge' if r['bent'] else ''}")
     summary = counts(rows)
     print(", ".join(f"{k} {v}" for k, v in summary.items()))
     write_result(RESULTS, {"seed": args.seed, "summary": summary, "rows": rows})

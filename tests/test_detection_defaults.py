@@ -129,7 +129,7 @@ def test_a_dot_touching_a_darker_surround_is_found(gap):
     """A dot of radius 10 px within 0-2 px of a darker surround (the card's edge, 90 DN
     darker) merges with it at the detection level: looked into higher up, it stands
     free and is fitted ok (was: no candidate at all; 3 of the UCL laparoscope photos'
-    dots). The surround in its ring is cut and the centre flagged as good to 0.1-0.3 px
+    dots). The surround in its ring is cut and the centre flagged as good to 0.4 px
     (pixelfit's steep_cut): within 0.15 px here (0.07-0.13)."""
     from vision_torsion.markers import STEEP_CUT_MESSAGE
 

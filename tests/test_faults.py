@@ -668,7 +668,7 @@ def test_the_typical_residual_is_the_median_of_the_sequence():
 
 def test_a_target_marker_beside_a_dark_surround_makes_its_image_suspect():
     """A marker whose ring held a region as dark as itself (Marker.steep_cut: its centre
-    good to 0.1-0.3 px, not to its std) makes its image suspect, even in a sequence
+    good to 0.4 px, not to its std) makes its image suspect, even in a sequence
     too short to have a typical residual; the other images stay clean."""
     from dataclasses import replace
 

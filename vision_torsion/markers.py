@@ -68,6 +68,9 @@ __all__ = [
     "BLURRED_NEIGHBOUR_MESSAGE",
     "UNEVEN_SHIFT_PX",
     "UNEVEN_SHIFT_SIGMAS",
+    "STEEP_CUT_PX",
+    "STEEP_EDGE_NOISE_TIMES",
+    "STEEP_EDGE_MESSAGE",
     "edge_asymmetry_px",
     "excluding_neighbours",
     "near_candidates",
@@ -124,7 +127,7 @@ class Marker:
     steep_cut : bool
         A region as dark (bright) as the marker, such as an edge or a shadow, lay
         within its ring and was cut (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`):
-        the centre is good to 0.1-0.3 px, not to its std. An image with such a
+        the centre is good to :data:`STEEP_CUT_PX`, not to its std. An image with such a
         target marker is ``suspect`` (:mod:`vision_torsion.quality`).
     status : str
         ``ok`` or the failure mode.
@@ -754,6 +757,14 @@ def _edge_profile(f: DiscFit):
     return np.arctan2(dy, dx)[order], np.hypot(dx, dy)[order] - f.radius_px
 
 
+def _widest_gap_deg(psi) -> float:
+    """The widest gap (degrees) between the directions `psi` (rad, in order) of a fit's
+    edge points, around the circle; 360 for fewer than two."""
+    if psi.size < 2:
+        return 360.0
+    return float(np.degrees(np.max(np.diff(np.r_[psi, psi[0] + 2.0 * np.pi]))))
+
+
 def _steep_cut_hides(f: DiscFit):
     """For a ``steep_cut`` fit: the noise figure (px) its asymmetry is judged against
     when the edge may hide a part of the marker, else None.
@@ -767,7 +778,7 @@ def _steep_cut_hides(f: DiscFit):
     neighbours' (the median absolute second difference, 0.03-0.05 px there) holds the
     noise without the occluder's smooth misfit, and the smaller of the two is used."""
     psi, delta = _edge_profile(f)
-    if psi.size < 7 or np.degrees(np.max(np.diff(np.r_[psi, psi[0] + 2.0 * np.pi]))) > _STEEP_MAX_GAP_DEG:
+    if psi.size < 7 or _widest_gap_deg(psi) > _STEEP_MAX_GAP_DEG:
         return None
     smooth = (np.roll(delta, 1) + delta + np.roll(delta, -1)) / 3.0
     if not -smooth.min() > smooth.max():
@@ -817,13 +828,56 @@ def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
     )
 
 
+#: Error (px) an ``ok`` marker whose ring held a surround as dark as itself
+#: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`) is good to: on rendered
+#: shadow edges across markers of 8-35 px radius the fits of that kind left ``ok``
+#: (:func:`_uneven_light`, :func:`_steep_edge_bent`) were up to 0.39 px off
+#: (``benchmarks/bench_light_edge.py``; 0.07-0.13 px beside a card's edge).
+STEEP_CUT_PX = 0.4
+
 #: The message of an ``ok`` marker whose ring held a surround as dark as itself
 #: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`): the centre is flagged, not
 #: withheld, as such a marker may be the only one there is.
 STEEP_CUT_MESSAGE = (
     "a region beside the marker as dark (bright) as it, such as an edge or a shadow, was cut from its ring: "
-    "the centre may be off by up to 0.3 px, more than its std says"
+    f"the centre may be off by up to {STEEP_CUT_PX} px, more than its std says"
 )
+
+#: Times its own noise figure (:attr:`~vision_torsion.pixelfit.DiscFit.edge_noise_px`)
+#: that a ``steep_cut`` fit's edge points may scatter about its circle (or ellipse),
+#: and by over half of :data:`STEEP_CUT_PX`, before the marker is ``near_edge``
+#: (:func:`_steep_edge_bent`): 0.2-3.0 times on rendered shadow edges whose fits
+#: were within 0.4 px, 7-15 times (0.4-0.6 px) on those 0.37-1.5 px off; 1.2-1.8
+#: times on the photographed round dots of the discorpy sets; 5.0-5.3 times (0.5 px)
+#: on two dots beside the dark line along a UCL frame's edge (one 0.18 px from the
+#: ML fit); 6 times but 0.15 px beside a rendered card's edge (0.07-0.13 px off). A
+#: bend of the edge by an RMS of e moves the centre by up to about √2·e (its first
+#: harmonic).
+STEEP_EDGE_NOISE_TIMES = 6.0
+
+#: The message of a ``near_edge`` marker whose cut surround bent its edge
+#: (:func:`_steep_edge_bent`).
+STEEP_EDGE_MESSAGE = (
+    "a region beside the marker as dark (bright) as it, such as an edge or a shadow, was cut from its ring, and "
+    "the edge left scatters about the fitted outline by {rms:.2f} px, {times:.0f} times its noise ({noise:.2f} px; "
+    f"allowed {{allowed:.0f}} times and {0.5 * STEEP_CUT_PX} px): the region bends the marker's edge, and the "
+    f"centre may be off by more than {STEEP_CUT_PX} px"
+)
+
+
+def _steep_edge_bent(f: DiscFit, rms: float) -> Marker | None:
+    """Status ``near_edge`` for a ``steep_cut`` fit whose edge points scatter about its
+    fitted outline (`rms`, px: the circle's or, seen obliquely, the ellipse's) by over
+    :data:`STEEP_EDGE_NOISE_TIMES` times their noise figure and by over half of
+    :data:`STEEP_CUT_PX`, else None (and None for any other fit). The region cut
+    from the ring meets the marker's edge and bends it (a shadow's edge along the
+    rim, or through the centre with half the ring cut), which the disc model's
+    centre follows by more than :data:`STEEP_CUT_PX`."""
+    noise = f.edge_noise_px
+    if not (f.steep_cut and rms > max(STEEP_EDGE_NOISE_TIMES * noise, 0.5 * STEEP_CUT_PX)):
+        return None
+    return _near_edge(f, STEEP_EDGE_MESSAGE.format(rms=rms, times=rms / noise, noise=noise,
+                                                   allowed=STEEP_EDGE_NOISE_TIMES))
 
 
 #: Centre move (px) under a lighting also curved over the ring
@@ -855,13 +909,22 @@ def _uneven_light(f: DiscFit) -> Marker | None:
     curved over the ring: :attr:`~vision_torsion.pixelfit.DiscFit.lighting_shift_px`),
     else None. The fit's lighting is a plane; a shadow's or a light's edge across
     the marker is a step, which the plane follows only in part, and the misfit
-    pulls the centre. Not judged on a fit that cut a surround as dark as the marker
-    from its ring (``steep_cut``, flagged with its own message): the cut region's
-    blurred flank stays in the background, uneven by construction, and the centre
-    is good to 0.1-0.3 px (0.07-0.13 px beside a card's edge, which the shift put at
-    0.23 px)."""
+    pulls the centre. A fit that cut a surround as dark as the marker from its ring
+    (``steep_cut``, flagged with its own message, good to :data:`STEEP_CUT_PX`) is
+    judged against that error instead of :data:`UNEVEN_SHIFT_PX`, and only when its
+    edge points leave a gap wider than :data:`_STEEP_MAX_GAP_DEG`: the cut region's
+    blurred flank stays in the background, uneven by construction, and where the
+    edge is seen all round it holds the centre whatever the shift (0.07-0.23 px off
+    beside a card's edge, which the shift put at 0.5-0.6 px; 0.01-0.09 px off for
+    moves of 0.95-1.26 px on rendered shadow edges 10-15 px from the centres of
+    markers of 15-25 px radius); where a part of the edge is unseen (the shaded
+    part of a marker a shadow's edge crosses) the shift is the evidence there is
+    (1.0-1.05 px off, moves of 0.83-0.94 px; ``benchmarks/bench_light_edge.py``)."""
     shift = f.lighting_shift_px
-    if f.steep_cut or not shift > max(UNEVEN_SHIFT_PX, UNEVEN_SHIFT_SIGMAS * f.lighting_shift_std_px):
+    allowed = STEEP_CUT_PX if f.steep_cut else UNEVEN_SHIFT_PX
+    if not shift > max(allowed, UNEVEN_SHIFT_SIGMAS * f.lighting_shift_std_px):
+        return None
+    if f.steep_cut and not _widest_gap_deg(_edge_profile(f)[0]) > _STEEP_MAX_GAP_DEG:
         return None
     return Marker(
         x_px=f.x_px,
@@ -871,7 +934,7 @@ def _uneven_light(f: DiscFit) -> Marker | None:
         status="near_edge",
         message=UNEVEN_LIGHT_MESSAGE.format(
             step=f.background_step_dn, share=f.background_step_dn / abs(f.foreground_dn - f.background_dn),
-            shift=shift, allowed=UNEVEN_SHIFT_PX),
+            shift=shift, allowed=allowed),
     )
 
 
@@ -890,7 +953,8 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     ``occluded`` when the circle or ellipse is asymmetric about its centre
     (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
     out of `patch` reach its edge zone); ``near_edge`` when the background is not
-    even across it (:func:`_uneven_light`); `crowded`: fitted with
+    even across it (:func:`_uneven_light`) or when a surround cut from its ring bent
+    its edge (:func:`_steep_edge_bent`); `crowded`: fitted with
     :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
     circ = f.circularity
     rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
@@ -910,6 +974,9 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
         ratio, rms = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
                    f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
+    bent = _steep_edge_bent(f, rms)
+    if bent is not None:
+        return bent
     if f.steep_cut:
         message = "; ".join(m for m in (message, STEEP_CUT_MESSAGE) if m)
     if crowded:
@@ -1211,9 +1278,9 @@ def _refit_unmasked(img, blobs: list[Blob], circles: np.ndarray, markers: list, 
             markers[i] = again if again.ok else _near_edge(m, UNMASKED_MESSAGE.format(reason=again.message))
 
 
-def _near_edge(m: Marker, message: str) -> Marker:
-    """The ``ok`` marker `m` made ``near_edge`` with `message`: its centre, radius
-    and edge width kept, without their uncertainties."""
+def _near_edge(m: Marker | DiscFit, message: str) -> Marker:
+    """The ``ok`` marker (or pixel fit) `m` made ``near_edge`` with `message`: its
+    centre, radius and edge width kept, without their uncertainties."""
     return Marker(x_px=m.x_px, y_px=m.y_px, radius_px=m.radius_px, edge_width_px=m.edge_width_px,
                   status="near_edge", message=message)
 

@@ -234,7 +234,7 @@ class DiscFit:
     steep_cut : bool
         Pixels were cut from the ring under a steep lighting gradient
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
-        shadow) within a few px of its edge. The centre is then good to 0.1-0.3 px,
+        shadow) within a few px of its edge. The centre is then good to 0.4 px (``markers.STEEP_CUT_PX``),
         not to its covariance.
     background_step_dn : float
         How uneven the background around the marker is beyond the fitted lighting

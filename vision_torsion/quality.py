@@ -15,7 +15,7 @@ renders each, clean), the largest ratio was 1.20.
 
 An image is also suspect when one of its target markers lay beside a region as dark
 (bright) as itself, which was cut from its ring (:attr:`Marker.steep_cut
-<vision_torsion.markers.Marker.steep_cut>`): its centre is then good to 0.1-0.3 px,
+<vision_torsion.markers.Marker.steep_cut>`): its centre is then good to 0.4 px,
 more than the angle's std allows for.
 """
 
