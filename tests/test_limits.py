@@ -7,6 +7,7 @@ outside the test's own folders is touched.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -368,6 +369,22 @@ def test_the_bytes_read_are_the_whole_file(tmp_path, size):
     assert read_image_bytes(path, signature=False) == raw
     if size >= 16:  # a whole PNG signature (fewer bytes are refused: not an image)
         assert read_image_bytes(path) == raw
+
+
+def test_the_whole_file_is_read_where_reads_return_less(tmp_path, monkeypatch):
+    """A file system whose reads return a part of what was asked (a network share)
+    still gives read_image_bytes the whole file."""
+
+    class Slow(io.FileIO):
+        def read(self, n=-1):
+            return super().read(min(n, 1000) if n >= 0 else 1000)
+
+    raw = _png(8, 8) + np.random.default_rng(5).integers(0, 256, 4321, np.uint8).tobytes()
+    path = tmp_path / "a.png"
+    path.write_bytes(raw)
+    monkeypatch.setattr(images_module, "open", lambda p, mode, buffering: Slow(p, mode), raising=False)
+    assert read_image_bytes(path) == raw
+    assert read_image_bytes(path, signature=False) == raw
 
 
 @pytest.mark.parametrize("name, raw, message", [

@@ -39,6 +39,18 @@ def test_fast_median_is_numpys_median():
         x = rng.integers(-15, 15, size=n).astype(np.float32) / 16
         assert fast_median(x) == np.median(x)
         assert fast_median(np.abs(x - 0.25)) == np.median(np.abs(x - 0.25))
+    # whole numbers (an integer image's grey levels and differences, sorted as int16),
+    # and those that are not, or not within int16's range (sorted as they are)
+    for n in (255, 256, 1137, 1138):
+        for x in (rng.integers(0, 256, size=n).astype(np.float64), rng.integers(-300, 300, size=n).astype(np.float32),
+                  rng.integers(0, 65536, size=n).astype(np.float64), rng.integers(-40000, -32000, size=n) * 1.0,
+                  rng.integers(0, 256, size=n) + 1e-9):
+            assert fast_median(x) == np.median(x)
+    x = rng.integers(0, 256, size=1000).astype(np.float64)
+    x[7] = np.nan  # sorted last, as by np.sort (np.median would give NaN)
+    assert fast_median(x) == 0.5 * (np.sort(x)[499] + np.sort(x)[500])
+    x[7] = np.inf
+    assert fast_median(x) == np.median(x)
 
 
 def test_the_damped_8x8_solve_is_linalgs():

@@ -286,8 +286,11 @@ class _Pixels:
         self.index = index
         self.xs, self.ys = patch.coordinates(index)
         self.vals = patch.values.take(index)
-        self.nx = (self.xs - x0) / r0
-        self.ny = (self.ys - y0) / r0
+        # in place: the same values as (xs - x0) / r0, one array less each
+        self.nx = np.subtract(self.xs, x0)
+        self.nx /= r0
+        self.ny = np.subtract(self.ys, y0)
+        self.ny /= r0
 
     def subset(self, keep):
         out = object.__new__(_Pixels)
@@ -320,12 +323,17 @@ def _evaluate(p, px, J=None):
     # (it was a fifth of a model evaluation)
     cv2.exp(gauss, gauss)
     Phi = normal_cdf(u, gauss)
-    L = px.nx * gx
-    L += px.ny * gy
-    L += 1.0
     M = Phi * (F - B)
     M += B
-    resid = px.vals - L * M
+    if not isinstance(gx, np.ndarray) and gx == 0.0 and gy == 0.0:
+        # flat lighting (a fit's start): L = nx·0 + ny·0 + 1 is exactly 1
+        L = 1.0
+        resid = px.vals - M
+    else:
+        L = px.nx * gx
+        L += px.ny * gy
+        L += 1.0
+        resid = px.vals - L * M
     g = np.multiply(L, gauss, out=J[2])  # dI/dR
     g *= (F - B) * INV_SQRT_2PI / s
     np.maximum(d, 1e-9, out=d)
@@ -526,14 +534,20 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     np.putmask(octant, other, 8)
     if m > 1:
         octant += np.arange(0, 9 * m, 9)[:, None]
-    counts = np.bincount(octant.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
-    means = np.bincount(octant.ravel(), resid.ravel(), minlength=9 * m).reshape(m, 9)[:, :8]
+    counts = np.bincount(octant.ravel(), minlength=9 * m)
+    means = np.bincount(octant.ravel(), resid.ravel(), minlength=9 * m)
+    if m == 1:
+        # one fit's eight octants as floats: the same divisions, max and min, without
+        # the rows' small array passes
+        full = [t / c for t, c in zip(means.tolist()[:8], counts.tolist()[:8]) if c >= _MIN_SECTOR_PX]
+        return np.array([max(full) - min(full) if len(full) >= BACKGROUND_SECTORS // 2 else np.nan])
+    counts, means = counts.reshape(m, 9)[:, :8], means.reshape(m, 9)[:, :8]
     full = counts >= _MIN_SECTOR_PX
     means /= np.maximum(counts, 1)
     means[~full] = np.nan
     # fmax/fmin pass over NaN
     spread = np.fmax.reduce(means, axis=1) - np.fmin.reduce(means, axis=1)
-    spread[np.count_nonzero(full, axis=1) < BACKGROUND_SECTORS // 2] = np.nan
+    spread[full.sum(axis=1) < BACKGROUND_SECTORS // 2] = np.nan
     return spread
 
 
@@ -1079,10 +1093,16 @@ def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
     g_cos, g_sin, g = flat.take(jat), flat.take(jat + size), flat.take(jat + 2 * size)
     rz = resid.reshape(-1).take(at)
     psi = np.arctan2(g_sin, g_cos)
-    dark = P[:, 5] < P[:, 4]
-    if dark.any():
-        psi += np.pi * dark[zr]
-    where = ((psi + np.pi) * (per_row / (2 * np.pi))).astype(np.int64) % per_row
+    if m == 1:
+        if P[0, 5] < P[0, 4]:
+            psi += np.pi
+    else:
+        dark = P[:, 5] < P[:, 4]
+        if dark.any():
+            psi += np.pi * dark[zr]
+    psi += np.pi
+    psi *= per_row / (2 * np.pi)
+    where = psi.astype(np.int64) % per_row
     if m > 1:
         where += zr * width
     den, num, cs, sn = (np.bincount(where, w, minlength=m * width) for w in (g * g, g * rz, g * g_cos, g * g_sin))
@@ -1106,7 +1126,7 @@ def _edge_diagnostics(P, resid, Jm, u, n, ssr) -> list:
     zone_n = [at.size] if m == 1 else np.bincount(zr, minlength=m).tolist()
     ends = list(accumulate([sel.size] if m == 1 else np.bincount(sr, minlength=m).tolist()))
     starts = [0] + ends[:-1]
-    need = sectors_needed(np.array(n_sec)).tolist()
+    need = [sectors_needed(n_sec[0])] if m == 1 else sectors_needed(np.array(n_sec)).tolist()
     out = []
     for k, (lo, hi, R, n_k, ssr_k) in enumerate(zip(starts, ends, radii, n, ssr)):
         kept = hi - lo

@@ -57,6 +57,10 @@ __all__ = [
 INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
 
+#: Abramowitz & Stegun 7.1.26's p for erf, scaled to Φ's argument (u/√2).
+_CDF_P = 0.3275911 / np.sqrt(2.0)
+
+
 def normal_cdf(u, gauss=None):
     """Standard normal distribution function Φ(u), to 1e-7 (Abramowitz & Stegun 7.1.26).
 
@@ -74,7 +78,7 @@ def normal_cdf(u, gauss=None):
     # in place: on a few thousand values each numpy call costs about as much as
     # its arithmetic
     t = np.abs(u)
-    t *= 0.3275911 / np.sqrt(2.0)
+    t *= _CDF_P
     t += 1.0
     np.reciprocal(t, out=t)
     tail = t * 0.5307027145
@@ -523,12 +527,33 @@ def fast_median(values) -> float:
     A sort, not a partition: the grey levels and pixel differences this is asked
     for hold few distinct values (a reduced 8-bit image's row differences), where
     numpy's introselect degrades and the SIMD sort does not. The median is the same
-    value either way."""
+    value either way.
+
+    Whole numbers within the int16 range (an integer image's grey levels and their
+    differences, held as floats) are sorted as int16 by numpy's radix sort: a third
+    to a fifth of the float sort's time on a few thousand values, and the same
+    median (a zero's sign aside)."""
     k = values.size // 2
-    ordered = np.sort(values)
+    ordered = _sorted(values)
     if values.size % 2:
         return float(ordered[k])
     return 0.5 * (float(ordered[k - 1]) + float(ordered[k]))
+
+
+#: Fewest values :func:`fast_median` tries to sort as int16: below it the float
+#: sort is as quick as the test.
+_INT_SORT_FROM = 256
+
+
+def _sorted(values) -> np.ndarray:
+    """`values` (1-D) sorted: as int16 (numpy's radix sort) when every one of them is
+    a whole number in its range, else as they are."""
+    if values.dtype.kind == "f" and values.size >= _INT_SORT_FROM:
+        with np.errstate(invalid="ignore"):  # NaN, inf or out of range: caught by the comparison
+            whole = values.astype(np.int16)
+        if (whole == values).all():
+            return np.sort(whole, kind="stable")
+    return np.sort(values)
 
 
 def harmonic_circularity(deviation, cos_psi, sin_psi, radius) -> float:
