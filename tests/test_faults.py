@@ -674,7 +674,7 @@ def test_a_target_marker_beside_a_dark_surround_makes_its_image_suspect():
 
     from vision_torsion.markers import Marker
     from vision_torsion.pair import PairMeasurement
-    from vision_torsion.quality import residual_flags
+    from vision_torsion.quality import STEEP_CUT_PX, residual_flags
 
     m = Marker(x_px=10.0, y_px=10.0, radius_px=5.0, residual_rms_px=0.1)
     clean = PairMeasurement(first=m, second=replace(m, x_px=50.0))
@@ -682,6 +682,8 @@ def test_a_target_marker_beside_a_dark_surround_makes_its_image_suspect():
     flags = residual_flags([clean, beside, None])
     assert flags[0] == "" and flags[2] == ""
     assert flags[1].startswith("suspect: marker 2 lies beside a region as dark (bright) as itself")
+    # the same bound as the marker's own caveat (markers.STEEP_CUT_MESSAGE)
+    assert f"off by up to {STEEP_CUT_PX} px" in flags[1]
     assert residual_flags([clean, clean, clean, beside])[3] == flags[1]  # with a typical residual too
 
 

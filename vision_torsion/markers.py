@@ -46,6 +46,7 @@ from .detect import (
 from .errors import FitError, VisionTorsionError
 from .images import as_grey_array, load_image
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
+from .quality import STEEP_CUT_PX
 from .ring import MarkerPatch, fast_median, marker_patch, normal_cdf, points_circularity
 from .settings import MeasureSettings
 
@@ -827,13 +828,6 @@ def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
                  f"off by about {2 * a3:.1f} px"),
     )
 
-
-#: Error (px) an ``ok`` marker whose ring held a surround as dark as itself
-#: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`) is good to: on rendered
-#: shadow edges across markers of 8-35 px radius the fits of that kind left ``ok``
-#: (:func:`_uneven_light`, :func:`_steep_edge_bent`) were up to 0.39 px off
-#: (``benchmarks/bench_light_edge.py``; 0.07-0.13 px beside a card's edge).
-STEEP_CUT_PX = 0.4
 
 #: The message of an ``ok`` marker whose ring held a surround as dark as itself
 #: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`): the centre is flagged, not

@@ -15,15 +15,15 @@ renders each, clean), the largest ratio was 1.20.
 
 An image is also suspect when one of its target markers lay beside a region as dark
 (bright) as itself, which was cut from its ring (:attr:`Marker.steep_cut
-<vision_torsion.markers.Marker.steep_cut>`): its centre is then good to 0.4 px,
-more than the angle's std allows for.
+<vision_torsion.markers.Marker.steep_cut>`): its centre is then good to
+:data:`STEEP_CUT_PX` (0.4 px), more than the angle's std allows for.
 """
 
 from __future__ import annotations
 
 import math
 
-__all__ = ["residual_flags", "SUSPECT_RESIDUAL_RATIO", "SUSPECT"]
+__all__ = ["residual_flags", "SUSPECT_RESIDUAL_RATIO", "SUSPECT", "STEEP_CUT_PX"]
 
 #: A marker residual this many times the sequence's typical one makes its image suspect.
 SUSPECT_RESIDUAL_RATIO = 2.0
@@ -41,13 +41,23 @@ def _residuals(pair) -> list[float] | None:
     return out
 
 
+#: Error (px) an ``ok`` marker whose ring held a surround as dark as itself
+#: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`) is good to, which its
+#: marker's message (:data:`vision_torsion.markers.STEEP_CUT_MESSAGE`) and its image's
+#: ``suspect`` flag state: on rendered shadow edges across markers of 8-35 px radius
+#: the fits of that kind left ``ok`` (``markers._uneven_light``,
+#: ``markers._steep_edge_bent``) were up to 0.39 px off
+#: (``benchmarks/bench_light_edge.py``; 0.07-0.13 px beside a card's edge).
+STEEP_CUT_PX = 0.4
+
+
 def _steep_cut(pair) -> str:
     """"" or why `pair`'s image is suspect for a marker fitted beside a dark surround."""
     for k, marker in enumerate((getattr(pair, "first", None), getattr(pair, "second", None)), start=1):
         if getattr(marker, "steep_cut", False):
             return (f"suspect: marker {k} lies beside a region as dark (bright) as itself, such as an edge or "
-                    "a shadow, cut from its fit: its centre may be off by up to 0.3 px, more than the angle's std "
-                    "allows for")
+                    f"a shadow, cut from its fit: its centre may be off by up to {STEEP_CUT_PX} px, more than the "
+                    "angle's std allows for")
     return ""
 
 
