@@ -793,7 +793,9 @@ def _lag_covariance(xs, ys, resid, J, block_px: int, inv, *, project=False):
     weighted = (jb[:, edge] * weight[None, edge, None]).reshape(k * edge.size, nb)
     for done in range(_LAG_ROUNDS + 1):
         omega = _psd(gamma[lag]) if project else gamma[lag]
-        j_omega = (jb @ omega) * present  # JΩ within each block, on the ring's pixels
+        # JΩ within each block (one product of all the blocks' rows), on the ring's pixels
+        j_omega = (jb.reshape(k * g, nb) @ omega).reshape(k, g, nb)
+        j_omega *= present
         cov = inv @ (j_omega.reshape(k, g * nb) @ jflat.T) @ inv
         if done == _LAG_ROUNDS:
             break
