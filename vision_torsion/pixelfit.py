@@ -790,18 +790,21 @@ def _lag_covariance(xs, ys, resid, J, block_px: int, inv, *, project=False):
     # their Jacobian and that times their weight
     edge = np.flatnonzero(weight > 1e-9 * weight.max())
     j_edge = jb[:, edge].reshape(k, edge.size * nb)
-    weighted = (jb[:, edge] * weight[None, edge, None]).reshape(k * edge.size, nb)
+    weighted_t = (jb[:, edge] * weight[None, edge, None]).transpose(0, 2, 1)  # (k, nb, edge blocks)
     for done in range(_LAG_ROUNDS + 1):
         omega = _psd(gamma[lag]) if project else gamma[lag]
-        # JΩ within each block (one product of all the blocks' rows), on the ring's pixels
-        j_omega = (jb.reshape(k * g, nb) @ omega).reshape(k, g, nb)
-        j_omega *= present
+        # JΩ within each block, on the ring's pixels: one product per parameter, each
+        # small enough that OpenBLAS keeps it in this thread (one product of all the
+        # rows ran in its threads, which cost more than the product)
+        j_omega = (jb @ omega) * present
         cov = inv @ (j_omega.reshape(k, g * nb) @ jflat.T) @ inv
         if done == _LAG_ROUNDS:
             break
         # the weighted lag sums of HΩ + ΩH - HΩH (H = Jᵀ inv J; HΩH = Jᵀ cov J),
         # what the residual products lose: h + hᵀ with h = Σ w Jᵀ(inv JΩ - cov J / 2)
-        h = weighted.T @ (inv @ j_omega[:, edge].reshape(k, -1) - 0.5 * (cov @ j_edge)).reshape(k * edge.size, nb)
+        # (summed over the parameters, one product each: see JΩ above)
+        loss = (inv @ j_omega[:, edge].reshape(k, -1) - 0.5 * (cov @ j_edge)).reshape(k, edge.size, nb)
+        h = (weighted_t @ loss).sum(axis=0)
         lost = np.bincount(flat, (h + h.T).ravel(), minlength=nb)
         gamma = np.where(some, (observed + lost) / pairs, 0.0)
     cov = cov[:3, :3]
