@@ -48,8 +48,8 @@ import numpy as np
 
 from .errors import ImageReadError
 
-__all__ = ["GreyImage", "load_image", "decode_image", "as_grey_array", "IMAGE_SUFFIXES", "write_image",
-           "MAX_IMAGE_PIXELS", "MIN_SIDE_PX", "image_size", "read_image_bytes", "MAX_IMAGE_FILE_BYTES"]
+__all__ = ["GreyImage", "load_image", "decode_image", "as_grey_array", "grey_array_and_blocks", "IMAGE_SUFFIXES",
+           "write_image", "MAX_IMAGE_PIXELS", "MIN_SIDE_PX", "image_size", "read_image_bytes", "MAX_IMAGE_FILE_BYTES"]
 
 logger = logging.getLogger(__name__)
 
@@ -560,6 +560,16 @@ def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) ->
         raise ImageReadError(f"{name}: contains NaN or infinite values")
     return out
 
+
+
+def grey_array_and_blocks(image, *, name: str = "image", keep_integers: bool = False) -> tuple[np.ndarray, int | None]:
+    """:func:`as_grey_array` of `image` and the side (px) of the blocks its grey
+    levels were compressed in (:attr:`GreyImage.jpeg_block_px`; None for a lossless
+    file or an array), which the marker fits' covariance takes: a path is loaded as a
+    :class:`GreyImage` to learn it."""
+    if isinstance(image, (str, os.PathLike)):
+        image = load_image(image, keep_integers=keep_integers)
+    return as_grey_array(image, name=name, keep_integers=keep_integers), (getattr(image, "jpeg_block_px", 0) or None)
 
 def write_image(path, data: np.ndarray, *, bit_depth: int = 8, jpeg_quality: int | None = None) -> None:
     """Write grey levels to an image file atomically (temporary file, then rename).

@@ -28,7 +28,6 @@ a light's edge crosses it, which the fit's lighting gradient cannot follow),
 from __future__ import annotations
 
 import logging
-import os
 import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -44,7 +43,7 @@ from .detect import (
     is_coarse_disc,
 )
 from .errors import FitError, VisionTorsionError
-from .images import as_grey_array, load_image
+from .images import grey_array_and_blocks
 from .pixelfit import DiscFit, fit_disc, fit_discs, patch_extent
 from .quality import STEEP_CUT_PX
 from .ring import MarkerPatch, fast_median, marker_patch, normal_cdf, points_circularity
@@ -1065,10 +1064,8 @@ def find_markers(
             "(settings already says how markers are found)",
             reason="conflicting_options",
         )
-    if isinstance(image, (str, os.PathLike)):
-        image = load_image(image, keep_integers=True)
-    return markers_to_frame(find_marker_list(as_grey_array(image, keep_integers=True), settings,
-                                             block_px=getattr(image, "jpeg_block_px", 0) or None))
+    img, block_px = grey_array_and_blocks(image, keep_integers=True)
+    return markers_to_frame(find_marker_list(img, settings, block_px=block_px))
 
 
 def _radius_range(img: np.ndarray, settings: MeasureSettings) -> tuple[float, float]:

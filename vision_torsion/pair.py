@@ -18,7 +18,6 @@ y downwards.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, fields
 from functools import lru_cache
 
@@ -26,7 +25,7 @@ import numpy as np
 
 from .detect import default_radius_range, detect_blobs
 from .errors import MarkerError
-from .images import as_grey_array, load_image
+from .images import grey_array_and_blocks
 from .markers import Marker, find_candidates, find_marker_list, is_frame
 from .settings import MeasureSettings
 
@@ -237,11 +236,7 @@ def measure_pair(image, *, settings: MeasureSettings | None = None, name: str | 
         is_path = isinstance(image, (str, bytes)) or hasattr(image, "__fspath__")
         name = str(image) if is_path else getattr(image, "path", "image")
     enough = _enough_rule(settings)
-    if isinstance(image, (str, os.PathLike)):
-        image = load_image(image, keep_integers=True)
-    # a JPEG's compression blocks, for the fits' covariance (GreyImage.jpeg_block_px)
-    block_px = getattr(image, "jpeg_block_px", 0) or None
-    img = as_grey_array(image, name=name, keep_integers=True)
+    img, block_px = grey_array_and_blocks(image, name=name, keep_integers=True)
     coarse = None
     if isinstance(candidates, PairCandidates):
         coarse, candidates = (candidates.blobs, None) if candidates.coarse else (None, candidates.blobs)

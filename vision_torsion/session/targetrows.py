@@ -42,14 +42,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import MarkerError, TargetError
-from ..images import as_grey_array, load_image
+from ..images import grey_array_and_blocks
 from ..markers import find_candidates, find_marker_list
 from ..measurements import TARGET_RESULT_COLUMNS
 from ..quality import SUSPECT
@@ -166,12 +165,8 @@ def measure_target_markers(image, *, settings: MeasureSettings | None = None, na
         No marker is found (reason ``no_markers``).
     """
     settings = settings or MeasureSettings()
-    if isinstance(image, (str, os.PathLike)):
-        image = load_image(image, keep_integers=True)
-    img = as_grey_array(image, keep_integers=True)
-    # a JPEG's compression blocks, for the fits' covariance (GreyImage.jpeg_block_px)
-    found = find_marker_list(img, settings, candidates=candidates,
-                             block_px=getattr(image, "jpeg_block_px", 0) or None)
+    img, block_px = grey_array_and_blocks(image, keep_integers=True)
+    found = find_marker_list(img, settings, candidates=candidates, block_px=block_px)
     ok = [m for m in found if m.status == "ok"]
     if not ok:
         raise MarkerError(f"{name or 'image'}: no marker found ({len(found)} candidate(s), none fitted)",
