@@ -835,22 +835,20 @@ def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
 #: beyond this the rest no longer pins an ellipse and its centre.
 _ARC_MOST = 0.4
 #: :func:`_hidden_arc` refits the pixels only when leaving the arc out moves the edge
-#: points' centre by over this (px), and their RMS distance from their ellipse falls
-#: by over :data:`_ARC_EDGE_RATIO` times. Occluders that move the centre by more than
-#: :data:`HIDDEN_ARC_PX` move it by 0.4-2 px there, at ratios of 3-15 (rendered
-#: 10-15 px dots, ``tests/test_marker_bias.py``); the photographed dots of
-#: ``benchmarks/bench_photos.py`` fire it 1 in 1000 (their edges' own bumps spread
-#: over the circle: ratios under 2 on all but a few).
+#: points' centre by over this (px), and their RMS distance from their outline falls
+#: by over :data:`_ARC_EDGE_RATIO` times. Rendered occluders that put a 10-15 px
+#: dot's centre over 0.5 px off move it by 0.4-2 px there, at ratios of 3.5-18; the
+#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-2.5 % of them
+#: a photo (0.5 % of 17000): their edges' own bumps spread over the circle.
 _ARC_EDGE_PX = 0.2
 _ARC_EDGE_RATIO = 2.0
 #: Centre move (px) without the arc beyond which a marker is ``occluded``
 #: (:func:`_hidden_arc`): half the error an ``ok`` centre may have (0.5 px, issue 31).
 HIDDEN_ARC_PX = 0.25
 #: ... when the ring's residual RMS (DN) also falls by over this factor without the
-#: arc: the arc holds something that is not the marker (an occluder over its edge
-#: leaves 2.4-8 on rendered dots); an edge that is no model edge all round leaves
-#: its misfit in the rest of the ring too (photographed dots: 1.0-1.8, 3 of some
-#: 16000 over 2 and one of those over the move's limit).
+#: arc: the arc holds something that is not the marker (an occluder over a rendered
+#: dot's edge: 2.2-8); an edge that is no model edge all round leaves its misfit in
+#: the rest of the ring too (the photographed grid dots refitted: 1.0-1.8).
 HIDDEN_ARC_NOISE_RATIO = 2.0
 #: ... and when the move exceeds this many standard deviations of the refit's centre.
 _ARC_MOVE_SIGMAS = 5.0
@@ -906,28 +904,32 @@ def _arc_search(f: DiscFit):
     psi = np.arctan2(dy, dx)
     order = np.argsort(psi)
     psi, r = psi[order], np.hypot(dx, dy)[order]
-    basis = np.stack([np.ones(n), np.cos(psi), np.sin(psi), np.cos(2.0 * psi), np.sin(2.0 * psi)])
-    terms = np.concatenate([(basis[:, None] * basis[None])[_UPPER_5], basis * r, (r * r)[None]])
-    total = terms.sum(axis=1)
-    cum = np.cumsum(np.concatenate([np.zeros((terms.shape[0], 1)), terms, terms], axis=1), axis=1)
+    c, si = np.cos(psi), np.sin(psi)
+    basis = np.stack([np.ones(n), c, si, c * c - si * si, 2.0 * c * si], axis=1)
+    # per point: the 15 products of the basis (the normal matrix's upper triangle),
+    # the basis times r and r², as rows; their running sums around the circle twice
+    terms = np.concatenate([basis[:, _UPPER_5[0]] * basis[:, _UPPER_5[1]], basis * r[:, None], (r * r)[:, None]],
+                           axis=1)
+    cum = np.cumsum(np.concatenate([np.zeros((1, 21)), terms, terms]), axis=0)
+    total = cum[n]
 
     def solved(sums):
-        """The outline's coefficients and sum of squares from the sums (21, ...)."""
-        a = np.moveaxis(sums[_SYMMETRIC_5], (0, 1), (-2, -1))
-        b = np.moveaxis(sums[15:20], 0, -1)
-        coef = np.linalg.solve(a, b[..., None])[..., 0]
-        return coef, sums[20] - (coef * b).sum(axis=-1)
+        """The outline's coefficients and sum of squares from the sums (..., 21)."""
+        b = sums[..., 15:20]
+        coef = np.linalg.solve(sums[..., _SYMMETRIC_5], b[..., None])[..., 0]
+        return coef, sums[..., 20] - (coef * b).sum(axis=-1)
 
     start, width = _arcs(n)
     try:
-        p_all, ssr_all = solved(total)
-        p, ssr = solved(total[:, None, None] - (cum[:, start + width] - cum[:, start]))
+        # all the points, then each arc left out: one batched solve
+        p, ssr = solved(np.concatenate([total[None], (total - (cum[start + width] - cum[start])).reshape(-1, 21)]))
     except np.linalg.LinAlgError:
         return None
-    k = np.unravel_index(np.argmax((ssr_all - ssr) * (n - width - 5) / np.maximum(ssr, 1e-24)), width.shape)
-    first, w = int(start[k]), int(width[k])
-    ratio = math.sqrt(ssr_all / (n - 5) / max(ssr[k] / (n - w - 5), 1e-24))
-    move = math.hypot(p[k][1] - p_all[1], p[k][2] - p_all[2])
+    width = width.ravel()
+    k = int(np.argmax((ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)))
+    first, w = int(start.flat[k]), int(width[k])
+    ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
+    move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
     half = np.pi / n
     span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
     return float(psi[first] - half), float(span), move, ratio
@@ -954,9 +956,11 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     The refit's covariance counts the pixels' errors as independent (a JPEG's
     are not): the move's limit in px decides on such photographs."""
     # the edge points' RMS distance from their ellipse (the circle's, less the
-    # second harmonic's share, of amplitude (1 - circularity)·R/2): an arc whose
-    # leaving out moves their centre by m leaves at least about m/2 (rendered
-    # occluders: 0.4-0.7 m), and most fits far less; they need not look further
+    # second harmonic's share, of amplitude (1 - circularity)·R/2) over half the
+    # edge-point move looked for: on rendered occluders that put the centre over
+    # 0.5 px off it is a third of that error (median), and those under 0.1 px hide
+    # a third of the edge, whose third harmonic _occluded flags; clean fits (the
+    # two-marker target, most photographed dots) need not look further
     c2 = 0.5 * (1.0 - f.circularity) * f.radius_px
     if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.5 * _ARC_EDGE_PX) ** 2:
         return None
