@@ -16,6 +16,7 @@ from helpers import area_image, ellipse_mask, supersampled_grid
 from vision_torsion.detect import Blob
 from vision_torsion.markers import (
     HIDDEN_ARC_MESSAGE,
+    UNMASKED_MESSAGE,
     find_candidates,
     find_marker_list,
     find_markers,
@@ -184,23 +185,44 @@ def test_a_speck_candidate_over_a_dot_edge_takes_none_of_its_pixels(offset):
         assert np.hypot(m.x_px - n.x_px, m.y_px - n.y_px) < 0.01
 
 
-@pytest.mark.parametrize("over", [3.0, 4.0])
-def test_an_occluder_a_speck_candidate_hid_is_seen(over):
-    """A clip at the background's level over `over` px of a 10 px dot's edge, and a
-    speck candidate (``too_small``) on it: the speck's mask took the clip's pixels
-    from the fit, which came out ``ok`` 0.4-0.7 px off. The edge left is a chord
-    short of the rest's outline: without the ring's pixels around it the centre
-    moves by 0.39 (3 px) or 0.68 px (4 px), so the dot is ``occluded`` with that
-    message on that fit, and the two other dots stay ``ok``."""
+def _clip_and_speck(over, level):
+    """Three 10 px dots, a clip at `level` DN (blurred 1.5 px) over `over` px of the
+    first one's edge (rows 40-150, to x = 160), and the markers found with a speck
+    candidate (radius 1.5 px) on the clip beside that edge: (the first dot's
+    marker, all the markers)."""
     dots = [((100.3, 100.6), 10.0), ((60.2, 175.4), 10.0), ((220.7, 60.2), 10.0)]
     img = _render((200, 300), dots, blur=1.0, seed=3)
     yy, xx = np.mgrid[0:200, 0:300]
     clip = cv2.GaussianBlur(((xx >= 110.3 - over) & (xx < 160) & (yy > 40) & (yy < 150)).astype(float), (0, 0), 1.5)
-    img = np.clip(img * (1 - clip) + 200.0 * clip, 0, 255).astype(np.uint8)
+    img = np.clip(img * (1 - clip) + level * clip, 0, 255).astype(np.uint8)
     settings = MeasureSettings()
     speck = Blob(x=112.0, y=100.6, radius=1.5, elongation=1.0, fill=1.0, touches_border=False)
     markers = find_marker_list(img, settings, candidates=find_candidates(img, settings) + [speck])
-    dot = min(markers, key=lambda m: np.hypot(m.x_px - 100.3, m.y_px - 100.6))
+    return min(markers, key=lambda m: np.hypot(m.x_px - 100.3, m.y_px - 100.6)), markers
+
+
+@pytest.mark.parametrize("over, reason", [(3.0, "the edge is not symmetric about the centre"),
+                                          (4.0, "edge is not circular")])
+def test_an_occluder_a_speck_candidate_hid_is_seen(over, reason):
+    """A clip a little brighter than the background (215 DN on 200) over `over` px of
+    a 10 px dot's edge, and a speck candidate (``too_small``) on it: the speck's mask
+    took the clip's pixels from the fit, which came out ``ok``. Fitted without that
+    mask, the dot is ``occluded`` (3 px) or ``not_round`` (4 px), so it is
+    ``near_edge`` with that reason."""
+    dot, markers = _clip_and_speck(over, 215.0)
+    assert dot.status == "near_edge"
+    assert dot.message.startswith(UNMASKED_MESSAGE.split("{")[0] + reason)
+    assert sorted(m.status for m in markers) == ["near_edge", "ok", "ok", "too_small"]
+
+
+@pytest.mark.parametrize("over", [3.0, 4.0])
+def test_a_clip_at_the_background_level_a_speck_hid_is_occluded(over):
+    """The same with the clip at the background's level (200 DN): the fit with the
+    speck's mask came out ``ok`` 0.4-0.7 px off. The edge it sees is a chord short of
+    the rest's outline: without the ring's pixels around it the centre moves by 0.39
+    (3 px) or 0.68 px (4 px), so the dot is ``occluded`` on that fit, with that
+    message, and the two other dots stay ``ok``."""
+    dot, markers = _clip_and_speck(over, 200.0)
     assert dot.status == "occluded"
     assert dot.message.startswith(HIDDEN_ARC_MESSAGE.split("{")[0])
     assert sorted(m.status for m in markers) == ["occluded", "ok", "ok", "too_small"]
