@@ -18,10 +18,11 @@ x to the right, y downwards.
 
 Failure modes (reported per marker in the ``status`` column, with a ``message``):
 ``border`` (cut by the image border), ``too_small``, ``too_large``, ``not_round``,
-``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
-hidden or cut by an edge), ``near_edge`` (a candidate beside it that is no marker
-lay over its edge, and fitted with those pixels it is not ``ok``; or a shadow's or
-a light's edge crosses it, which the fit's lighting gradient cannot follow),
+``occluded`` (the fitted edge is asymmetric about its centre, or an arc of it lies
+off the outline the rest follows: part of the marker hidden or cut by an edge),
+``near_edge`` (a candidate beside it that is no marker lay over its edge, and fitted
+with those pixels it is not ``ok``; or a shadow's or a light's edge crosses it, which
+the fit's lighting gradient cannot follow),
 ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
@@ -947,7 +948,7 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     found on the edge points (:func:`_arc_search`); when leaving it out moves their
     centre by over :data:`_ARC_EDGE_PX` and their scatter drops
     :data:`_ARC_EDGE_RATIO` times, the marker is fitted again without the ring's
-    pixels in that arc's directions. ``occluded`` when that refit's centre is over
+    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc. ``occluded`` when that refit's centre is over
     :data:`HIDDEN_ARC_PX` and :data:`_ARC_MOVE_SIGMAS` of its standard deviations
     away and the ring's residual RMS is over :data:`HIDDEN_ARC_NOISE_RATIO` times
     the refit's: the arc held what the rest of the ring does not (on rendered
@@ -1107,7 +1108,8 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     :func:`_oblique`; then ``ok``, with the ellipse's residual and a message);
     ``occluded`` when the circle or ellipse is asymmetric about its centre
     (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
-    out of `patch` reach its edge zone); ``near_edge`` when the background is not
+    out of `patch` reach its edge zone) or an arc of its edge is not its own
+    (:func:`_hidden_arc`; not judged when `crowded`); ``near_edge`` when the background is not
     even across it (:func:`_uneven_light`) or when a surround cut from its ring bent
     its edge (:func:`_steep_edge_bent`); `crowded`: fitted with
     :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
