@@ -1108,10 +1108,10 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     :func:`_oblique`; then ``ok``, with the ellipse's residual and a message);
     ``occluded`` when the circle or ellipse is asymmetric about its centre
     (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
-    out of `patch` reach its edge zone) or an arc of its edge is not its own
-    (:func:`_hidden_arc`; not judged when `crowded`); ``near_edge`` when the background is not
+    out of `patch` reach its edge zone); ``near_edge`` when the background is not
     even across it (:func:`_uneven_light`) or when a surround cut from its ring bent
-    its edge (:func:`_steep_edge_bent`); `crowded`: fitted with
+    its edge (:func:`_steep_edge_bent`); else ``occluded`` when an arc of its edge is
+    not its own (:func:`_hidden_arc`; not judged when `crowded`); `crowded`: fitted with
     :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
     circ = f.circularity
     rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
@@ -1121,7 +1121,7 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
         if oblique is None:
             return _not_round(f.x_px, f.y_px, f.radius_px, circ)
     # a circle or an ellipse so far; one with a chord hidden or cut is neither
-    occluded = None if crowded else _occluded(f, patch) or _hidden_arc(f, patch)
+    occluded = None if crowded else _occluded(f, patch)
     if occluded is not None:
         return occluded
     uneven = _uneven_light(f)
@@ -1134,6 +1134,11 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     bent = _steep_edge_bent(f, rms)
     if bent is not None:
         return bent
+    # last: what the checks above name more closely (a shadow's edge, a bent edge)
+    # may leave an arc off the outline too
+    hidden = None if crowded else _hidden_arc(f, patch)
+    if hidden is not None:
+        return hidden
     if f.steep_cut:
         message = "; ".join(m for m in (message, STEEP_CUT_MESSAGE) if m)
     if crowded:
