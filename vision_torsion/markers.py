@@ -21,7 +21,9 @@ Failure modes (reported per marker in the ``status`` column, with a ``message``)
 ``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
 hidden or cut by an edge), ``near_edge`` (a candidate beside it that is no marker
 lay over its edge, and fitted with those pixels it is not ``ok``; or a shadow's or
-a light's edge crosses it, which the fit's lighting gradient cannot follow),
+a light's edge crosses it, which the fit's lighting gradient cannot follow; or its
+outline is stretched towards a dark region left out of its fit; or, fitted as an
+ellipse, its ``ok`` neighbours are rounder and sharper),
 ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
