@@ -51,7 +51,8 @@ import re
 import sys
 
 __all__ = ["main", "build_parser", "COMMAND_MODULES", "failure_line", "add_common_options", "progress_enabled",
-           "Terminal", "printable", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL"]
+           "Terminal", "printable", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL",
+           "BLAS_THREAD_VARIABLES"]
 
 EXIT_OK, EXIT_FAILED, EXIT_UNUSABLE, EXIT_INTERNAL = 0, 1, 2, 3
 
@@ -191,6 +192,7 @@ def main(argv=None) -> int:
         _configure_logging(args)
         command = _command_name(args)
         if argv is None:  # this process's own command line (the console script, python -m): it ends after
+            _one_blas_thread()
             with _ends_process(gc_off=getattr(args, "gc_off", False)):
                 return _run(args, command)
         return _run(args, command)
@@ -286,6 +288,24 @@ class Terminal:
         if self._stream is None:
             raise AttributeError(name)
         return getattr(self._stream, name)
+
+
+#: The environment variables by which a user sets the BLAS library's threads.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _one_blas_thread() -> None:
+    """One BLAS thread for this command's process and its workers, unless the user
+    set a count (:data:`BLAS_THREAD_VARIABLES`) or numpy is already imported.
+
+    Every command measures with one BLAS thread (its matrices are 8 x a few
+    thousand). Without this, OpenBLAS starts a thread per core when numpy is
+    imported, and they spin on the other core while the command imports and
+    starts, CPU that ``process``'s reading threads then wait for. Only for the
+    process's own command line."""
+    if "numpy" in sys.modules or any(name in os.environ for name in BLAS_THREAD_VARIABLES):
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 
 @contextlib.contextmanager
