@@ -18,7 +18,9 @@ flags); harmful ones (error over 0.2 px) that come out ``ok`` with no caveat (mi
 a ``steep_cut`` fit's message says "up to 0.4 px",
 :data:`~vision_torsion.markers.STEEP_CUT_PX`, so those within it count as caveated);
 between 0.1 and 0.2 px either is accepted. Also: every ``ok`` marker over 0.5 px off,
-and the ``steep_cut`` fits flagged (all, and the accurate ones). Candidates that do
+and the ``steep_cut`` fits flagged (all, and the accurate ones), and the markers whose
+outline a dark region or their neighbours contradict (:data:`~vision_torsion.markers.MERGED_END_MESSAGE`,
+:data:`~vision_torsion.markers.UNLIKE_NEIGHBOURS_MESSAGE`; all, and the accurate ones). Candidates that do
 not fit (the shadow's own edge taken for a marker, ``fit_failed``) are counted apart.
 Prints the table of the flagged or harmful cases and the counts; writes
 ``benchmarks/results/light_edge.json``.
@@ -45,6 +47,8 @@ from vision_torsion.synthetic import Scene, render  # noqa: E402
 RESULTS = Path(__file__).resolve().parent / "results" / "light_edge.json"
 PREFIX = markers.UNEVEN_LIGHT_MESSAGE.split("{")[0]
 BENT_PREFIX = markers.STEEP_EDGE_MESSAGE.split("{")[0]
+#: The messages of a marker whose outline a dark region or its neighbours contradict.
+OUTLINE_PREFIXES = (markers.MERGED_END_MESSAGE.split("{")[0], markers.UNLIKE_NEIGHBOURS_MESSAGE.split("{")[0])
 #: Errors (px) below which a centre is accurate, above which it is harmful.
 ACCURATE_PX, HARMFUL_PX = 0.1, 0.2
 #: Error (px) a steep_cut fit's message admits.
@@ -88,6 +92,7 @@ def measure(radius, distance, width, shade, seed) -> dict:
             "error_px": float(err.min()), "status": row["status"],
             "uneven": bool(str(row["message"]).startswith(PREFIX)),
             "bent": bool(str(row["message"]).startswith(BENT_PREFIX)),
+            "outline": bool(str(row["message"]).startswith(OUTLINE_PREFIXES)),
             "steep_cut": bool(same and fit.steep_cut),
             "shift_px": float(fit.lighting_shift_px) if same else float("nan"),
             "shift_std_px": float(getattr(fit, "lighting_shift_std_px", float("nan"))) if same else float("nan")}
@@ -100,16 +105,18 @@ def counts(rows) -> dict:
     uneven = np.array([r["uneven"] for r in rows])
     steep = np.array([r["steep_cut"] for r in rows])
     bent = np.array([r.get("bent", False) for r in rows])
+    outline = np.array([r.get("outline", False) for r in rows])
     caveat = steep & (err <= STEEP_PX)
     harmful = err > HARMFUL_PX
     return {"cases": len(rows), "accurate": int((err < ACCURATE_PX).sum()),
             "false_flags": int(((err < ACCURATE_PX) & uneven).sum()), "harmful": int(harmful.sum()),
             "missed": int((harmful & ok & ~caveat).sum()),
             "missed_steep_cut": int((harmful & ok & ~caveat & steep).sum()),
-            "uneven_flags": int(uneven.sum()), "not_fitted": int((~ok & ~uneven & ~bent & harmful).sum()),
+            "uneven_flags": int(uneven.sum()), "not_fitted": int((~ok & ~uneven & ~bent & ~outline & harmful).sum()),
             "ok_far": int((ok & (err > FAR_PX)).sum()), "ok_far_steep_cut": int((ok & (err > FAR_PX) & steep).sum()),
             "steep_cut_flagged": int((steep & ~ok).sum()),
-            "accurate_steep_cut_flagged": int((steep & ~ok & (err < ACCURATE_PX)).sum())}
+            "accurate_steep_cut_flagged": int((steep & ~ok & (err < ACCURATE_PX)).sum()),
+            "outline_flags": int(outline.sum()), "accurate_outline_flagged": int((outline & (err < ACCURATE_PX)).sum())}
 
 
 def main(argv=None) -> int:
@@ -128,10 +135,11 @@ def main(argv=None) -> int:
     print(f"{'r':>4} {'d':>4} {'w':>3} {'shade':>5} {'error':>6} {'status':>10} {'uneven':>6} {'steep':>5} "
           f"{'shift':>6} {'std':>6}")
     for r in rows:
-        if r["error_px"] > ACCURATE_PX or r["uneven"]:
+        if r["error_px"] > ACCURATE_PX or r["uneven"] or r["outline"]:
             print(f"{r['radius_px']:4.0f} {r['distance_px']:4.0f} {r['width_px']:3.0f} {r['shade']:5.2f} "
                   f"{r['error_px']:6.3f} {r['status']:>10} {r['uneven']!s:>6} {r['steep_cut']!s:>5} "
-                  f"{r['shift_px']:6.3f} {r['shift_std_px']:6.3f}{'  bent edge' if r['bent'] else ''}")
+                  f"{r['shift_px']:6.3f} {r['shift_std_px']:6.3f}{'  bent edge' if r['bent'] else ''}"
+                  f"{'  outline' if r['outline'] else ''}")
     summary = counts(rows)
     print(", ".join(f"{k} {v}" for k, v in summary.items()))
     write_result(RESULTS, {"seed": args.seed, "summary": summary, "rows": rows})

@@ -35,7 +35,7 @@ from .numerics import numeric_jacobian
 
 __all__ = [
     "CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse",
-    "centred_ellipse",
+    "centred_ellipse", "centred_ellipse_polar",
 ]
 
 #: Largest condition number accepted for the normal equations of the ellipse's centre
@@ -463,12 +463,28 @@ def centred_ellipse(dx, dy):
     A = (1/a² + 1/b²)/2 and √(B² + C²) = (1/b² - 1/a²)/2: linear least squares in
     (A, B, C). b/a = √((A - h)/(A + h)) with h = √(B² + C²).
     """
-    r2 = dx * dx + dy * dy
-    design = np.stack([np.ones_like(r2), (dx * dx - dy * dy) / r2, 2.0 * dx * dy / r2], axis=1)
-    coef = np.linalg.lstsq(design, 1.0 / r2, rcond=None)[0]
+    coef, design = _centred_ellipse_fit(dx, dy)
     h = float(np.hypot(coef[1], coef[2]))
     inverse_r2 = design @ coef
+    r2 = dx * dx + dy * dy
     if not coef[0] > h or not (inverse_r2 > 0).all():
         return None
     off = np.sqrt(r2) - 1.0 / np.sqrt(inverse_r2)
     return float(np.sqrt((coef[0] - h) / (coef[0] + h))), float(np.sqrt(np.mean(off * off)))
+
+
+def centred_ellipse_polar(dx, dy) -> np.ndarray:
+    """The coefficients (A, B, C) of the ellipse centred on the origin closest to points
+    at offsets (`dx`, `dy`) (px) from it (:func:`centred_ellipse`), in polar form
+    1/r(ψ)² = A + B·cos 2ψ + C·sin 2ψ (px⁻²), ψ the direction in image axes: the
+    major axis (largest r) lies at ψ = atan2(-C, -B)/2. No check that they are an
+    ellipse (A > √(B² + C²)): :func:`centred_ellipse` says so."""
+    return _centred_ellipse_fit(dx, dy)[0]
+
+
+def _centred_ellipse_fit(dx, dy):
+    """(A, B, C) of :func:`centred_ellipse_polar` and the design matrix of that linear
+    least-squares fit of 1/r² (rows: 1, cos 2ψ, sin 2ψ)."""
+    r2 = dx * dx + dy * dy
+    design = np.stack([np.ones_like(r2), (dx * dx - dy * dy) / r2, 2.0 * dx * dy / r2], axis=1)
+    return np.linalg.lstsq(design, 1.0 / r2, rcond=None)[0], design

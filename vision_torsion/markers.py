@@ -22,7 +22,9 @@ Failure modes (reported per marker in the ``status`` column, with a ``message``)
 off the outline the rest follows: part of the marker hidden or cut by an edge),
 ``near_edge`` (a candidate beside it that is no marker lay over its edge, and fitted
 with those pixels it is not ``ok``; or a shadow's or a light's edge crosses it, which
-the fit's lighting gradient cannot follow),
+the fit's lighting gradient cannot follow; or its outline is stretched towards a dark
+region left out of its fit; or, fitted as an ellipse, its ``ok`` neighbours are rounder
+and sharper),
 ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
@@ -69,6 +71,8 @@ __all__ = [
     "CROWDED_MESSAGE",
     "UNEVEN_LIGHT_MESSAGE",
     "BLURRED_NEIGHBOUR_MESSAGE",
+    "MERGED_END_MESSAGE",
+    "UNLIKE_NEIGHBOURS_MESSAGE",
     "UNEVEN_SHIFT_PX",
     "UNEVEN_SHIFT_SIGMAS",
     "STEEP_CUT_PX",
@@ -697,6 +701,99 @@ def _oblique(f: DiscFit):
     return ratio, rms
 
 
+#: Semi-axes' difference (px) of a fit's outline (its edge points' centred ellipse)
+#: from which :func:`_merged_end` looks for a dark region at the ends of its major
+#: axis: a region that stretched the outline by less moves the centre by less than
+#: the issue's bound on an ``ok`` centre (0.5 px; rendered: moves of 0.58-0.62 px for
+#: a difference of 0.77-0.79 px, 0.29-0.30 px for 0.48 px).
+_MERGED_MIN_STRETCH_PX = 0.5
+#: The band beyond that outline where a dark region left out of the fit shows:
+#: directions within this angle (degrees) of either end of the major axis ...
+_MERGED_WEDGE_DEG = 30.0
+#: ... and distances from the outline of 1.5 to 3 edge widths s plus 1 px (a disc's
+#: blurred edge there keeps 7 % of its contrast at most; the fit's edge zone ends
+#: there); the band is a region's when at least this share of its pixels were left
+#: out of the fit for a neighbouring candidate ...
+_MERGED_LEFT_OUT_SHARE = 0.5
+#: ... and their mean grey level is at least this share of the marker's contrast
+#: from the background towards the marker's level.
+_MERGED_DARK_SHARE = 0.5
+
+#: The message of a marker whose outline is stretched towards a dark region left out
+#: of its fit (:func:`_merged_end`).
+MERGED_END_MESSAGE = (
+    "its outline is an ellipse of axis ratio {ratio:.2f} whose major axis ends at a region left out of the fit "
+    "(another candidate's), {dark:.0%} as dark as the marker within {reach:.1f} px of the outline: the region's "
+    "blurred edge merges with the marker's and stretches the outline towards it, and the centre may be off by "
+    "about {off:.1f} px (the semi-axes' difference)"
+)
+
+
+def _merged_end(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
+    """Status ``near_edge`` for a pixel fit whose outline is stretched towards a dark
+    region left out of its fit, else None.
+
+    A disc, seen straight or obliquely, has background beyond its outline all round.
+    A dark region whose blurred edge reaches the marker's (a dark rectangle 2-4 px
+    from a 6 px dot, both blurred 3.5 px) merges with it: the fit's outline follows
+    the region's edge on that side, an ellipse whose major axis points at the region,
+    and the centre moves towards it by about the semi-axes' difference (3.0 px for an
+    ellipse of 10.6 x 7.3 px at a 2 px gap, 1.35 px for 8.0 x 6.4 px at 3 px, 0.6 px
+    for 6.6 x 5.8 px at 4 px). The region is a candidate of its own, left out of the
+    fit (`patch`'s excluded pixels), so the fit's own checks never see it.
+
+    Judged for fits whose outline's semi-axes differ by over
+    :data:`_MERGED_MIN_STRETCH_PX` (first from the fit's circularity, free): at either
+    end of the major axis, the pixels within :data:`_MERGED_WEDGE_DEG` of it, 1.5 s to
+    3 s + 1 px beyond the outline (s the fitted edge width), at least
+    :data:`_MERGED_LEFT_OUT_SHARE` left out and their mean level at least
+    :data:`_MERGED_DARK_SHARE` of the contrast F - B from the background B towards the
+    marker's level F. A neighbouring dot of a grid whose mask reaches that band lies
+    beyond its own blurred edge there: on the photographed targets no ``ok`` fit with
+    pixels left out had such a band (ellipses whose band a neighbour's mask covered by
+    41-65 % had it at 0.02-0.04 of the contrast). Costs one pass over the patch, for
+    those fits only."""
+    if patch is None or patch.excluded is None:
+        return None
+    # 1 - circularity is twice the second harmonic over R: about (a - b)/R
+    if not f.radius_px * (1.0 - f.circularity) > _MERGED_MIN_STRETCH_PX:
+        return None
+    from .circlefit import centred_ellipse_polar  # only for the few markers that need it
+
+    A, B, C = centred_ellipse_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    h = float(np.hypot(B, C))
+    if not A > h:
+        return None  # no ellipse: the fit's own checks judged its shape
+    semi_major, semi_minor = 1.0 / np.sqrt(A - h), 1.0 / np.sqrt(A + h)
+    if not semi_major - semi_minor > _MERGED_MIN_STRETCH_PX:
+        return None
+    s = f.edge_width_px
+    # the pixels of the annulus that can hold the band, then their offsets along the
+    # major axis and 1/r² of the outline in their direction (no angles: products of
+    # the offsets)
+    d2 = patch.squared_distance(f.x_px, f.y_px)
+    near = np.flatnonzero((d2 > (semi_minor + 1.5 * s) ** 2) & (d2 < (semi_major + 3.0 * s + 1.0) ** 2))
+    xs, ys = patch.coordinates(near)
+    dx, dy = xs - f.x_px, ys - f.y_px
+    d2 = d2.take(near)
+    major = 0.5 * np.arctan2(-C, -B)
+    along = (dx * np.cos(major) + dy * np.sin(major)) / np.sqrt(d2)  # cosine of the angle to the major axis
+    beyond = np.sqrt(d2) - 1.0 / np.sqrt(A + (B * (dx * dx - dy * dy) + 2.0 * C * dx * dy) / d2)
+    band = (beyond > 1.5 * s) & (beyond < 3.0 * s + 1.0)
+    wedge = np.cos(np.radians(_MERGED_WEDGE_DEG))
+    contrast = f.foreground_dn - f.background_dn
+    for at_end in (along > wedge, along < -wedge):
+        pixels = near[band & at_end]
+        if not pixels.size:
+            continue
+        left_out = float(np.mean(patch.excluded.take(pixels)))
+        dark = float(np.mean(patch.values.take(pixels)) - f.background_dn) / contrast
+        if left_out >= _MERGED_LEFT_OUT_SHARE and dark >= _MERGED_DARK_SHARE:
+            return _near_edge(f, MERGED_END_MESSAGE.format(ratio=semi_minor / semi_major, dark=dark,
+                                                           reach=3.0 * s + 1.0, off=semi_major - semi_minor))
+    return None
+
+
 #: A marker's edge is asymmetric about its centre (part of it hidden behind an
 #: occluder, or cut by an edge) when the third radial harmonic of its per-sector edge
 #: points about the fitted centre exceeds this share of the radius plus
@@ -1127,6 +1224,9 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     uneven = _uneven_light(f)
     if uneven is not None:
         return uneven
+    merged = _merged_end(f, patch)
+    if merged is not None:
+        return merged
     if oblique is not None:
         ratio, rms = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
@@ -1326,6 +1426,7 @@ def find_marker_list(
         markers.append(marker)
     if enough is None and fit == "pixels":
         _refit_beside_blurred(img, blobs, circles, markers, width, block_px)
+    _flag_unlike_neighbours(markers)
     return markers
 
 
@@ -1377,7 +1478,72 @@ def _fit_all(img, blobs: list[Blob], circles: np.ndarray, radius_range, block_px
     _refit_beside_blurred(img, blobs, circles, markers, width, block_px)
     crowded = _refit_crowded(img, blobs, circles, markers, width, block_px)
     _refit_unmasked(img, blobs, circles, markers, width, crowded, block_px)
+    _flag_unlike_neighbours(markers)
     return markers
+
+
+#: A marker fitted as an ellipse is compared with this many of its nearest ``ok``
+#: markers (:func:`_flag_unlike_neighbours`) ...
+_UNLIKE_NEIGHBOURS = 6
+#: ... and is ``near_edge`` when its fitted edge width is over this many times their
+#: median ...
+_UNLIKE_WIDTH_TIMES = 2.5
+#: ... and its circularity (minor over major axis) is below their median by over this.
+_UNLIKE_ROUNDER_BY = 0.1
+
+#: The message of a marker fitted as an ellipse that its ``ok`` neighbours contradict
+#: (:func:`_flag_unlike_neighbours`).
+UNLIKE_NEIGHBOURS_MESSAGE = (
+    "fitted as an ellipse (circularity {circ:.2f}) with an edge width of {width:.1f} px, where its nearest ok "
+    "markers ({n}) are rounder ({their_circ:.2f}) and sharper ({their_width:.1f} px; allowed {times} times): no disc "
+    "seen obliquely through the same optics; a shadow's or a light's edge, or a dark region beside it, widened "
+    "and stretched its edge, and the centre may be off by up to the axes' difference, {off:.1f} px"
+)
+
+
+def _flag_unlike_neighbours(markers: list) -> None:
+    """Each ``ok`` marker of `markers` fitted as an ellipse (circularity below
+    :func:`min_circularity`) whose :data:`_UNLIKE_NEIGHBOURS` nearest other ``ok``
+    markers are at once rounder (their median circularity above its own by over
+    :data:`_UNLIKE_ROUNDER_BY`) and sharper (its edge width over
+    :data:`_UNLIKE_WIDTH_TIMES` times their median) made ``near_edge`` (in place,
+    :data:`UNLIKE_NEIGHBOURS_MESSAGE`); nothing when there is no other ``ok`` marker.
+
+    A disc seen obliquely is blurred by the same optics as the markers beside it, and
+    its view changes smoothly across a target; a marker's edge that a light's or a
+    shadow's edge across it, or a dark region beside it, widens (the fit's edge width
+    takes up the uneven background its lighting plane cannot follow) is stretched into
+    an ellipse as well: an 8 px marker in a 1/3 shade 15 px from a 10 px wide shadow
+    edge, fitted as an ellipse of axis ratio 0.72 with an edge width of 5.1 px beside
+    a round marker of 1.1 px, 0.74 px off (and 3.4 px, ratio 0.67, 0.26 px off, 10 px
+    from the edge). On photographed targets an ellipse's edge width is at most 2.2
+    times its neighbours' median, and at most 1.8 times where it is also less round
+    than them by over 0.1 (dots 0.23 px from the maximum-likelihood fit). The
+    neighbours are judged before any is flagged: one pass over the ``ok`` markers,
+    and only when one is fitted as an ellipse."""
+    ok = [i for i, m in enumerate(markers) if m.ok and np.isfinite(m.edge_width_px)]
+    suspects = [i for i in ok if markers[i].circularity < min_circularity(markers[i].radius_px)]
+    if not suspects or len(ok) < 2:
+        return
+    table = np.array([(markers[i].x_px, markers[i].y_px, markers[i].edge_width_px, markers[i].circularity)
+                      for i in ok])
+    where = {i: k for k, i in enumerate(ok)}
+    k_near = min(_UNLIKE_NEIGHBOURS, len(ok) - 1)
+    flagged = []
+    for lo in range(0, len(suspects), 256):  # 256 markers at a time: a few MB at most
+        rows = np.array([where[i] for i in suspects[lo : lo + 256]])
+        d2 = (table[rows, None, 0] - table[None, :, 0]) ** 2 + (table[rows, None, 1] - table[None, :, 1]) ** 2
+        d2[np.arange(rows.size), rows] = np.inf  # not its own neighbour
+        near = np.argpartition(d2, k_near - 1, axis=1)[:, :k_near]
+        width = np.median(table[near, 2], axis=1)
+        circ = np.median(table[near, 3], axis=1)
+        unlike = (table[rows, 2] > _UNLIKE_WIDTH_TIMES * width) & (table[rows, 3] < circ - _UNLIKE_ROUNDER_BY)
+        flagged.extend((ok[r], w, c) for r, w, c in zip(rows[unlike].tolist(), width[unlike], circ[unlike]))
+    for i, width, circ in flagged:
+        m = markers[i]
+        markers[i] = _near_edge(m, UNLIKE_NEIGHBOURS_MESSAGE.format(
+            circ=m.circularity, width=m.edge_width_px, n=k_near, their_circ=circ, their_width=width,
+            times=_UNLIKE_WIDTH_TIMES, off=m.radius_px * (1.0 - m.circularity)))
 
 
 #: Statuses of a candidate that turned out to be no marker nor any object whose
