@@ -18,20 +18,23 @@ x to the right, y downwards.
 
 Failure modes (reported per marker in the ``status`` column, with a ``message``):
 ``border`` (cut by the image border), ``too_small``, ``too_large``, ``not_round``,
-``occluded`` (the fitted edge is asymmetric about its centre: part of the marker
-hidden or cut by an edge), ``near_edge`` (a candidate beside it that is no marker
-lay over its edge, and fitted with those pixels it is not ``ok``; or a shadow's or
-a light's edge crosses it, which the fit's lighting gradient cannot follow; or its
-outline is stretched towards a dark region left out of its fit; or, fitted as an
-ellipse, its ``ok`` neighbours are rounder and sharper),
+``occluded`` (the fitted edge is asymmetric about its centre, or an arc of it lies
+off the outline the rest follows: part of the marker hidden or cut by an edge),
+``near_edge`` (a candidate beside it that is no marker lay over its edge, and fitted
+with those pixels it is not ``ok``; or a shadow's or a light's edge crosses it, which
+the fit's lighting gradient cannot follow; or its outline is stretched towards a dark
+region left out of its fit; or, fitted as an ellipse, its ``ok`` neighbours are rounder
+and sharper),
 ``low_contrast`` and ``fit_failed``; ``ok`` otherwise.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -925,6 +928,166 @@ def _occluded(f: DiscFit, patch: MarkerPatch | None = None) -> Marker | None:
     )
 
 
+#: Largest share of a fit's edge points that :func:`_hidden_arc` may take for one
+#: hidden arc: an occluder over 5 px of a 10 px dot's edge hides a third of it;
+#: beyond this the rest no longer pins an ellipse and its centre.
+_ARC_MOST = 0.4
+#: :func:`_hidden_arc` refits the pixels only when leaving the arc out moves the edge
+#: points' centre by over this (px), and their RMS distance from their outline falls
+#: by over :data:`_ARC_EDGE_RATIO` times. Rendered occluders that put a 10-15 px
+#: dot's centre over 0.5 px off move it by 0.4-2 px there, at ratios of 3.5-18; the
+#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-2.5 % of them
+#: a photo (0.5 % of 17000): their edges' own bumps spread over the circle.
+_ARC_EDGE_PX = 0.2
+_ARC_EDGE_RATIO = 2.0
+#: Centre move (px) without the arc beyond which a marker is ``occluded``
+#: (:func:`_hidden_arc`): half the error an ``ok`` centre may have (0.5 px, issue 31).
+HIDDEN_ARC_PX = 0.25
+#: ... when the ring's residual RMS (DN) also falls by over this factor without the
+#: arc: the arc holds something that is not the marker (an occluder over a rendered
+#: dot's edge: 2.2-8); an edge that is no model edge all round leaves its misfit in
+#: the rest of the ring too (the photographed grid dots refitted: 1.0-1.8).
+HIDDEN_ARC_NOISE_RATIO = 2.0
+#: ... and when the move exceeds this many standard deviations of the refit's centre.
+_ARC_MOVE_SIGMAS = 5.0
+
+#: The message of an ``occluded`` marker whose edge holds an arc that is not its own
+#: (:func:`_hidden_arc`).
+HIDDEN_ARC_MESSAGE = (
+    "an arc of the edge lies off the outline the rest of it follows: without the ring's pixels in directions "
+    "{start:.0f} to {end:.0f} deg (counter-clockwise as displayed) its residual RMS falls from {noise:.1f} to "
+    "{rest:.1f} DN (allowed {ratio:.0f} times) and the centre moves by {move:.2f} px (allowed {allowed} px) to "
+    "({x:.2f}, {y:.2f}): part of the marker is hidden, and its centre may be off by about as much"
+)
+
+
+#: The upper triangle of a 5 x 5 matrix (its 15 entries, row by row) and, for each
+#: entry of the matrix, its place in that list: :func:`_arc_search`'s normal
+#: equations are kept as 15 sums.
+_UPPER_5 = np.triu_indices(5)
+_SYMMETRIC_5 = np.array([[min(i, j) * 5 - min(i, j) * (min(i, j) - 1) // 2 + abs(i - j) for j in range(5)]
+                         for i in range(5)])
+
+
+@lru_cache(maxsize=64)
+def _arcs(n: int):
+    """The arcs :func:`_arc_search` tries among `n` edge points, as two grids (read-only)
+    of every start with every length: starts every n/16 points, four lengths from
+    n/8 to :data:`_ARC_MOST` of them."""
+    grid = np.meshgrid(np.arange(0, n, max(1, n // 16)),
+                       np.unique(np.linspace(max(2, n // 8), int(_ARC_MOST * n), 4).astype(np.int64)), indexing="ij")
+    for g in grid:
+        g.flags.writeable = False
+    return grid
+
+
+def _arc_search(f: DiscFit):
+    """The contiguous arc of the pixel fit's per-sector edge points whose leaving out
+    best explains their scatter about their outline, and what leaving it out
+    changes: (start direction, span in rad, the centre's move in px, the ratio of
+    the points' RMS distance from their outline with and without the arc), or None
+    for fewer than 12 edge points.
+
+    The outline is the edge's radial distance from the fitted centre as a Fourier
+    series to the second harmonic (a circle, a shift of its centre and an ellipse:
+    a disc seen at any angle), fitted by least squares. The arc is, of those
+    starting every n/16 of the n points and holding n/8 to :data:`_ARC_MOST` of
+    them (four lengths), the one whose leaving out drops the sum of squares most
+    in units of the rest's variance: each candidate's normal equations from
+    cumulative sums around the circle, one batched 5 x 5 solve for all."""
+    dx, dy = f.edge_x_px - f.x_px, f.edge_y_px - f.y_px
+    n = dx.size
+    if n < 12:
+        return None
+    psi = np.arctan2(dy, dx)
+    order = np.argsort(psi)
+    psi, r = psi[order], np.hypot(dx, dy)[order]
+    c, si = np.cos(psi), np.sin(psi)
+    basis = np.stack([np.ones(n), c, si, c * c - si * si, 2.0 * c * si], axis=1)
+    # per point: the 15 products of the basis (the normal matrix's upper triangle),
+    # the basis times r and r², as rows; their running sums around the circle twice
+    terms = np.concatenate([basis[:, _UPPER_5[0]] * basis[:, _UPPER_5[1]], basis * r[:, None], (r * r)[:, None]],
+                           axis=1)
+    cum = np.cumsum(np.concatenate([np.zeros((1, 21)), terms, terms]), axis=0)
+    total = cum[n]
+
+    def solved(sums):
+        """The outline's coefficients and sum of squares from the sums (..., 21)."""
+        b = sums[..., 15:20]
+        coef = np.linalg.solve(sums[..., _SYMMETRIC_5], b[..., None])[..., 0]
+        return coef, sums[..., 20] - (coef * b).sum(axis=-1)
+
+    start, width = _arcs(n)
+    try:
+        # all the points, then each arc left out: one batched solve
+        p, ssr = solved(np.concatenate([total[None], (total - (cum[start + width] - cum[start])).reshape(-1, 21)]))
+    except np.linalg.LinAlgError:
+        return None
+    width = width.ravel()
+    k = int(np.argmax((ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)))
+    first, w = int(start.flat[k]), int(width[k])
+    ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
+    move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
+    half = np.pi / n
+    span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
+    return float(psi[first] - half), float(span), move, ratio
+
+
+def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
+    """Status ``occluded`` for a fit an arc of whose edge is not its own, else None
+    (and None without `patch`, the fit's pixels).
+
+    An occluder over the edge hides a chord of the marker: the edge points there
+    lie inside the outline that the rest of them follow, and the disc model's
+    centre moves away from it, by 0.5 px for one over 2 px of a 10 px dot's edge
+    whose third harmonic stays under :func:`_occluded`'s limit (an occluder that
+    is not much brighter or darker than the background, or blurred). The arc is
+    found on the edge points (:func:`_arc_search`); when leaving it out moves their
+    centre by over :data:`_ARC_EDGE_PX` and their scatter drops
+    :data:`_ARC_EDGE_RATIO` times, the marker is fitted again without the ring's
+    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc. ``occluded`` when that refit's centre is over
+    :data:`HIDDEN_ARC_PX` and :data:`_ARC_MOVE_SIGMAS` of its standard deviations
+    away and the ring's residual RMS is over :data:`HIDDEN_ARC_NOISE_RATIO` times
+    the refit's: the arc held what the rest of the ring does not (on rendered
+    occluders the refit is within 0.1 px of the truth), where an edge that is no
+    model edge all round (a photographed dot's) leaves its misfit in the rest too.
+    The refit's covariance counts the pixels' errors as independent (a JPEG's
+    are not): the move's limit in px decides on such photographs."""
+    # the edge points' RMS distance from their ellipse (the circle's, less the
+    # second harmonic's share, of amplitude (1 - circularity)·R/2) over half the
+    # edge-point move looked for: on rendered occluders that put the centre over
+    # 0.5 px off it is a third of that error (median), and those under 0.1 px hide
+    # a third of the edge, whose third harmonic _occluded flags; clean fits (the
+    # two-marker target, most photographed dots) need not look further
+    c2 = 0.5 * (1.0 - f.circularity) * f.radius_px
+    if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.5 * _ARC_EDGE_PX) ** 2:
+        return None
+    arc = _arc_search(f)
+    if arc is None or not (arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO):
+        return None
+    # the ring's pixels in a wedge of _ARC_MOST of the turn about the arc (or the
+    # arc, if wider): an occluder over the edge covers the background beyond the
+    # hidden chord over a wider angle than the chord, and its level there pulls too
+    span = max(arc[1], 2.0 * np.pi * _ARC_MOST)
+    start = arc[0] + 0.5 * (arc[1] - span)
+    inside = (np.arctan2(patch.ys - f.y_px, patch.xs - f.x_px) - start) % (2.0 * np.pi) < span
+    without = replace(patch, excluded=inside if patch.excluded is None else patch.excluded | inside)
+    try:
+        g = fit_disc(None, f.x_px, f.y_px, f.radius_px, edge_width=f.edge_width_px,
+                     levels=(f.background_dn, f.foreground_dn), patch=without)
+    except FitError:
+        return None
+    d = np.array([g.x_px - f.x_px, g.y_px - f.y_px])
+    move = float(np.hypot(d[0], d[1]))
+    along = d / move if move > 0 else d
+    std = float(np.sqrt(max(along @ g.cov[:2, :2] @ along, 0.0)))
+    if not (move > max(HIDDEN_ARC_PX, _ARC_MOVE_SIGMAS * std) and f.noise_dn > HIDDEN_ARC_NOISE_RATIO * g.noise_dn):
+        return None
+    return _flagged(f, "occluded", HIDDEN_ARC_MESSAGE.format(
+        start=-np.degrees(start + span) % 360.0, end=-np.degrees(start) % 360.0, noise=f.noise_dn,
+        rest=g.noise_dn, ratio=HIDDEN_ARC_NOISE_RATIO, move=move, allowed=HIDDEN_ARC_PX, x=g.x_px, y=g.y_px))
+
+
 #: The message of an ``ok`` marker whose ring held a surround as dark as itself
 #: (:attr:`~vision_torsion.pixelfit.DiscFit.steep_cut`): the centre is flagged, not
 #: withheld, as such a marker may be the only one there is.
@@ -1044,7 +1207,8 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     (:func:`_occluded`; not judged when `crowded` or when a neighbour's pixels left
     out of `patch` reach its edge zone); ``near_edge`` when the background is not
     even across it (:func:`_uneven_light`) or when a surround cut from its ring bent
-    its edge (:func:`_steep_edge_bent`); `crowded`: fitted with
+    its edge (:func:`_steep_edge_bent`); else ``occluded`` when an arc of its edge is
+    not its own (:func:`_hidden_arc`; not judged when `crowded`); `crowded`: fitted with
     :func:`crowded_patch` (:data:`CROWDED_MESSAGE`)."""
     circ = f.circularity
     rms, n_edge, message = f.residual_rms_px, int(f.edge_x_px.size), ""
@@ -1070,6 +1234,11 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     bent = _steep_edge_bent(f, rms)
     if bent is not None:
         return bent
+    # last: what the checks above name more closely (a shadow's edge, a bent edge)
+    # may leave an arc off the outline too
+    hidden = None if crowded else _hidden_arc(f, patch)
+    if hidden is not None:
+        return hidden
     if f.steep_cut:
         message = "; ".join(m for m in (message, STEEP_CUT_MESSAGE) if m)
     if crowded:
@@ -1438,8 +1607,14 @@ def _refit_unmasked(img, blobs: list[Blob], circles: np.ndarray, markers: list, 
 def _near_edge(m: Marker | DiscFit, message: str) -> Marker:
     """The ``ok`` marker (or pixel fit) `m` made ``near_edge`` with `message`: its
     centre, radius and edge width kept, without their uncertainties."""
+    return _flagged(m, "near_edge", message)
+
+
+def _flagged(m: Marker | DiscFit, status: str, message: str) -> Marker:
+    """The marker (or pixel fit) `m` with `status` and `message`: its centre, radius
+    and edge width kept, without their uncertainties."""
     return Marker(x_px=m.x_px, y_px=m.y_px, radius_px=m.radius_px, edge_width_px=m.edge_width_px,
-                  status="near_edge", message=message)
+                  status=status, message=message)
 
 
 #: The message of a marker fitted ``ok`` with a candidate's pixels left out that took
