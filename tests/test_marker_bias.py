@@ -164,6 +164,18 @@ def test_an_occluder_over_a_dot_edge_is_never_ok_far_off(darkness, over, blur):
         assert other["status"] == "ok" and far < 0.05
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "not solved: an occluder 20 DN darker than the background over 5 px of a 10 px dot's "
+    "edge (a third of it), blurred 3 px: the hidden arc is wider than the hidden-arc check's "
+    "largest (40 % of the edge) and the rest of the edge pins no ellipse; ok 1.37 px off at "
+    "seed 4, occluded at seeds 3 and 5 and at 15 and 30 DN"))
+def test_an_occluder_over_a_third_of_a_dot_edge_is_not_ok_far_off():
+    """The one case of the sweep (5-60 DN, 1-5 px over, blur 0.75-3 px, seeds 3-5) that
+    still comes out ``ok`` over the bound: ``ok`` within it, or not ``ok``."""
+    row, err = _nearest(find_markers(_occluder_scene(20.0, 5.0, 3.0, 4)), (100.3, 100.6))
+    assert row["status"] != "ok" or err < BOUND_PX
+
+
 def _jpeg_grid(seed):
     """A 5 x 4 grid of dots of radius 7 px 45 px apart, blurred 3 px, JPEG at quality
     30 (blocky, irregular edges, as a compressed photo's), and their centres."""
