@@ -234,8 +234,8 @@ class DiscFit:
     steep_cut : bool
         Pixels were cut from the ring under a steep lighting gradient
         (:data:`_STEEP_LIGHT`): a surround as dark as the marker (a card's edge, a
-        shadow) within a few px of its edge. The centre is then good to 0.4 px (``markers.STEEP_CUT_PX``),
-        not to its covariance.
+        shadow) within a few px of its edge. The centre is then good to 0.4 px
+        (:data:`vision_torsion.quality.STEEP_CUT_PX`), not to its covariance.
     background_step_dn : float
         How uneven the background around the marker is beyond the fitted lighting
         gradient (DN): the spread (largest minus smallest) of the mean residuals of
@@ -551,12 +551,13 @@ def _background_steps(P, xs, ys, resid, u, valid=None) -> np.ndarray:
     return spread
 
 
-def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
+def _lighting_shift(nx, ny, resid, J, u, M, inv) -> tuple:
     """(:attr:`DiscFit.lighting_shift_px`, :attr:`DiscFit.lighting_shift_std_px`) of a
     converged fit: how far (px) the centre moves when the lighting may also
     curve, L = 1 + gx·nx + gy·ny + a·nx² + b·nx·ny + c·ny² + (dx·nx + dy·ny)·(ρ - 1)
     with ρ = √(nx² + ny²) (`nx`, `ny`: the pixels' lighting frame; `resid`, `J`,
-    `u`: the fitted model, `M` its unlit image B + (F - B)·Φ(u)), the added terms'
+    `u`: the fitted model, `M` its unlit image B + (F - B)·Φ(u), `inv` the fit's
+    (JᵀJ)⁻¹), the added terms'
     coefficients taken from the residuals of the pixels away from the edge zone
     only; and that move's standard deviation (px) from the pixel noise alone; NaNs
     when those terms are degenerate.
@@ -577,7 +578,6 @@ def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
     rho = np.hypot(nx, ny) - 1.0
     curved = np.stack([nx * nx, nx * ny, ny * ny, nx * rho, ny * rho]) * M
     try:
-        inv = np.linalg.inv(J @ J.T)
         # the curved terms as the residuals hold them (what the fit's own
         # parameters leave of them), on the pixels away from the edge zone: an
         # edge that is not the model's (sharpening, an asymmetric blur) leaves
@@ -600,11 +600,12 @@ def _lighting_shift(nx, ny, resid, J, u, M) -> tuple:
     return float(shift), math.sqrt(max(var, 0.0))
 
 
-def _background_check(p, step, resid, J, u, nx, ny) -> tuple:
+def _background_check(p, step, resid, J, u, nx, ny, inv) -> tuple:
     """(:attr:`DiscFit.background_step_dn`, :attr:`DiscFit.lighting_shift_px`,
     :attr:`DiscFit.lighting_shift_std_px`) of the
     fit `p` whose background step is `step` (DN, :func:`_background_steps`), from
-    its pixels' lighting frame `nx`, `ny` and the model there (`resid`, `J`, `u`):
+    its pixels' lighting frame `nx`, `ny` and the model there (`resid`, `J`, `u`,
+    and `inv` = (JᵀJ)⁻¹):
     the shifts only when the step exceeds :data:`UNEVEN_BACKGROUND` of the contrast
     (else NaNs)."""
     if not step > UNEVEN_BACKGROUND * abs(p[5] - p[4]):
@@ -612,7 +613,7 @@ def _background_check(p, step, resid, J, u, nx, ny) -> tuple:
     M = normal_cdf(u)
     M *= p[5] - p[4]
     M += p[4]
-    return (step, *_lighting_shift(nx, ny, resid, J, u, M))
+    return (step, *_lighting_shift(nx, ny, resid, J, u, M, inv))
 
 
 def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, background=None) -> DiscFit:
@@ -624,7 +625,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, 
     radius against its σ
     (:func:`~vision_torsion.ring.check_radius`) and the edge diagnostics
     (``diagnostics()``: :func:`_edge_diagnostics`' tuple, or its FitError);
-    ``background()`` gives :func:`_background_check`.
+    ``background(inverse())`` gives :func:`_background_check`.
 
     Raises
     ------
@@ -641,7 +642,7 @@ def _disc_fit(p, sigma2, inverse, diagnostics, *, n, steep_cut, block_cov=None, 
     if isinstance(found, FitError):
         raise found
     ex, ey, rms, circularity, noise = found
-    step, shift, shift_std = (float("nan"),) * 3 if background is None else background()
+    step, shift, shift_std = (float("nan"),) * 3 if background is None else background(inv)
     return DiscFit(
         x_px=float(p[0]),
         y_px=float(p[1]),
@@ -951,9 +952,9 @@ def _fit_from(p, ring: _Pixels, patch: MarkerPatch, resid, J, u, *, max_iter, bl
     return _disc_fit(p, sigma2, lambda: _inverse(A), lambda: _edge_diagnostics(
         p[None], resid[None], J[None], u[None], [n], [ssr])[0], n=n, steep_cut=steep_cut,
         block_cov=(lambda inv: _block_covariance(px.xs, px.ys, resid, J, block_px, inv)) if block_px else None,
-        background=lambda: _background_check(p, float(_background_steps(p[None], px.xs[None], px.ys[None],
-                                                                           resid[None], u[None])[0]),
-                                             resid, J, u, px.nx, px.ny))
+        background=lambda inv: _background_check(p, float(_background_steps(p[None], px.xs[None], px.ys[None],
+                                                                               resid[None], u[None])[0]),
+                                                 resid, J, u, px.nx, px.ny, inv))
 
 
 class _Scratch(threading.local):
@@ -1339,8 +1340,8 @@ class _RowsFit:
                 out[self.live[k]] = _disc_fit(
                     P[k], sigma2[k], inverse, lambda: diagnostics[j], n=nk, steep_cut=self.steep_cut[k],
                     block_cov=block_cov,
-                    background=lambda: _background_check(P[k], float(steps[k]), resid[k, :nk], Jm[k, :, :nk],
-                                                         u[k, :nk], px.nx[k, :nk], px.ny[k, :nk]))
+                    background=lambda inv: _background_check(P[k], float(steps[k]), resid[k, :nk], Jm[k, :, :nk],
+                                                             u[k, :nk], px.nx[k, :nk], px.ny[k, :nk], inv))
             except FitError as exc:
                 failed[k] = exc
         for k, exc in failed.items():
