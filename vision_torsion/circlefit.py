@@ -463,10 +463,9 @@ def centred_ellipse(dx, dy):
     A = (1/a² + 1/b²)/2 and √(B² + C²) = (1/b² - 1/a²)/2: linear least squares in
     (A, B, C). b/a = √((A - h)/(A + h)) with h = √(B² + C²).
     """
-    coef, design = _centred_ellipse_fit(dx, dy)
+    coef, design, r2 = _centred_ellipse_fit(dx, dy)
     h = float(np.hypot(coef[1], coef[2]))
     inverse_r2 = design @ coef
-    r2 = dx * dx + dy * dy
     if not coef[0] > h or not (inverse_r2 > 0).all():
         return None
     off = np.sqrt(r2) - 1.0 / np.sqrt(inverse_r2)
@@ -483,8 +482,8 @@ def centred_ellipse_polar(dx, dy) -> np.ndarray:
 
 
 def _centred_ellipse_fit(dx, dy):
-    """(A, B, C) of :func:`centred_ellipse_polar` and the design matrix of that linear
-    least-squares fit of 1/r² (rows: 1, cos 2ψ, sin 2ψ)."""
+    """(A, B, C) of :func:`centred_ellipse_polar`, the design matrix of that linear
+    least-squares fit of 1/r² (rows: 1, cos 2ψ, sin 2ψ) and the points' r² (px²)."""
     r2 = dx * dx + dy * dy
     design = np.stack([np.ones_like(r2), (dx * dx - dy * dy) / r2, 2.0 * dx * dy / r2], axis=1)
-    return np.linalg.lstsq(design, 1.0 / r2, rcond=None)[0], design
+    return np.linalg.lstsq(design, 1.0 / r2, rcond=None)[0], design, r2
