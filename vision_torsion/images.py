@@ -561,7 +561,6 @@ def as_grey_array(image, *, name: str = "image", keep_integers: bool = False) ->
     return out
 
 
-
 def grey_array_and_blocks(image, *, name: str = "image", keep_integers: bool = False) -> tuple[np.ndarray, int | None]:
     """:func:`as_grey_array` of `image` and the side (px) of the blocks its grey
     levels were compressed in (:attr:`GreyImage.jpeg_block_px`; None for a lossless
@@ -570,6 +569,7 @@ def grey_array_and_blocks(image, *, name: str = "image", keep_integers: bool = F
     if isinstance(image, (str, os.PathLike)):
         image = load_image(image, keep_integers=keep_integers)
     return as_grey_array(image, name=name, keep_integers=keep_integers), (getattr(image, "jpeg_block_px", 0) or None)
+
 
 def write_image(path, data: np.ndarray, *, bit_depth: int = 8, jpeg_quality: int | None = None) -> None:
     """Write grey levels to an image file atomically (temporary file, then rename).
