@@ -710,3 +710,18 @@ def test_plan_and_synth_refuse_an_unwritable_folder_before_writing(capsys, tmp_p
     assert code == 2 and "file" in err and "cannot create the output folder" in err
     code, _, err = run(capsys, "synth", "session", tmp_path / "file", "--scene", "paper_session")
     assert code == 2 and "it is a file, not a folder" in err
+
+
+# -- inputs that are not regular files: refused at once, never waited on --------------------
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+@pytest.mark.parametrize("name", ["manifest.csv", "session.toml"])
+def test_a_named_pipe_for_a_session_file_is_refused_without_waiting(capsys, small_session, tmp_path, name):
+    (small_session / name).unlink()
+    os.mkfifo(small_session / name)  # opening it for reading would wait for a writer for ever
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 2
+    assert f"{name}: not a regular file (a named pipe or a device); expected " in err
+    assert tree_digest(tmp_path) == before
