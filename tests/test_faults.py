@@ -715,13 +715,50 @@ def test_plan_and_synth_refuse_an_unwritable_folder_before_writing(capsys, tmp_p
 # -- inputs that are not regular files: refused at once, never waited on --------------------
 
 
+def named_pipe(path, *, release_after_s=20.0):
+    """Make a named pipe at `path`; after `release_after_s` a thread keeps opening and
+    closing its writing end, so a reader wrongly waiting on it fails the test instead
+    of hanging it. Returns the thread's stop event (set it at the end)."""
+    import threading
+
+    os.mkfifo(path)
+    stop = threading.Event()
+
+    def release():
+        stop.wait(release_after_s)
+        while not stop.wait(0.2):
+            try:
+                os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+            except OSError:  # no reader waiting (ENXIO), or the pipe already gone
+                pass
+
+    threading.Thread(target=release, daemon=True).start()
+    return stop
+
+
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
 @pytest.mark.parametrize("name", ["manifest.csv", "session.toml", "binding.json"])
 def test_a_named_pipe_for_a_session_file_is_refused_without_waiting(capsys, small_session, tmp_path, name):
     (small_session / name).unlink(missing_ok=True)
-    os.mkfifo(small_session / name)  # opening it for reading would wait for a writer for ever
+    stop = named_pipe(small_session / name)  # opening it for reading would wait for a writer
     before = tree_digest(tmp_path)
     code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    stop.set()
     assert code == 2
     assert f"{name}: not a regular file (a named pipe or a device); expected " in err
     assert tree_digest(tmp_path) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_in_the_camera_folder_is_set_aside_by_bind(capsys, small_session, tmp_path):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):  # in capture order
+        (small_session / image).rename(cam / f"IMG_{i + 1:04d}.png")
+    stop = named_pipe(cam / "IMG_9999.png")  # reading it (a capture time, a hash) would wait
+    before = tree_digest(cam)
+    code, out, err = run(capsys, "bind", small_session, cam, "--by", "name")
+    stop.set()
+    assert code == 1  # the synthetic angles' steps give bind things to look at
+    assert "IMG_9999.png: not a regular file (a named pipe or a device); not bound" in out + err
+    assert tree_digest(cam) == before
