@@ -762,3 +762,16 @@ def test_a_named_pipe_in_the_camera_folder_is_set_aside_by_bind(capsys, small_se
     assert code == 1  # the synthetic angles' steps give bind things to look at
     assert "IMG_9999.png: not a regular file (a named pipe or a device); not bound" in out + err
     assert tree_digest(cam) == before
+
+
+# -- the output folder is never a folder of the inputs ---------------------------------------
+
+
+@pytest.mark.parametrize("command", ["process", "report"])
+def test_the_folder_of_the_session_s_images_is_refused_as_output(capsys, small_session, command):
+    before = tree_digest(small_session)
+    code, out, err = run(capsys, command, small_session, "-o", small_session / "images")
+    assert code == 2
+    assert f"{small_session / 'images'}: the output folder cannot be a folder of the session's images; " \
+           "use a folder of its own such as results/" in err
+    assert tree_digest(small_session) == before

@@ -476,7 +476,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     Raises
     ------
     SessionError
-        Invalid session folder or session.toml, or `out_dir` is the session folder.
+        Invalid session folder or session.toml, or `out_dir` is the session folder or a
+        folder of its images.
     ManifestError
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
@@ -491,6 +492,10 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     if out.resolve() == session.folder.resolve():
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
+    image_dirs = {session.manifest.image_path(row).parent for row in session.manifest.rows}
+    if out.resolve() in {d.resolve() for d in image_dirs}:  # the photographs are only read
+        raise SessionError(f"{out}: the output folder cannot be a folder of the session's images; "
+                           "use a folder of its own such as results/")
     # before measuring: a run must not do its work and then fail to write it
     check_output_dir(out, replaces=[MEASUREMENTS_NAME])
     settings = session.settings
