@@ -775,3 +775,21 @@ def test_the_folder_of_the_session_s_images_is_refused_as_output(capsys, small_s
     assert f"{small_session / 'images'}: the output folder cannot be a folder of the session's images; " \
            "use a folder of its own such as results/" in err
     assert tree_digest(small_session) == before
+
+
+# -- a zero mass where the plan has weights ----------------------------------------------------
+
+
+def test_an_unloading_step_at_zero_mass_before_its_last_names_its_line(capsys, small_session, tmp_path):
+    manifest = small_session / "manifest.csv"
+    rows = manifest.read_text().splitlines()
+    n = next(i for i, r in enumerate(rows) if ",positive_unloading,0," in r)  # the fully loaded step
+    rows[n] = rows[n].rsplit(",", 1)[0] + ",0"
+    manifest.write_text("\n".join(rows) + "\n")
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 2
+    assert re.search(rf"line {n + 1}: mass_kg 0 on step 0 of a positive_unloading row, yet step 1 \(line "
+                     rf"{n + 2}\) still has 0\.02 kg on each pan; an unloading phase reaches 0 only at its "
+                     "last step", err), err
+    assert tree_digest(tmp_path) == before

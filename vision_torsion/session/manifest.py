@@ -284,6 +284,7 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
     by_key: dict[tuple, int] = {}
     last_step: dict[tuple, tuple[int, int]] = {}
     reference: dict[float, int] = {}
+    unloaded: dict[tuple, ManifestRow] = {}  # an unloading phase's first row at zero mass
     for row in rows:
         where = (f"orientation {row.orientation_deg:g}, cycle {row.cycle}, {row.phase}")
         key = (row.orientation_deg, row.cycle, row.phase, row.step)
@@ -302,6 +303,15 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
                                 f"step {prev_step} (line {prev_line}); steps must increase "
                                 "down the file")
         last_step[group] = (row.step, row.line)
+        if row.phase.endswith("_unloading") and row.torque_nm is None:
+            zero = unloaded.get(group)
+            if zero is not None and row.mass_kg:
+                check.add(zero.line, f"mass_kg 0 on step {zero.step} of a {row.phase} row, yet step "
+                                     f"{row.step} (line {row.line}) still has {row.mass_kg:g} kg on each "
+                                     "pan; an unloading phase reaches 0 only at its last step")
+                del unloaded[group]
+            elif row.mass_kg == 0:
+                unloaded.setdefault(group, row)
         if row.phase == "reference":
             if row.orientation_deg in reference:
                 check.add(row.line, f"second reference row of orientation "
