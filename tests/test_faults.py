@@ -793,3 +793,20 @@ def test_an_unloading_step_at_zero_mass_before_its_last_names_its_line(capsys, s
                      rf"{n + 2}\) still has 0\.02 kg on each pan; an unloading phase reaches 0 only at its "
                      "last step", err), err
     assert tree_digest(tmp_path) == before
+
+
+# -- watch: a camera folder that is not there yet has not disappeared ---------------------------
+
+
+def test_watch_on_a_camera_folder_not_made_yet_says_so(small_session, tmp_path):
+    from vision_torsion.session.watch import Watcher
+
+    cam = tmp_path / "cam"  # the camera makes it at its first photograph, or --camera-dir has a typo
+    with Watcher(small_session, camera_dir=cam, events="poll") as w:
+        assert [(e.kind, e.message) for e in w.tick()] == [
+            ("folder_gone", f"{cam}: no such folder yet; waiting for it (check --camera-dir if the camera "
+                            "does not make it; Ctrl-C to stop)")]
+        assert w.tick() == []  # said once
+        cam.mkdir()
+        assert [(e.kind, e.message) for e in w.tick()] == [("folder_back", f"{cam}: the camera folder is there")]
+    assert not cam.exists() or not any(cam.iterdir())

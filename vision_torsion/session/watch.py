@@ -100,7 +100,8 @@ class WatchEvent:
         "retracted" (a warning the next image showed to be the gear), "replaced" (a
         bound file changed: measured again), "ignored" (a file set aside), "leftover"
         (a photograph beyond the last row), "deleted",
-        "folder_gone", "folder_back", "complete" (every row has its photograph).
+        "folder_gone" (the camera folder is not there: gone, or not made yet),
+        "folder_back", "complete" (every row has its photograph).
     file : str
         The file concerned ("" for folder events).
     message : str
@@ -224,6 +225,7 @@ class Watcher:
         self.order: list[int] = []  # positions in capture order
         self.notices: list[str] = []
         self.folder_gone = False
+        self.folder_seen = False  # a folder never seen has not "disappeared": it is not there yet
         self.timings: list[dict] = []
         cfg = self.session.config
         self.step_torque = cfg.rig.step_torque_nm
@@ -337,11 +339,16 @@ class Watcher:
                 self.folder_gone = True
                 events.append(self._notice("folder_gone", "", f"{self.camera}: the camera folder "
                                            "has disappeared; waiting for it to come back "
-                                           "(nothing measured so far is lost; Ctrl-C to stop)"))
+                                           "(nothing measured so far is lost; Ctrl-C to stop)"
+                                           if self.folder_seen else f"{self.camera}: no such "
+                                           "folder yet; waiting for it (check --camera-dir if the "
+                                           "camera does not make it; Ctrl-C to stop)"))
             return events
         if self.folder_gone:
             self.folder_gone = False
-            events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is back"))
+            events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is "
+                                       + ("back" if self.folder_seen else "there")))
+        self.folder_seen = True
         events += self._vanished({e.name for e in entries})
         self.events.ensure()  # on again after the folder was gone or replaced
         closed = self.events.closed()
