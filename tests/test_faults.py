@@ -810,3 +810,21 @@ def test_watch_on_a_camera_folder_not_made_yet_says_so(small_session, tmp_path):
         cam.mkdir()
         assert [(e.kind, e.message) for e in w.tick()] == [("folder_back", f"{cam}: the camera folder is there")]
     assert not cam.exists() or not any(cam.iterdir())
+
+
+def test_a_manifest_of_more_rows_than_a_plan_may_write_is_refused_as_it_is_read(capsys, small_session, tmp_path):
+    from vision_torsion.session.manifest import MAX_MANIFEST_ROWS
+    from vision_torsion.session.plan import MAX_PLAN_IMAGES
+
+    assert MAX_PLAN_IMAGES == MAX_MANIFEST_ROWS  # what plan may write, process may read
+    manifest = small_session / "manifest.csv"
+    n = len(manifest.read_text().splitlines()) - 1
+    with manifest.open("a") as fh:  # a runaway script appending rows
+        fh.writelines(f"images/x{i}.png,0,1,positive_loading,{i + 9},0.02\n" for i in range(MAX_MANIFEST_ROWS))
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 2
+    assert f"manifest.csv: line {MAX_MANIFEST_ROWS + 2}: more than {MAX_MANIFEST_ROWS} rows, the most a session " \
+           "may have (as many as a plan may write)" in err
+    assert n < MAX_MANIFEST_ROWS
+    assert tree_digest(tmp_path) == before
