@@ -828,3 +828,14 @@ def test_a_manifest_of_more_rows_than_a_plan_may_write_is_refused_as_it_is_read(
            "may have (as many as a plan may write)" in err
     assert n < MAX_MANIFEST_ROWS
     assert tree_digest(tmp_path) == before
+
+
+def test_a_huge_reference_table_is_refused_before_it_is_read(capsys, folder, tmp_path):
+    table = folder / "reference.csv"
+    with table.open("wb") as fh:  # sparse: 3 GB that take no room; read whole it took 6 GB of memory
+        fh.truncate(3 << 30)
+    before = tree_digest(folder, exclude=["reference.csv"]), table.stat().st_mtime_ns  # not read for the hash
+    code, out, err = run(capsys, "check-accuracy", folder, "-o", tmp_path / "out")
+    assert code == 2
+    assert f"{table}: 3221225472 bytes, more than the 268435456 a reference table may have" in err
+    assert (tree_digest(folder, exclude=["reference.csv"]), table.stat().st_mtime_ns) == before

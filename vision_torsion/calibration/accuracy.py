@@ -64,7 +64,7 @@ from ..measure import measure_sequence
 from ..measurements import output_folder
 from ..pair import measure_pair
 from ..settings import MeasureSettings
-from ..textfiles import csv_delimiter, decode_utf8, read_toml
+from ..textfiles import csv_delimiter, decode_utf8, read_text_bytes, read_toml
 from ..validate import check_number
 
 __all__ = [
@@ -164,10 +164,12 @@ def read_reference_table(folder) -> pd.DataFrame:
     """
     folder = Path(folder)
     path = folder / "reference.csv"
-    if not path.is_file():
+    if not path.exists():
         raise ReferenceTableError(f"{path}: no reference table (expected image,reference_angle_deg)")
+    # its size before it is read; a folder, a named pipe or a device refused by name
+    raw = read_text_bytes(path, what="a reference table", error=ReferenceTableError)
     try:
-        text = decode_utf8(path.read_bytes(), name=path, error=ReferenceTableError, what="the table")
+        text = decode_utf8(raw, name=path, error=ReferenceTableError, what="the table")
         sep = csv_delimiter(text.split("\n", 1)[0], ("image", "reference_angle_deg"))
         rows = list(csv.reader(io.StringIO(text, newline=""), delimiter=sep))
     except (OSError, csv.Error) as exc:
