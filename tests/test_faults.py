@@ -839,3 +839,16 @@ def test_a_huge_reference_table_is_refused_before_it_is_read(capsys, folder, tmp
     assert code == 2
     assert f"{table}: 3221225472 bytes, more than the 268435456 a reference table may have" in err
     assert (tree_digest(folder, exclude=["reference.csv"]), table.stat().st_mtime_ns) == before
+
+
+def test_a_huge_plane_correction_json_is_refused_before_it_is_read(tmp_path):
+    from vision_torsion.correction import load_correction
+    from vision_torsion.errors import CalibrationError
+
+    path = tmp_path / "plane.json"
+    with path.open("wb") as fh:  # sparse: 3 GB that take no room; it was read whole
+        fh.truncate(3 << 30)
+    with pytest.raises(CalibrationError, match=r"plane\.json: 3221225472 bytes, more than the 268435456 a plane "
+                                               r"correction file may have") as info:
+        load_correction(path)
+    assert info.value.reason == "too_large"
