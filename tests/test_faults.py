@@ -852,3 +852,20 @@ def test_a_huge_plane_correction_json_is_refused_before_it_is_read(tmp_path):
                                                r"correction file may have") as info:
         load_correction(path)
     assert info.value.reason == "too_large"
+
+
+@pytest.mark.parametrize("kind", ["folder", "named pipe"])
+def test_stiffness_given_a_folder_or_a_pipe_says_what_it_is(capsys, tmp_path, kind):
+    data = tmp_path / "record.csv"
+    if kind == "folder":
+        data.mkdir()
+    elif not hasattr(os, "mkfifo"):
+        pytest.skip("named pipes are POSIX")
+    else:
+        os.mkfifo(data)
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "stiffness", data)
+    assert code == 2
+    assert f"{data}: not a regular file (a folder, a named pipe or a device); expected a torque-angle " \
+           "record CSV" in err  # it said "no such file"
+    assert tree_digest(tmp_path) == before  # no output folder made beside it
