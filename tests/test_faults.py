@@ -869,3 +869,14 @@ def test_stiffness_given_a_folder_or_a_pipe_says_what_it_is(capsys, tmp_path, ki
     assert f"{data}: not a regular file (a folder, a named pipe or a device); expected a torque-angle " \
            "record CSV" in err  # it said "no such file"
     assert tree_digest(tmp_path) == before  # no output folder made beside it
+
+
+def test_a_newline_in_a_camera_file_name_cannot_forge_a_line_of_bind(capsys, small_session, tmp_path):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):
+        (small_session / image).rename(cam / f"IMG_{i + 1:04d}.png")
+    (cam / "IMG_0099\nerror: forged.txt").write_text("x")
+    code, out, err = run(capsys, "bind", small_session, cam, "--by", "name")
+    assert "set aside: IMG_0099\\nerror: forged.txt: not an image file" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
