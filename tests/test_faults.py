@@ -880,3 +880,19 @@ def test_a_newline_in_a_camera_file_name_cannot_forge_a_line_of_bind(capsys, sma
     code, out, err = run(capsys, "bind", small_session, cam, "--by", "name")
     assert "set aside: IMG_0099\\nerror: forged.txt: not an image file" in err
     assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_a_newline_in_an_unlisted_file_name_cannot_forge_a_line_of_process(capsys, small_session, tmp_path):
+    (small_session / "images" / "x\nerror: forged.png").write_bytes(cv2.imencode(".png", draw_target(0.0))[1])
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 0
+    assert "not in the manifest: images/x\\nerror: forged.png" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_a_newline_in_a_failed_image_s_name_cannot_forge_a_line_of_measure(capsys, folder):
+    (folder / "y\nerror: forged.png").write_text("not an image")
+    code, out, err = measure(capsys, folder)
+    assert code == 1
+    assert f"failed: {folder}/y\\nerror: forged.png: not a PNG, TIFF, BMP or JPEG image" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
