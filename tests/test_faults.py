@@ -896,3 +896,17 @@ def test_a_newline_in_a_failed_image_s_name_cannot_forge_a_line_of_measure(capsy
     assert code == 1
     assert f"failed: {folder}/y\\nerror: forged.png: not a PNG, TIFF, BMP or JPEG image" in err
     assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_watch_shows_no_nan_for_the_first_photograph_s_step(small_session, tmp_path):
+    from vision_torsion.session.watch import Watcher
+
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    first = pd.read_csv(small_session / "manifest.csv")["image"][0]
+    (small_session / first).rename(cam / "IMG_0001.png")
+    with Watcher(small_session, camera_dir=cam, settle_s=0.0, events="poll") as w:
+        shots = [e for _ in range(3) for e in w.tick() if e.kind == "shot"]
+    assert len(shots) == 1
+    assert re.search(r"θ=[+-]\d+\.\d{4}°  Δθ=—$", shots[0].message), shots[0].message  # it said Δθ=+nan°
+    assert "nan" not in shots[0].message

@@ -578,7 +578,8 @@ class Watcher:
         number = self.order.index(pos) + 1
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
-                + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
+                + (f"θ={b.angle:+.4f}°  Δθ=" + (f"{b.delta:+.4f}°" if math.isfinite(b.delta) else "—")
+                   if math.isfinite(b.angle) else "θ=—")
                 + (f"  ({note})" if (note := polarity_note(b.pair, self.session.settings.polarity)) else ""))
         events = [WatchEvent("shot", b.file, line, row.line)]
         for p in sorted(self.bound, key=self.order.index):
