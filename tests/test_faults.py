@@ -910,3 +910,22 @@ def test_watch_shows_no_nan_for_the_first_photograph_s_step(small_session, tmp_p
     assert len(shots) == 1
     assert re.search(r"θ=[+-]\d+\.\d{4}°  Δθ=—$", shots[0].message), shots[0].message  # it said Δθ=+nan°
     assert "nan" not in shots[0].message
+
+
+# -- an output folder that is a symbolic link looping on itself --------------------------------
+
+
+@pytest.mark.parametrize("command", ["process", "report", "watch", "measure", "check-accuracy"])
+def test_an_output_folder_that_is_a_looping_link_is_named(capsys, small_session, folder, tmp_path, command):
+    loop = tmp_path / "loop"
+    loop.symlink_to("loop")  # Path.resolve raised RuntimeError on it: an internal error
+    (folder / "reference.csv").write_text("image,reference_angle_deg\n" + "".join(
+        f"{p.name},{i}\n" for i, p in enumerate(sorted(folder.glob("*.png"), key=lambda p: p.name != "reference.png"))))
+    argv = {"process": [small_session], "report": [small_session], "watch": [small_session],
+            "measure": [folder, "--reference", folder / "reference.png"], "check-accuracy": [folder]}[command]
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, command, *argv, "-o", loop)
+    assert code == 2
+    assert f"{loop}: cannot create the output folder: a symbolic link that leads nowhere (it loops, or its " \
+           "target is missing)" in err
+    assert tree_digest(tmp_path) == before

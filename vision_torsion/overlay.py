@@ -185,9 +185,10 @@ def write_overlays(images, out_dir, *, settings: MeasureSettings | None = None,
         `out_dir` is one of `inputs`.
     """
     from .errors import OutputError, VisionTorsionError
+    from .fileio import same_folder
 
     out = Path(out_dir)
-    if any(out.resolve() == Path(p).resolve() for p in inputs):
+    if any(same_folder(out, p) for p in inputs):
         raise OutputError(f"{out}: the overlay folder cannot be an input folder (it is never "
                           "written); name another folder")
     written = []

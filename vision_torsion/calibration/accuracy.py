@@ -59,7 +59,7 @@ from scipy import stats
 
 from ..correction import load_correction
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
-from ..fileio import check_output_dir, output_set, write_csv, write_json
+from ..fileio import check_output_dir, output_set, same_folder, write_csv, write_json
 from ..measure import measure_sequence
 from ..measurements import output_folder
 from ..pair import measure_pair
@@ -355,7 +355,7 @@ def check_accuracy(
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)
     out = output_folder(folder, out_dir)
-    if out.resolve() == folder.resolve():
+    if same_folder(out, folder):
         raise OutputError(
             f"{out}: the output folder cannot be the image folder itself (results "
             "written among the images would be taken for images); use a subfolder "

@@ -46,7 +46,7 @@ from pathlib import Path
 from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
-from ..fileio import check_output_dir, write_records_csv
+from ..fileio import check_output_dir, same_folder, write_records_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, TARGET_RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
@@ -489,11 +489,11 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
     out = output_folder(session.folder, out_dir)
-    if out.resolve() == session.folder.resolve():
+    if same_folder(out, session.folder):
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
     image_dirs = {session.manifest.image_path(row).parent for row in session.manifest.rows}
-    if out.resolve() in {d.resolve() for d in image_dirs}:  # the photographs are only read
+    if any(same_folder(out, d) for d in image_dirs):  # the photographs are only read
         raise SessionError(f"{out}: the output folder cannot be a folder of the session's images; "
                            "use a folder of its own such as results/")
     # before measuring: a run must not do its work and then fail to write it

@@ -72,7 +72,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text, check_output_dir, check_replaceable
+from ..fileio import atomic_write_text, check_output_dir, check_replaceable, same_folder
 from ..images import IMAGE_SUFFIXES, MAX_IMAGE_FILE_BYTES
 from ..measure import natural_key
 from ..measurements import output_folder
@@ -201,7 +201,7 @@ class Watcher:
         self.camera_mode = camera_dir is not None
         self.camera = Path(camera_dir).absolute() if camera_dir is not None else folder / "images"
         self.out = output_folder(folder, out_dir)
-        if self.camera.resolve() == self.out.resolve():
+        if same_folder(self.camera, self.out):
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
         # before the first photograph: a watch must not announce itself and then die
         check_output_dir(self.out)  # live.html and the cache
