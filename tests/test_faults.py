@@ -929,3 +929,18 @@ def test_an_output_folder_that_is_a_looping_link_is_named(capsys, small_session,
     assert f"{loop}: cannot create the output folder: a symbolic link that leads nowhere (it loops, or its " \
            "target is missing)" in err
     assert tree_digest(tmp_path) == before
+
+
+# -- overlays: a folder that cannot take them is said so, not skipped -------------------------
+
+
+def test_a_user_s_file_under_an_overlay_s_name_stops_the_overlays_by_name(capsys, folder, tmp_path):
+    overlays = tmp_path / "overlays"
+    overlays.mkdir()
+    (overlays / "img_002_overlay.png").write_text("the user's own")
+    before = tree_digest(overlays)
+    code, out, err = measure(capsys, folder, "--overlay", overlays)
+    assert code == 2  # it was 0, 'wrote 4 overlay(s)', the fifth skipped without a word
+    assert f"{overlays / 'img_002_overlay.png'}: not replaced: vision-torsion did not write this file" in err
+    assert tree_digest(overlays) == before  # none drawn, the user's file kept
+    assert (folder.parent / "out" / "angles.csv").is_file()  # the measurements are kept
