@@ -944,3 +944,15 @@ def test_a_user_s_file_under_an_overlay_s_name_stops_the_overlays_by_name(capsys
     assert f"{overlays / 'img_002_overlay.png'}: not replaced: vision-torsion did not write this file" in err
     assert tree_digest(overlays) == before  # none drawn, the user's file kept
     assert (folder.parent / "out" / "angles.csv").is_file()  # the measurements are kept
+
+
+def test_bind_refuses_a_camera_folder_that_is_its_output_folder(capsys, small_session, tmp_path):
+    results = small_session / "results"  # the default output folder, given as the camera's
+    results.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):
+        (small_session / image).rename(results / f"IMG_{i + 1:04d}.png")
+    before = tree_digest(small_session)
+    code, out, err = run(capsys, "bind", small_session, results)
+    assert code == 2  # it measured them and wrote its cache among them
+    assert f"{results}: the camera folder cannot be the output folder" in err
+    assert tree_digest(small_session) == before
