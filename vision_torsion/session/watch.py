@@ -328,10 +328,9 @@ class Watcher:
                                            "complete; not bound"))
         return events
 
-    def tick(self, now: float | None = None) -> list[WatchEvent]:
-        """Look at the camera folder once; return what happened (module docstring)."""
-        now = self.clock() if now is None else now
-        events: list[WatchEvent] = []
+    def _camera_entries(self, events: list[WatchEvent]) -> list | None:
+        """The camera folder's files, or None when the folder is not there (gone, or not
+        made yet: said once, in `events`, as is its coming back)."""
         try:
             entries = [e for e in os.scandir(self.camera) if e.is_file()]
         except (FileNotFoundError, NotADirectoryError):
@@ -343,12 +342,21 @@ class Watcher:
                                            if self.folder_seen else f"{self.camera}: no such "
                                            "folder yet; waiting for it (check --camera-dir if the "
                                            "camera does not make it; Ctrl-C to stop)"))
-            return events
+            return None
         if self.folder_gone:
             self.folder_gone = False
             events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is "
                                        + ("back" if self.folder_seen else "there")))
         self.folder_seen = True
+        return entries
+
+    def tick(self, now: float | None = None) -> list[WatchEvent]:
+        """Look at the camera folder once; return what happened (module docstring)."""
+        now = self.clock() if now is None else now
+        events: list[WatchEvent] = []
+        entries = self._camera_entries(events)
+        if entries is None:
+            return events
         events += self._vanished({e.name for e in entries})
         self.events.ensure()  # on again after the folder was gone or replaced
         closed = self.events.closed()
