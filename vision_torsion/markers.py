@@ -981,24 +981,30 @@ def _arcs(n: int):
     return grid
 
 
-def _arc_search(f: DiscFit):
-    """The contiguous arc of the pixel fit's per-sector edge points whose leaving out
-    best explains their scatter about their outline, and what leaving it out
-    changes: (start direction, span in rad, the centre's move in px, the ratio of
-    the points' RMS distance from their outline with and without the arc), or None
-    for fewer than 12 edge points.
+def _arc_search(f: DiscFit) -> list:
+    """The contiguous arcs of the pixel fit's per-sector edge points whose leaving out
+    best explains their scatter about their outline, and what leaving each out
+    changes: a list of (start direction, span in rad, the centre's move in px, the
+    ratio of the points' RMS distance from their outline with and without the arc),
+    empty for fewer than 12 edge points; the best arc first, then the best of those
+    whose points lie on the other side of the rest's outline (inside it, where the
+    first lies outside, or the reverse), if any.
 
     The outline is the edge's radial distance from the fitted centre as a Fourier
     series to the second harmonic (a circle, a shift of its centre and an ellipse:
-    a disc seen at any angle), fitted by least squares. The arc is, of those
+    a disc seen at any angle), fitted by least squares. The arcs are, of those
     starting every n/16 of the n points and holding n/8 to :data:`_ARC_MOST` of
-    them (four lengths), the one whose leaving out drops the sum of squares most
+    them (four lengths), the ones whose leaving out drops the sum of squares most
     in units of the rest's variance: each candidate's normal equations from
-    cumulative sums around the circle, one batched 5 x 5 solve for all."""
+    cumulative sums around the circle, one batched 5 x 5 solve for all. A hidden
+    chord lies inside the outline of the rest, and the outline of all the points
+    moves away from it, which leaves the opposite arc outside: leaving out either
+    explains much of the scatter, and the wrong one may explain a little more
+    (a third of a dot's edge hidden), hence the second."""
     dx, dy = f.edge_x_px - f.x_px, f.edge_y_px - f.y_px
     n = dx.size
     if n < 12:
-        return None
+        return []
     psi = np.arctan2(dy, dx)
     order = np.argsort(psi)
     psi, r = psi[order], np.hypot(dx, dy)[order]
@@ -1018,19 +1024,28 @@ def _arc_search(f: DiscFit):
         return coef, sums[..., 20] - (coef * b).sum(axis=-1)
 
     start, width = _arcs(n)
+    arc_sums = (cum[start + width] - cum[start]).reshape(-1, 21)
     try:
         # all the points, then each arc left out: one batched solve
-        p, ssr = solved(np.concatenate([total[None], (total - (cum[start + width] - cum[start])).reshape(-1, 21)]))
+        p, ssr = solved(np.concatenate([total[None], total - arc_sums]))
     except np.linalg.LinAlgError:
-        return None
+        return []
     width = width.ravel()
-    k = int(np.argmax((ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)))
-    first, w = int(start.flat[k]), int(width[k])
-    ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
-    move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
+    score = (ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)
+    # each arc's points' summed radial offset from the rest's outline: Σr - Σbasis·p
+    # (the basis's sums are the products with its constant term, the first five)
+    outside = arc_sums[:, 15] - (arc_sums[:, :5] * p[1:]).sum(axis=1) > 0.0
+    best = int(np.argmax(score))
+    other = np.flatnonzero(outside != outside[best])
     half = np.pi / n
-    span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
-    return float(psi[first] - half), float(span), move, ratio
+    arcs = []
+    for k in [best] + ([int(other[np.argmax(score[other])])] if other.size else []):
+        first, w = int(start.flat[k]), int(width[k])
+        ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
+        move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
+        span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
+        arcs.append((float(psi[first] - half), float(span), move, ratio))
+    return arcs
 
 
 def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
@@ -1041,11 +1056,13 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     lie inside the outline that the rest of them follow, and the disc model's
     centre moves away from it, by 0.5 px for one over 2 px of a 10 px dot's edge
     whose third harmonic stays under :func:`_occluded`'s limit (an occluder that
-    is not much brighter or darker than the background, or blurred). The arc is
-    found on the edge points (:func:`_arc_search`); when leaving it out moves their
+    is not much brighter or darker than the background, or blurred). The arcs are
+    found on the edge points (:func:`_arc_search`: the best, then the best on the
+    other side of their outline); for each in turn, when leaving it out moves their
     centre by over :data:`_ARC_EDGE_PX` and their scatter drops
     :data:`_ARC_EDGE_RATIO` times, the marker is fitted again without the ring's
-    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc. ``occluded`` when that refit's centre is over
+    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc
+    (:func:`_without_arc`). ``occluded`` when that refit's centre is over
     :data:`HIDDEN_ARC_PX` and :data:`_ARC_MOVE_SIGMAS` of its standard deviations
     away and the ring's residual RMS is over :data:`HIDDEN_ARC_NOISE_RATIO` times
     the refit's: the arc held what the rest of the ring does not (on rendered
@@ -1062,9 +1079,17 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     c2 = 0.5 * (1.0 - f.circularity) * f.radius_px
     if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.5 * _ARC_EDGE_PX) ** 2:
         return None
-    arc = _arc_search(f)
-    if arc is None or not (arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO):
-        return None
+    for arc in _arc_search(f):
+        hidden = _without_arc(f, patch, arc) if arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO else None
+        if hidden is not None:
+            return hidden
+    return None
+
+
+def _without_arc(f: DiscFit, patch: MarkerPatch, arc) -> Marker | None:
+    """Status ``occluded`` for the pixel fit `f` when its refit without the ring's
+    pixels about `arc` (from :func:`_arc_search`) says the arc is not its own
+    (:func:`_hidden_arc`), else None."""
     # the ring's pixels in a wedge of _ARC_MOST of the turn about the arc (or the
     # arc, if wider): an occluder over the edge covers the background beyond the
     # hidden chord over a wider angle than the chord, and its level there pulls too
