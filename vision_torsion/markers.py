@@ -1550,20 +1550,23 @@ def _flag_unlike_neighbours(markers: list) -> None:
     suspects = [i for i in ok if markers[i].circularity < min_circularity(markers[i].radius_px)]
     if not suspects or len(ok) < 2:
         return
+    from scipy.spatial import cKDTree  # here: only a marker fitted as an ellipse needs it
+
     table = np.array([(markers[i].x_px, markers[i].y_px, markers[i].edge_width_px, markers[i].circularity)
                       for i in ok])
     where = {i: k for k, i in enumerate(ok)}
     k_near = min(_UNLIKE_NEIGHBOURS, len(ok) - 1)
-    flagged = []
-    for lo in range(0, len(suspects), 256):  # 256 markers at a time: a few MB at most
-        rows = np.array([where[i] for i in suspects[lo : lo + 256]])
-        d2 = (table[rows, None, 0] - table[None, :, 0]) ** 2 + (table[rows, None, 1] - table[None, :, 1]) ** 2
-        d2[np.arange(rows.size), rows] = np.inf  # not its own neighbour
-        near = np.argpartition(d2, k_near - 1, axis=1)[:, :k_near]
-        width = np.median(table[near, 2], axis=1)
-        circ = np.median(table[near, 3], axis=1)
-        unlike = (table[rows, 2] > _UNLIKE_WIDTH_TIMES * width) & (table[rows, 3] < circ - _UNLIKE_ROUNDER_BY)
-        flagged.extend((ok[r], w, c) for r, w, c in zip(rows[unlike].tolist(), width[unlike], circ[unlike]))
+    rows = np.array([where[i] for i in suspects])
+    # the nearest k_near + 1 hold the marker itself, unless as many others share its
+    # place: then the farthest of them is the one too many
+    near = cKDTree(table[:, :2]).query(table[rows, :2], k=k_near + 1)[1].reshape(rows.size, k_near + 1)
+    others = near != rows[:, None]
+    others[others.all(axis=1), -1] = False
+    near = near[others].reshape(rows.size, k_near)
+    width = np.median(table[near, 2], axis=1)
+    circ = np.median(table[near, 3], axis=1)
+    unlike = (table[rows, 2] > _UNLIKE_WIDTH_TIMES * width) & (table[rows, 3] < circ - _UNLIKE_ROUNDER_BY)
+    flagged = [(ok[r], w, c) for r, w, c in zip(rows[unlike].tolist(), width[unlike], circ[unlike])]
     for i, width, circ in flagged:
         m = markers[i]
         markers[i] = _near_edge(m, UNLIKE_NEIGHBOURS_MESSAGE.format(
