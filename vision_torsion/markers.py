@@ -678,8 +678,9 @@ _OBLIQUE_NOISE_TIMES = 4.0
 
 
 def _oblique(f: DiscFit):
-    """(axis ratio, RMS distance in px) of the ellipse centred on the pixel fit's centre
-    through its per-sector edge points when it describes them (their RMS distance
+    """(axis ratio, RMS distance in px, its polar coefficients (A, B, C) of
+    :func:`~vision_torsion.circlefit.centred_ellipse_polar`) of the ellipse centred on
+    the pixel fit's centre through its per-sector edge points when it describes them (their RMS distance
     from it at most √((0.4·their RMS from the circle)² + (2·their noise figure)²):
     :data:`_OBLIQUE_RESIDUAL_SHARE`, :data:`_OBLIQUE_NOISE_TIMES`), else None.
 
@@ -689,16 +690,16 @@ def _oblique(f: DiscFit):
     ellipse fit's own centre gave no straighter rows (0.393 against 0.380 px on the
     UCL frame's 668 triples). A shape whose centre the disc model misses (a
     teardrop) is off any ellipse centred there."""
-    from .circlefit import centred_ellipse  # only for the few markers that need it
+    from .circlefit import centred_ellipse_and_polar  # only for the few markers that need it
 
-    found = centred_ellipse(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    found, polar = centred_ellipse_and_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
     if found is None:
         return None
     ratio, rms = found
     allowed = np.hypot(_OBLIQUE_RESIDUAL_SHARE * f.residual_rms_px, _OBLIQUE_NOISE_TIMES * f.edge_noise_px)
     if ratio < _OBLIQUE_MIN_AXIS_RATIO or not rms <= allowed:
         return None
-    return ratio, rms
+    return ratio, rms, polar
 
 
 #: Semi-axes' difference (px) of a fit's outline (its edge points' centred ellipse)
@@ -729,9 +730,11 @@ MERGED_END_MESSAGE = (
 )
 
 
-def _merged_end(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
+def _merged_end(f: DiscFit, patch: MarkerPatch | None, polar=None) -> Marker | None:
     """Status ``near_edge`` for a pixel fit whose outline is stretched towards a dark
-    region left out of its fit, else None.
+    region left out of its fit, else None; `polar`, the outline's coefficients
+    (:func:`~vision_torsion.circlefit.centred_ellipse_polar`) if :func:`_oblique`
+    has fitted them.
 
     A disc, seen straight or obliquely, has background beyond its outline all round.
     A dark region whose blurred edge reaches the marker's (a dark rectangle 2-4 px
@@ -758,9 +761,11 @@ def _merged_end(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     # 1 - circularity is twice the second harmonic over R: about (a - b)/R
     if not f.radius_px * (1.0 - f.circularity) > _MERGED_MIN_STRETCH_PX:
         return None
-    from .circlefit import centred_ellipse_polar  # only for the few markers that need it
+    if polar is None:
+        from .circlefit import centred_ellipse_polar  # only for the few markers that need it
 
-    A, B, C = centred_ellipse_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+        polar = centred_ellipse_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    A, B, C = polar
     h = float(np.hypot(B, C))
     if not A > h:
         return None  # no ellipse: the fit's own checks judged its shape
@@ -1249,11 +1254,11 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     uneven = _uneven_light(f)
     if uneven is not None:
         return uneven
-    merged = _merged_end(f, patch)
+    merged = _merged_end(f, patch, None if oblique is None else oblique[2])
     if merged is not None:
         return merged
     if oblique is not None:
-        ratio, rms = oblique
+        ratio, rms, _ = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
                    f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
     bent = _steep_edge_bent(f, rms)
