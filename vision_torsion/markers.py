@@ -941,8 +941,8 @@ _ARC_MOST = 0.4
 #: points' centre by over this (px), and their RMS distance from their outline falls
 #: by over :data:`_ARC_EDGE_RATIO` times. Rendered occluders that put a 10-15 px
 #: dot's centre over 0.5 px off move it by 0.4-2 px there, at ratios of 3.5-18; the
-#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-2.5 % of them
-#: a photo (0.5 % of 17000): their edges' own bumps spread over the circle.
+#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-3.4 % of them
+#: a photo (0.6 % of 17000): their edges' own bumps spread over the circle.
 _ARC_EDGE_PX = 0.2
 _ARC_EDGE_RATIO = 2.0
 #: Centre move (px) without the arc beyond which a marker is ``occluded``
@@ -1076,13 +1076,14 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     The refit's covariance counts the pixels' errors as independent (a JPEG's
     are not): the move's limit in px decides on such photographs."""
     # the edge points' RMS distance from their ellipse (the circle's, less the
-    # second harmonic's share, of amplitude (1 - circularity)·R/2) over half the
-    # edge-point move looked for: on rendered occluders that put the centre over
-    # 0.5 px off it is a third of that error (median), and those under 0.1 px hide
-    # a third of the edge, whose third harmonic _occluded flags; clean fits (the
-    # two-marker target, most photographed dots) need not look further
+    # second harmonic's share, of amplitude (1 - circularity)·R/2) over 0.35 of
+    # the edge-point move looked for (0.07 px): on rendered occluders that put the
+    # centre over 0.5 px off it is a third of that error (median), and at least
+    # 0.087 px (an occluder 60 DN darker over 2 px of a 10 px dot's edge, blurred
+    # 3.5 px, 0.51 px off); clean fits need not look further (the two-marker
+    # target's leave 0.025-0.028 px, most dots of the sharp photographs less)
     c2 = 0.5 * (1.0 - f.circularity) * f.radius_px
-    if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.5 * _ARC_EDGE_PX) ** 2:
+    if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.35 * _ARC_EDGE_PX) ** 2:
         return None
     for arc in _arc_search(f):
         hidden = _without_arc(f, patch, arc) if arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO else None
