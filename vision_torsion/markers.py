@@ -680,9 +680,10 @@ _OBLIQUE_NOISE_TIMES = 4.0
 def _oblique(f: DiscFit):
     """(axis ratio, RMS distance in px, its polar coefficients (A, B, C) of
     :func:`~vision_torsion.circlefit.centred_ellipse_polar`) of the ellipse centred on
-    the pixel fit's centre through its per-sector edge points when it describes them (their RMS distance
-    from it at most √((0.4·their RMS from the circle)² + (2·their noise figure)²):
-    :data:`_OBLIQUE_RESIDUAL_SHARE`, :data:`_OBLIQUE_NOISE_TIMES`), else None.
+    the pixel fit's centre through its per-sector edge points when it describes them
+    (their RMS distance from it at most √((0.4·their RMS from the circle)² +
+    (4·their noise figure)²): :data:`_OBLIQUE_RESIDUAL_SHARE`,
+    :data:`_OBLIQUE_NOISE_TIMES`), else None.
 
     The centre stays the disc model's: an ellipse is symmetric about its centre, and
     so is the least-squares fit of the (symmetric) disc model to it, which lands on
