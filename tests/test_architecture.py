@@ -27,7 +27,7 @@ LAYERS = [
                        "vision_torsion.batch", "vision_torsion.measurements", "vision_torsion.settings",
                        "vision_torsion.plotting", "vision_torsion.htmlpage", "vision_torsion.table_import",
                        "vision_torsion.progress", "vision_torsion.targets", "vision_torsion.validate"]),
-    (1, "image", ["vision_torsion.images", "vision_torsion.quality"]),
+    (1, "image", ["vision_torsion.images", "vision_torsion.pngrows", "vision_torsion.quality"]),
     (2, "markers", ["vision_torsion.ring", "vision_torsion.detect", "vision_torsion.edges",
                     "vision_torsion.pixelfit", "vision_torsion.circlefit", "vision_torsion.markers"]),
     (3, "pair", ["vision_torsion.pair"]),
