@@ -14,7 +14,8 @@ measures, each ``process`` run in a fresh child process with an empty cache:
 - ``process`` wall time with 1 job (measured in the calling process), 2 jobs
   forced into threads (two threads read and decode, the calling thread measures:
   the path of fewer than ``PROCESS_MIN_IMAGES`` images to measure) and 2 jobs in 2
-  worker processes (the default on two cores for this many images), each run between two decode-only runs with as many processes (this VM's
+  worker processes (the default on two cores for this many images), each run
+  between two decode-only runs with as many processes (this VM's
   speed drifts by tens of percent over minutes, and its two vCPUs do not give two
   processes twice the speed of one), and the ratios ``process / (decode with as
   many processes)`` and ``process / (1-core decode / jobs)`` (issue 4 asks for
