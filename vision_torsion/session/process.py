@@ -351,9 +351,8 @@ def _read_ahead(tasks, *, readers: int):
     ahead, and this thread measures them (:func:`~.worker.finish_task`).
 
     Reading, decoding and most of the detection run in C without the GIL;
-    measuring holds it. On two cores this beat two worker processes in five of six
-    alternating runs of 1000 images, by 2-9 %, before the candidates moved to the
-    readers (3.9 % more): no process start-up, no messages."""
+    measuring holds it, so the threads wait for each other on many images
+    (:data:`PROCESS_MIN_IMAGES`); on a few, no process start-up beats that."""
     todo = iter(tasks)
     pool = ThreadPoolExecutor(max_workers=readers, thread_name_prefix="vision-torsion-read")
     try:
