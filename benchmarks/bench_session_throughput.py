@@ -11,10 +11,11 @@ two files are identical and the content-hash cache cannot share results), then
 measures, each ``process`` run in a fresh child process with an empty cache:
 
 - decode-only time: reading and decoding every file (``cv2.imdecode``), one core;
-- ``process`` wall time with 1 job (measured in the calling process), 2 jobs (the
-  default on two cores: two threads read and decode, the calling thread measures)
-  and 2 jobs forced into 2 worker processes (the path ``process`` takes above three
-  jobs), each run between two decode-only runs with as many processes (this VM's
+- ``process`` wall time with 1 job (measured in the calling process), 2 jobs
+  forced into threads (two threads read and decode, the calling thread measures:
+  the path of fewer than ``PROCESS_MIN_IMAGES`` images to measure) and 2 jobs in 2
+  worker processes (the default on two cores for this many images), each run
+  between two decode-only runs with as many processes (this VM's
   speed drifts by tens of percent over minutes, and its two vCPUs do not give two
   processes twice the speed of one), and the ratios ``process / (decode with as
   many processes)`` and ``process / (1-core decode / jobs)`` (issue 4 asks for
@@ -47,8 +48,8 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results" / "session_throughput.json"
-#: (name, jobs, mode) of the timed runs; the second is the default on two cores.
-CONFIGS = (("1 job", 1, "default"), ("2 jobs, threads", 2, "default"),
+#: (name, jobs, mode) of the timed runs; the third is the default on two cores.
+CONFIGS = (("1 job", 1, "default"), ("2 jobs, threads", 2, "threads"),
            ("2 jobs, processes", 2, "processes"))
 ANGLE_GRID_DEG = 0.25  # ideal renders are shared between images on this grid
 
@@ -151,14 +152,17 @@ def decode_only(folder: Path, jobs: int = 1) -> float:
 
 def child(session: str, out: str, jobs: int, mode: str) -> None:
     """Run process_session here and print wall time and counts as JSON; `mode`
-    "processes" sends even 2 jobs to worker processes."""
+    "processes" sends even 2 jobs to worker processes, "threads" keeps up to
+    three in threads of this process, however many images."""
     import resource
 
     from vision_torsion.session import process as process_module
     from vision_torsion.session import process_session
 
     if mode == "processes":
-        process_module._MAX_THREAD_JOBS = 0
+        process_module.MAX_THREAD_JOBS = 0
+    elif mode == "threads":
+        process_module.PROCESS_MIN_IMAGES = sys.maxsize
 
     start = time.perf_counter()
     result = process_session(session, out_dir=out, jobs=jobs)

@@ -5,6 +5,8 @@ import pytest
 
 from vision_torsion.circlefit import (
     centred_ellipse,
+    centred_ellipse_and_polar,
+    centred_ellipse_polar,
     fit_circle,
     fit_circle_algebraic,
     fit_circle_geometric,
@@ -149,3 +151,22 @@ def test_centred_ellipse_gives_the_ellipse_fit_s_axis_ratio():
     # four points on a circle of 10 px and one 1.4 px from the centre: the fitted
     # 1/r² is negative in some directions, which no ellipse is
     assert centred_ellipse(np.array([10.0, -10.0, 0.0, 0.0, 1.0]), np.array([0.0, 0.0, 10.0, -10.0, 1.0])) is None
+
+
+def test_centred_ellipse_and_polar_is_both_from_one_fit():
+    """centred_ellipse_and_polar gives centred_ellipse's (axis ratio, RMS distance),
+    or None where the points lie on no ellipse, together with centred_ellipse_polar's
+    (A, B, C): the semi-axes 12 and 7.3 px at 25° are 1/√(A ∓ √(B² + C²)), the major
+    axis at atan2(-C, -B)/2."""
+    t = np.linspace(0.0, 2 * np.pi, 90, endpoint=False)
+    a, b, th = 12.0, 7.3, np.deg2rad(25.0)
+    x = a * np.cos(t) * np.cos(th) - b * np.sin(t) * np.sin(th)
+    y = a * np.cos(t) * np.sin(th) + b * np.sin(t) * np.cos(th)
+    found, (A, B, C) = centred_ellipse_and_polar(x, y)
+    assert found == centred_ellipse(x, y)
+    assert np.array_equal((A, B, C), centred_ellipse_polar(x, y))
+    h = np.hypot(B, C)
+    assert (1 / np.sqrt(A - h), 1 / np.sqrt(A + h), 0.5 * np.arctan2(-C, -B)) == pytest.approx((a, b, th))
+    none_x, none_y = np.array([10.0, -10.0, 0.0, 0.0, 1.0]), np.array([0.0, 0.0, 10.0, -10.0, 1.0])
+    found, polar = centred_ellipse_and_polar(none_x, none_y)
+    assert found is None and np.array_equal(polar, centred_ellipse_polar(none_x, none_y))

@@ -129,6 +129,27 @@ def _occluder_scene(darkness, over, blur, seed):
     return np.clip(img * (1 - region) + (200.0 - darkness) * region, 0, 255).astype(np.uint8)
 
 
+def _assert_hidden_arc_flagged(img):
+    """In an occluder scene: the first dot's fit is over the bound off and
+    ``occluded`` with the hidden-arc message; the other dot is ``ok``."""
+    table = find_markers(img)
+    row, err = _nearest(table, (100.3, 100.6))
+    assert err > BOUND_PX  # the fit is that far off: the flag is what keeps it from ok
+    assert row["status"] == "occluded"
+    assert row["message"].startswith(HIDDEN_ARC_MESSAGE.split("{")[0])
+    assert _nearest(table, (60.2, 175.4))[0]["status"] == "ok"
+
+
+def _assert_occluded_dot_not_ok_far_off(img):
+    """In an occluder scene: the first dot ``ok`` within the bound or not ``ok``;
+    the other ``ok`` within 0.05 px (its σ is ~0.01 px)."""
+    table = find_markers(img)
+    row, err = _nearest(table, (100.3, 100.6))
+    assert row["status"] != "ok" or err < BOUND_PX
+    other, far = _nearest(table, (60.2, 175.4))
+    assert other["status"] == "ok" and far < 0.05
+
+
 def test_a_slightly_darker_occluder_over_a_dot_edge_is_not_ok_far_off():
     """A region at 185 DN (background 200 DN, blurred 1.5 px) over 2 px of a 10 px
     dot's edge hides a chord and moves the centre 0.51 px; its third harmonic
@@ -136,12 +157,7 @@ def test_a_slightly_darker_occluder_over_a_dot_edge_is_not_ok_far_off():
     but without the ring's pixels around that arc the ring's residual RMS falls
     from 7.1 to 2.1 DN and the centre moves by 0.48 px, to 0.04 px from the truth:
     ``occluded`` with that message; the other dot stays ``ok``."""
-    table = find_markers(_occluder_scene(15.0, 2.0, 1.5, 3))
-    row, err = _nearest(table, (100.3, 100.6))
-    assert err > BOUND_PX  # the fit is that far off: the flag is what keeps it from ok
-    assert row["status"] == "occluded"
-    assert row["message"].startswith(HIDDEN_ARC_MESSAGE.split("{")[0])
-    assert _nearest(table, (60.2, 175.4))[0]["status"] == "ok"
+    _assert_hidden_arc_flagged(_occluder_scene(15.0, 2.0, 1.5, 3))
 
 
 @pytest.mark.parametrize("darkness", [5.0, 15.0, 30.0, 60.0])
@@ -153,27 +169,47 @@ def test_an_occluder_over_a_dot_edge_is_never_ok_far_off(darkness, over, blur):
     ``ok`` (before the hidden-arc check, 23 of these 96 cases came out ``ok``
     0.51-1.08 px off: blurred or slightly darker occluders leave the third harmonic
     under its limit), and the dot beside it stays ``ok`` within 0.05 px (found:
-    0.013). Over 5 px (a third of the edge hidden) with a 3 px blur, one of the
-    sweep's 9 cases stays ``ok`` 1.37 px off: the hidden arc is wider than the
-    check's largest (40 % of the edge) and the rest of it no ellipse."""
+    0.013)."""
     for seed in (3, 4):
-        table = find_markers(_occluder_scene(darkness, over, blur, seed))
-        row, err = _nearest(table, (100.3, 100.6))
-        assert row["status"] != "ok" or err < BOUND_PX
-        other, far = _nearest(table, (60.2, 175.4))
-        assert other["status"] == "ok" and far < 0.05
+        _assert_occluded_dot_not_ok_far_off(_occluder_scene(darkness, over, blur, seed))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "not solved: an occluder 20 DN darker than the background over 5 px of a 10 px dot's "
-    "edge (a third of it), blurred 3 px: the hidden arc is wider than the hidden-arc check's "
-    "largest (40 % of the edge) and the rest of the edge pins no ellipse; ok 1.37 px off at "
-    "seed 4, occluded at seeds 3 and 5 and at 15 and 30 DN"))
-def test_an_occluder_over_a_third_of_a_dot_edge_is_not_ok_far_off():
-    """The one case of the sweep (5-60 DN, 1-5 px over, blur 0.75-3 px, seeds 3-5) that
-    still comes out ``ok`` over the bound: ``ok`` within it, or not ``ok``."""
-    row, err = _nearest(find_markers(_occluder_scene(20.0, 5.0, 3.0, 4)), (100.3, 100.6))
-    assert row["status"] != "ok" or err < BOUND_PX
+def test_an_occluder_over_a_third_of_a_dot_edge_is_occluded():
+    """An occluder 20 DN darker than the background over 5 px of a 10 px dot's edge (a
+    third of it), blurred 3 px, seed 4: the fit is 1.37 px off, and the arc whose
+    leaving out best explains the edge points' scatter was the one opposite the
+    hidden chord (the outline of all of them moves away from the chord, which leaves
+    the far side outside it): ``ok``. The best arc on the other side of the outline
+    is tried as well: ``occluded``, with the refit's message, and the other dot stays
+    ``ok``."""
+    _assert_hidden_arc_flagged(_occluder_scene(20.0, 5.0, 3.0, 4))
+
+
+@pytest.mark.parametrize("darkness", [15.0, 20.0, 30.0])
+@pytest.mark.parametrize("over", [4.0, 5.0, 6.0])
+@pytest.mark.parametrize("blur", [2.0, 3.0, 3.5])
+def test_an_occluder_over_a_third_of_a_dot_edge_is_never_ok_far_off(darkness, over, blur):
+    """Around that case: occluders 15-30 DN darker than the background over 4-6 px of
+    a 10 px dot's edge, blurred 2-3.5 px (three seeds each): ``ok`` within the bound
+    or not ``ok`` (before the arc on the other side was tried, 11 of these 81 came
+    out ``ok`` 1.3-1.8 px off, 3 of them seen obliquely), and the dot beside it
+    stays ``ok`` within 0.05 px (found: 0.013)."""
+    for seed in (3, 4, 5):
+        _assert_occluded_dot_not_ok_far_off(_occluder_scene(darkness, over, blur, seed))
+
+
+@pytest.mark.parametrize("darkness", [45.0, 60.0])
+@pytest.mark.parametrize("over", [1.0, 2.0, 3.0])
+@pytest.mark.parametrize("blur", [3.0, 3.5])
+def test_a_dark_blurred_occluder_over_a_little_of_a_dot_edge_is_never_ok_far_off(darkness, over, blur):
+    """Occluders 45-60 DN darker than the background over 1-3 px of a 10 px dot's
+    edge, blurred 3-3.5 px (three seeds each): the edge points scatter about their
+    ellipse by as little as 0.087 px, under the 0.1 px from which the hidden arc
+    was looked for, and 4 of these 36 came out ``ok`` 0.51-0.54 px off (over 2 px,
+    blur 3.5 px); looked for from 0.07 px, ``ok`` within the bound (found: up to
+    0.11 px) or not ``ok``, and the dot beside it stays ``ok`` within 0.05 px."""
+    for seed in (3, 4, 5):
+        _assert_occluded_dot_not_ok_far_off(_occluder_scene(darkness, over, blur, seed))
 
 
 def _jpeg_grid(seed):

@@ -91,3 +91,46 @@ def test_killed_run_resumes_to_the_same_file(tmp_path, jobs):
     result = process_session(folder, out_dir=out, jobs=jobs)
     assert (result.n_measured, result.n_cached) == (n - done, done)
     assert result.measurements_path.read_bytes() == reference.read_bytes()
+
+
+def _how_measured(caplog) -> str:
+    said = [r.getMessage() for r in caplog.records if "results: measuring with" in r.getMessage()]
+    assert len(said) == 1, said
+    return said[0].rsplit("measuring with ", 1)[1]
+
+
+def test_many_images_to_measure_go_to_worker_processes_and_give_the_same_file(rendered, tmp_path, monkeypatch,
+                                                                              caplog):
+    folder, plan, _ = rendered
+    caplog.set_level("DEBUG", logger="vision_torsion.session.process")
+    few = process_session(folder, out_dir=tmp_path / "threads", jobs=2)
+    assert _how_measured(caplog) == "2 reading threads"  # fewer than PROCESS_MIN_IMAGES
+    monkeypatch.setattr(process_module, "PROCESS_MIN_IMAGES", len(plan.rows))
+    caplog.clear()
+    many = process_session(folder, out_dir=tmp_path / "processes", jobs=2)
+    assert _how_measured(caplog) == "2 worker processes"
+    assert many.n_measured == len(plan.rows)
+    assert many.measurements_path.read_bytes() == few.measurements_path.read_bytes()
+    caplog.clear()
+    again = process_session(folder, out_dir=tmp_path / "processes", jobs=2)  # every result cached
+    assert _how_measured(caplog) == "2 reading threads"
+    assert again.n_cached == len(plan.rows)
+
+
+def test_a_measuring_function_that_does_not_pickle_runs_in_threads(rendered, tmp_path, monkeypatch, caplog):
+    from vision_torsion.pair import measure_pair
+
+    folder, plan, _ = rendered
+    monkeypatch.setattr(process_module, "PROCESS_MIN_IMAGES", 1)
+    caplog.set_level("DEBUG", logger="vision_torsion.session.process")
+
+    def local_measure(image, **kw):  # a local function: not picklable
+        return measure_pair(image, **kw)
+
+    result = process_session(folder, out_dir=tmp_path / "two", jobs=2, measure=local_measure)
+    assert _how_measured(caplog) == "2 reading threads"
+    assert result.n_measured == len(plan.rows) and result.n_ok == len(plan.rows)
+    caplog.clear()
+    result = process_session(folder, out_dir=tmp_path / "four", jobs=4, measure=local_measure)
+    assert _how_measured(caplog) == "3 reading threads"
+    assert "cannot be sent to worker processes; measuring with 3 threads of this process instead" in caplog.text

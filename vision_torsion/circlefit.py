@@ -35,7 +35,7 @@ from .numerics import numeric_jacobian
 
 __all__ = [
     "CircleFit", "EllipseFit", "fit_circle", "fit_circle_algebraic", "fit_circle_geometric", "fit_ellipse",
-    "centred_ellipse", "centred_ellipse_polar",
+    "centred_ellipse", "centred_ellipse_and_polar", "centred_ellipse_polar",
 ]
 
 #: Largest condition number accepted for the normal equations of the ellipse's centre
@@ -463,13 +463,20 @@ def centred_ellipse(dx, dy):
     A = (1/a² + 1/b²)/2 and √(B² + C²) = (1/b² - 1/a²)/2: linear least squares in
     (A, B, C). b/a = √((A - h)/(A + h)) with h = √(B² + C²).
     """
+    return centred_ellipse_and_polar(dx, dy)[0]
+
+
+def centred_ellipse_and_polar(dx, dy):
+    """:func:`centred_ellipse`'s result and :func:`centred_ellipse_polar`'s coefficients
+    (A, B, C) for points at offsets (`dx`, `dy`) (px) from the origin, from one
+    least-squares fit: for a caller that needs both."""
     coef, design, r2 = _centred_ellipse_fit(dx, dy)
     h = float(np.hypot(coef[1], coef[2]))
     inverse_r2 = design @ coef
     if not coef[0] > h or not (inverse_r2 > 0).all():
-        return None
+        return None, coef
     off = np.sqrt(r2) - 1.0 / np.sqrt(inverse_r2)
-    return float(np.sqrt((coef[0] - h) / (coef[0] + h))), float(np.sqrt(np.mean(off * off)))
+    return (float(np.sqrt((coef[0] - h) / (coef[0] + h))), float(np.sqrt(np.mean(off * off)))), coef
 
 
 def centred_ellipse_polar(dx, dy) -> np.ndarray:

@@ -678,10 +678,12 @@ _OBLIQUE_NOISE_TIMES = 4.0
 
 
 def _oblique(f: DiscFit):
-    """(axis ratio, RMS distance in px) of the ellipse centred on the pixel fit's centre
-    through its per-sector edge points when it describes them (their RMS distance
-    from it at most √((0.4·their RMS from the circle)² + (2·their noise figure)²):
-    :data:`_OBLIQUE_RESIDUAL_SHARE`, :data:`_OBLIQUE_NOISE_TIMES`), else None.
+    """(axis ratio, RMS distance in px, its polar coefficients (A, B, C) of
+    :func:`~vision_torsion.circlefit.centred_ellipse_polar`) of the ellipse centred on
+    the pixel fit's centre through its per-sector edge points when it describes them
+    (their RMS distance from it at most √((0.4·their RMS from the circle)² +
+    (4·their noise figure)²): :data:`_OBLIQUE_RESIDUAL_SHARE`,
+    :data:`_OBLIQUE_NOISE_TIMES`), else None.
 
     The centre stays the disc model's: an ellipse is symmetric about its centre, and
     so is the least-squares fit of the (symmetric) disc model to it, which lands on
@@ -689,16 +691,16 @@ def _oblique(f: DiscFit):
     ellipse fit's own centre gave no straighter rows (0.393 against 0.380 px on the
     UCL frame's 668 triples). A shape whose centre the disc model misses (a
     teardrop) is off any ellipse centred there."""
-    from .circlefit import centred_ellipse  # only for the few markers that need it
+    from .circlefit import centred_ellipse_and_polar  # only for the few markers that need it
 
-    found = centred_ellipse(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    found, polar = centred_ellipse_and_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
     if found is None:
         return None
     ratio, rms = found
     allowed = np.hypot(_OBLIQUE_RESIDUAL_SHARE * f.residual_rms_px, _OBLIQUE_NOISE_TIMES * f.edge_noise_px)
     if ratio < _OBLIQUE_MIN_AXIS_RATIO or not rms <= allowed:
         return None
-    return ratio, rms
+    return ratio, rms, polar
 
 
 #: Semi-axes' difference (px) of a fit's outline (its edge points' centred ellipse)
@@ -729,9 +731,11 @@ MERGED_END_MESSAGE = (
 )
 
 
-def _merged_end(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
+def _merged_end(f: DiscFit, patch: MarkerPatch | None, polar=None) -> Marker | None:
     """Status ``near_edge`` for a pixel fit whose outline is stretched towards a dark
-    region left out of its fit, else None.
+    region left out of its fit, else None; `polar`, the outline's coefficients
+    (:func:`~vision_torsion.circlefit.centred_ellipse_polar`) if :func:`_oblique`
+    has fitted them.
 
     A disc, seen straight or obliquely, has background beyond its outline all round.
     A dark region whose blurred edge reaches the marker's (a dark rectangle 2-4 px
@@ -758,9 +762,11 @@ def _merged_end(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     # 1 - circularity is twice the second harmonic over R: about (a - b)/R
     if not f.radius_px * (1.0 - f.circularity) > _MERGED_MIN_STRETCH_PX:
         return None
-    from .circlefit import centred_ellipse_polar  # only for the few markers that need it
+    if polar is None:
+        from .circlefit import centred_ellipse_polar  # only for the few markers that need it
 
-    A, B, C = centred_ellipse_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+        polar = centred_ellipse_polar(f.edge_x_px - f.x_px, f.edge_y_px - f.y_px)
+    A, B, C = polar
     h = float(np.hypot(B, C))
     if not A > h:
         return None  # no ellipse: the fit's own checks judged its shape
@@ -936,8 +942,8 @@ _ARC_MOST = 0.4
 #: points' centre by over this (px), and their RMS distance from their outline falls
 #: by over :data:`_ARC_EDGE_RATIO` times. Rendered occluders that put a 10-15 px
 #: dot's centre over 0.5 px off move it by 0.4-2 px there, at ratios of 3.5-18; the
-#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-2.5 % of them
-#: a photo (0.5 % of 17000): their edges' own bumps spread over the circle.
+#: photographed dots of ``benchmarks/bench_photos.py`` are refitted 0-3.4 % of them
+#: a photo (0.6 % of 17000): their edges' own bumps spread over the circle.
 _ARC_EDGE_PX = 0.2
 _ARC_EDGE_RATIO = 2.0
 #: Centre move (px) without the arc beyond which a marker is ``occluded``
@@ -981,24 +987,30 @@ def _arcs(n: int):
     return grid
 
 
-def _arc_search(f: DiscFit):
-    """The contiguous arc of the pixel fit's per-sector edge points whose leaving out
-    best explains their scatter about their outline, and what leaving it out
-    changes: (start direction, span in rad, the centre's move in px, the ratio of
-    the points' RMS distance from their outline with and without the arc), or None
-    for fewer than 12 edge points.
+def _arc_search(f: DiscFit) -> list:
+    """The contiguous arcs of the pixel fit's per-sector edge points whose leaving out
+    best explains their scatter about their outline, and what leaving each out
+    changes: a list of (start direction, span in rad, the centre's move in px, the
+    ratio of the points' RMS distance from their outline with and without the arc),
+    empty for fewer than 12 edge points; the best arc first, then the best of those
+    whose points lie on the other side of the rest's outline (inside it, where the
+    first lies outside, or the reverse), if any.
 
     The outline is the edge's radial distance from the fitted centre as a Fourier
     series to the second harmonic (a circle, a shift of its centre and an ellipse:
-    a disc seen at any angle), fitted by least squares. The arc is, of those
+    a disc seen at any angle), fitted by least squares. The arcs are, of those
     starting every n/16 of the n points and holding n/8 to :data:`_ARC_MOST` of
-    them (four lengths), the one whose leaving out drops the sum of squares most
+    them (four lengths), the ones whose leaving out drops the sum of squares most
     in units of the rest's variance: each candidate's normal equations from
-    cumulative sums around the circle, one batched 5 x 5 solve for all."""
+    cumulative sums around the circle, one batched 5 x 5 solve for all. A hidden
+    chord lies inside the outline of the rest, and the outline of all the points
+    moves away from it, which leaves the opposite arc outside: leaving out either
+    explains much of the scatter, and the wrong one may explain a little more
+    (a third of a dot's edge hidden), hence the second."""
     dx, dy = f.edge_x_px - f.x_px, f.edge_y_px - f.y_px
     n = dx.size
     if n < 12:
-        return None
+        return []
     psi = np.arctan2(dy, dx)
     order = np.argsort(psi)
     psi, r = psi[order], np.hypot(dx, dy)[order]
@@ -1018,19 +1030,28 @@ def _arc_search(f: DiscFit):
         return coef, sums[..., 20] - (coef * b).sum(axis=-1)
 
     start, width = _arcs(n)
+    arc_sums = (cum[start + width] - cum[start]).reshape(-1, 21)
     try:
         # all the points, then each arc left out: one batched solve
-        p, ssr = solved(np.concatenate([total[None], (total - (cum[start + width] - cum[start])).reshape(-1, 21)]))
+        p, ssr = solved(np.concatenate([total[None], total - arc_sums]))
     except np.linalg.LinAlgError:
-        return None
+        return []
     width = width.ravel()
-    k = int(np.argmax((ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)))
-    first, w = int(start.flat[k]), int(width[k])
-    ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
-    move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
+    score = (ssr[0] - ssr[1:]) * (n - width - 5) / np.maximum(ssr[1:], 1e-24)
+    # each arc's points' summed radial offset from the rest's outline: Σr - Σbasis·p
+    # (the basis's sums are the products with its constant term, the first five)
+    outside = arc_sums[:, 15] - (arc_sums[:, :5] * p[1:]).sum(axis=1) > 0.0
+    best = int(np.argmax(score))
+    other = np.flatnonzero(outside != outside[best])
     half = np.pi / n
-    span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
-    return float(psi[first] - half), float(span), move, ratio
+    arcs = []
+    for k in [best] + ([int(other[np.argmax(score[other])])] if other.size else []):
+        first, w = int(start.flat[k]), int(width[k])
+        ratio = math.sqrt(ssr[0] / (n - 5) / max(ssr[k + 1] / (n - w - 5), 1e-24))
+        move = math.hypot(p[k + 1, 1] - p[0, 1], p[k + 1, 2] - p[0, 2])
+        span = (psi[(first + w - 1) % n] - psi[first]) % (2.0 * np.pi) + 2.0 * half
+        arcs.append((float(psi[first] - half), float(span), move, ratio))
+    return arcs
 
 
 def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
@@ -1041,11 +1062,13 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     lie inside the outline that the rest of them follow, and the disc model's
     centre moves away from it, by 0.5 px for one over 2 px of a 10 px dot's edge
     whose third harmonic stays under :func:`_occluded`'s limit (an occluder that
-    is not much brighter or darker than the background, or blurred). The arc is
-    found on the edge points (:func:`_arc_search`); when leaving it out moves their
+    is not much brighter or darker than the background, or blurred). The arcs are
+    found on the edge points (:func:`_arc_search`: the best, then the best on the
+    other side of their outline); for each in turn, when leaving it out moves their
     centre by over :data:`_ARC_EDGE_PX` and their scatter drops
     :data:`_ARC_EDGE_RATIO` times, the marker is fitted again without the ring's
-    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc. ``occluded`` when that refit's centre is over
+    pixels in a wedge of :data:`_ARC_MOST` of the turn about that arc
+    (:func:`_without_arc`). ``occluded`` when that refit's centre is over
     :data:`HIDDEN_ARC_PX` and :data:`_ARC_MOVE_SIGMAS` of its standard deviations
     away and the ring's residual RMS is over :data:`HIDDEN_ARC_NOISE_RATIO` times
     the refit's: the arc held what the rest of the ring does not (on rendered
@@ -1054,17 +1077,26 @@ def _hidden_arc(f: DiscFit, patch: MarkerPatch | None) -> Marker | None:
     The refit's covariance counts the pixels' errors as independent (a JPEG's
     are not): the move's limit in px decides on such photographs."""
     # the edge points' RMS distance from their ellipse (the circle's, less the
-    # second harmonic's share, of amplitude (1 - circularity)·R/2) over half the
-    # edge-point move looked for: on rendered occluders that put the centre over
-    # 0.5 px off it is a third of that error (median), and those under 0.1 px hide
-    # a third of the edge, whose third harmonic _occluded flags; clean fits (the
-    # two-marker target, most photographed dots) need not look further
+    # second harmonic's share, of amplitude (1 - circularity)·R/2) over 0.35 of
+    # the edge-point move looked for (0.07 px): on rendered occluders that put the
+    # centre over 0.5 px off it is a third of that error (median), and at least
+    # 0.087 px (an occluder 60 DN darker over 2 px of a 10 px dot's edge, blurred
+    # 3.5 px, 0.51 px off); clean fits need not look further (the two-marker
+    # target's leave 0.025-0.028 px, most dots of the sharp photographs less)
     c2 = 0.5 * (1.0 - f.circularity) * f.radius_px
-    if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.5 * _ARC_EDGE_PX) ** 2:
+    if patch is None or not f.residual_rms_px**2 - 0.5 * c2 * c2 > (0.35 * _ARC_EDGE_PX) ** 2:
         return None
-    arc = _arc_search(f)
-    if arc is None or not (arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO):
-        return None
+    for arc in _arc_search(f):
+        hidden = _without_arc(f, patch, arc) if arc[2] > _ARC_EDGE_PX and arc[3] > _ARC_EDGE_RATIO else None
+        if hidden is not None:
+            return hidden
+    return None
+
+
+def _without_arc(f: DiscFit, patch: MarkerPatch, arc) -> Marker | None:
+    """Status ``occluded`` for the pixel fit `f` when its refit without the ring's
+    pixels about `arc` (from :func:`_arc_search`) says the arc is not its own
+    (:func:`_hidden_arc`), else None."""
     # the ring's pixels in a wedge of _ARC_MOST of the turn about the arc (or the
     # arc, if wider): an occluder over the edge covers the background beyond the
     # hidden chord over a wider angle than the chord, and its level there pulls too
@@ -1224,11 +1256,11 @@ def _pixels_marker(f: DiscFit, *, crowded: bool = False, patch: MarkerPatch | No
     uneven = _uneven_light(f)
     if uneven is not None:
         return uneven
-    merged = _merged_end(f, patch)
+    merged = _merged_end(f, patch, None if oblique is None else oblique[2])
     if merged is not None:
         return merged
     if oblique is not None:
-        ratio, rms = oblique
+        ratio, rms, _ = oblique
         message = (f"seen obliquely: the edge is an ellipse of axis ratio {ratio:.2f} "
                    f"(residual {rms:.2f} px; {circ:.2f} as a circle); centre of the disc model")
     bent = _steep_edge_bent(f, rms)
@@ -1525,20 +1557,23 @@ def _flag_unlike_neighbours(markers: list) -> None:
     suspects = [i for i in ok if markers[i].circularity < min_circularity(markers[i].radius_px)]
     if not suspects or len(ok) < 2:
         return
+    from scipy.spatial import cKDTree  # here: only a marker fitted as an ellipse needs it
+
     table = np.array([(markers[i].x_px, markers[i].y_px, markers[i].edge_width_px, markers[i].circularity)
                       for i in ok])
     where = {i: k for k, i in enumerate(ok)}
     k_near = min(_UNLIKE_NEIGHBOURS, len(ok) - 1)
-    flagged = []
-    for lo in range(0, len(suspects), 256):  # 256 markers at a time: a few MB at most
-        rows = np.array([where[i] for i in suspects[lo : lo + 256]])
-        d2 = (table[rows, None, 0] - table[None, :, 0]) ** 2 + (table[rows, None, 1] - table[None, :, 1]) ** 2
-        d2[np.arange(rows.size), rows] = np.inf  # not its own neighbour
-        near = np.argpartition(d2, k_near - 1, axis=1)[:, :k_near]
-        width = np.median(table[near, 2], axis=1)
-        circ = np.median(table[near, 3], axis=1)
-        unlike = (table[rows, 2] > _UNLIKE_WIDTH_TIMES * width) & (table[rows, 3] < circ - _UNLIKE_ROUNDER_BY)
-        flagged.extend((ok[r], w, c) for r, w, c in zip(rows[unlike].tolist(), width[unlike], circ[unlike]))
+    rows = np.array([where[i] for i in suspects])
+    # the nearest k_near + 1 hold the marker itself, unless as many others share its
+    # place: then the farthest of them is the one too many
+    near = cKDTree(table[:, :2]).query(table[rows, :2], k=k_near + 1)[1].reshape(rows.size, k_near + 1)
+    others = near != rows[:, None]
+    others[others.all(axis=1), -1] = False
+    near = near[others].reshape(rows.size, k_near)
+    width = np.median(table[near, 2], axis=1)
+    circ = np.median(table[near, 3], axis=1)
+    unlike = (table[rows, 2] > _UNLIKE_WIDTH_TIMES * width) & (table[rows, 3] < circ - _UNLIKE_ROUNDER_BY)
+    flagged = [(ok[r], w, c) for r, w, c in zip(rows[unlike].tolist(), width[unlike], circ[unlike])]
     for i, width, circ in flagged:
         m = markers[i]
         markers[i] = _near_edge(m, UNLIKE_NEIGHBOURS_MESSAGE.format(

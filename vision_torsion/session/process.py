@@ -37,6 +37,7 @@ import json
 import logging
 import math
 import os
+import pickle
 from collections import defaultdict, deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -58,7 +59,7 @@ from .shots import image_warnings, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
-           "code_fingerprint", "MAX_THREAD_JOBS"]
+           "code_fingerprint", "MAX_THREAD_JOBS", "PROCESS_MIN_IMAGES"]
 
 logger = logging.getLogger(__name__)
 
@@ -69,11 +70,17 @@ OUTPUT_COLUMNS = RESULT_COLUMNS
 #: every cache key.
 _CACHE_FORMAT = 6
 #: Up to this many jobs run as threads of the calling process (jobs threads read,
-#: decode and find candidates, the calling thread measures); more run as worker
-#: processes. The measuring thread (~2 ms per image, holding the GIL) would keep
-#: up with about five reading threads (~10.5 ms per image each, mostly without
-#: it); three leaves room for slower measuring. Measured on two cores only.
+#: decode and find candidates, the calling thread measures) when fewer than
+#: :data:`PROCESS_MIN_IMAGES` images are to be measured; more jobs, or more images,
+#: run as worker processes.
 MAX_THREAD_JOBS = 3
+#: Images to measure (present, less the results the cache holds) from which even
+#: 2-3 jobs run as worker processes. Threads share one interpreter lock, which the
+#: measuring (~2 ms of an image's ~6 ms, on the demo's PNGs) holds: two threads
+#: reached 1.3x a plain decode of the demo's 444 images where two processes take
+#: 1.0x. A worker process costs ~0.2 s to start (its fork server's imports): a
+#: 20-image session took 0.43 s with threads, 0.62 s with processes.
+PROCESS_MIN_IMAGES = 150
 
 
 @dataclass(frozen=True)
@@ -243,13 +250,44 @@ def _progress_bar(total: int, progress: bool):
     return progress_bar(total, desc="measuring", unit="image", enabled=progress)
 
 
-def _run_tasks(tasks, *, jobs: int, progress: bool, cache_dir: str, run: str, known: frozenset, measure):
-    """Yield each task's result in task order: in this process with `jobs` up to
-    :data:`MAX_THREAD_JOBS` (:func:`_read_ahead`), else in `jobs` worker processes."""
-    jobs = _jobs_within_open_files(jobs, len(tasks))
+def _workers(jobs: int, n_tasks: int, n_cached: int, measure) -> tuple[int, bool]:
+    """(jobs, whether they are worker processes) to measure `n_tasks` images, of
+    which about `n_cached` have their results in the cache, with `measure`.
+
+    Threads of this process for up to :data:`MAX_THREAD_JOBS` jobs and fewer than
+    :data:`PROCESS_MIN_IMAGES` images to measure, or where worker processes would
+    start slowly (no fork server: each would import the measuring code again);
+    else worker processes, unless `measure` cannot be sent to them (it does not
+    pickle) or the open-file limit has no room for them: then threads, logged when
+    `jobs` is above :data:`MAX_THREAD_JOBS`."""
+    if jobs <= 1 or n_tasks <= 1:
+        return jobs, False
+    if jobs <= MAX_THREAD_JOBS and (n_tasks - n_cached < PROCESS_MIN_IMAGES
+                                    or _pool_context().get_start_method() != "forkserver"):
+        return jobs, False
+    try:
+        pickle.dumps(measure)
+    except (pickle.PicklingError, AttributeError, TypeError):  # a lambda, a local function, a lock
+        if jobs > MAX_THREAD_JOBS:
+            logger.warning("the measuring function %r cannot be sent to worker processes; measuring with %d "
+                           "threads of this process instead", measure, MAX_THREAD_JOBS)
+        return min(jobs, MAX_THREAD_JOBS), False
+    if _room_for_workers(jobs):
+        return jobs, True
+    if jobs > MAX_THREAD_JOBS:
+        logger.warning("only %d files may be open (ulimit -n), too few for %d worker processes; measuring "
+                       "with %d threads of this process instead", _open_file_limit(), jobs, MAX_THREAD_JOBS)
+    return min(jobs, MAX_THREAD_JOBS), False
+
+
+def _run_tasks(tasks, *, jobs: int, processes: bool, progress: bool, cache_dir: str, run: str, known: frozenset,
+               measure):
+    """Yield each task's result in task order: in `jobs` worker processes when
+    `processes` (:func:`_workers`), else in this process (:func:`_read_ahead`, or
+    one by one for one job)."""
     bar = _progress_bar(len(tasks), progress)
     try:
-        if jobs <= MAX_THREAD_JOBS or len(tasks) <= 1:
+        if not processes:
             with in_process(cache_dir, run, known, measure):
                 results = (_read_ahead(tasks, readers=jobs) if jobs > 1
                            else map(measure_task, tasks))
@@ -295,21 +333,16 @@ def _open_file_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else soft
 
 
-def _jobs_within_open_files(jobs: int, n_tasks: int) -> int:
-    """`jobs`, or the threads of this process (at most :data:`MAX_THREAD_JOBS`) when
-    the open-file limit has no room for `jobs` worker processes (logged)."""
+def _room_for_workers(jobs: int) -> bool:
+    """Whether the open-file limit leaves room for `jobs` worker processes."""
     limit = _open_file_limit()
-    if jobs <= MAX_THREAD_JOBS or n_tasks <= 1 or limit is None:
-        return jobs
+    if limit is None:
+        return True
     try:
         in_use = len(os.listdir("/proc/self/fd"))
     except OSError:  # no /proc: the standard streams at least
         in_use = 3
-    if in_use + _FILES_RESERVED + _FILES_PER_WORKER * jobs <= limit:
-        return jobs
-    logger.warning("only %d files may be open (ulimit -n), too few for %d worker processes; measuring "
-                   "with %d threads of this process instead", limit, jobs, MAX_THREAD_JOBS)
-    return MAX_THREAD_JOBS
+    return in_use + _FILES_RESERVED + _FILES_PER_WORKER * jobs <= limit
 
 
 def _read_ahead(tasks, *, readers: int):
@@ -318,9 +351,8 @@ def _read_ahead(tasks, *, readers: int):
     ahead, and this thread measures them (:func:`~.worker.finish_task`).
 
     Reading, decoding and most of the detection run in C without the GIL;
-    measuring holds it. On two cores this beat two worker processes in five of six
-    alternating runs of 1000 images, by 2-9 %, before the candidates moved to the
-    readers (3.9 % more): no process start-up, no messages."""
+    measuring holds it, so the threads wait for each other on many images
+    (:data:`PROCESS_MIN_IMAGES`); on a few, no process start-up beats that."""
     todo = iter(tasks)
     pool = ThreadPoolExecutor(max_workers=readers, thread_name_prefix="vision-torsion-read")
     try:
@@ -446,8 +478,9 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     jobs : int, optional
         Images read and decoded at once; all available cores by default. 1
         measures in this process alone; up to 3 (``MAX_THREAD_JOBS``) run as
-        reading threads of this process beside the measuring one; more run as
-        worker processes.
+        reading threads of this process beside the measuring one while fewer than
+        ``PROCESS_MIN_IMAGES`` (150) images are to be measured; more jobs or more
+        images run as worker processes.
     progress : bool
         Show a progress bar (on stderr).
     measure : callable
@@ -455,7 +488,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         returns its :class:`~vision_torsion.pair.PairMeasurement`. The default,
         :func:`~vision_torsion.pair.measure_pair`, is the measurement core; another
         function (a stand-in in tests, an experimental fit) keys the cache apart from
-        it by its qualified name, and with more than three jobs must be picklable.
+        it by its qualified name; one that does not pickle runs in threads of this
+        process only.
         For a session of an N-marker target (``[target]`` in session.toml) the
         default is :func:`~.targetrows.measure_target_markers` (every marker), and
         the rows come from the rigid fit of all of them (:mod:`.targetrows`: status
@@ -510,8 +544,13 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     present = [row for row in session.manifest.rows if row.line not in pending]
     tasks = [(str(session.manifest.image_path(row)), settings_json, key) for row in present]
     measured, sources = [], []
-    jobs = max(1, min(jobs, len(tasks)))
-    for image_key, text, source in _run_tasks(tasks, jobs=jobs, progress=progress,
+    jobs, processes = _workers(max(1, min(jobs, len(tasks))), len(tasks), len(cached), measure)
+    logger.debug("%d images, the cache holds %d results: measuring with %s", len(tasks), len(cached),
+                 f"{jobs} worker processes" if processes else
+                 f"{jobs} reading threads" if jobs > 1 else "this process alone")
+    if processes:
+        _start_server()
+    for image_key, text, source in _run_tasks(tasks, jobs=jobs, processes=processes, progress=progress,
                                               cache_dir=str(cache_dir), run=run,
                                               known=frozenset(cached), measure=measure):
         measured.append(cached[image_key] if text is None else json.loads(text))
