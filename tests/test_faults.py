@@ -710,3 +710,249 @@ def test_plan_and_synth_refuse_an_unwritable_folder_before_writing(capsys, tmp_p
     assert code == 2 and "file" in err and "cannot create the output folder" in err
     code, _, err = run(capsys, "synth", "session", tmp_path / "file", "--scene", "paper_session")
     assert code == 2 and "it is a file, not a folder" in err
+
+
+# -- inputs that are not regular files: refused at once, never waited on --------------------
+
+
+def named_pipe(path, *, release_after_s=20.0):
+    """Make a named pipe at `path`; after `release_after_s` a thread keeps opening and
+    closing its writing end, so a reader wrongly waiting on it fails the test instead
+    of hanging it. Returns the thread's stop event (set it at the end)."""
+    import threading
+
+    os.mkfifo(path)
+    stop = threading.Event()
+
+    def release():
+        stop.wait(release_after_s)
+        while not stop.wait(0.2):
+            try:
+                os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+            except OSError:  # no reader waiting (ENXIO), or the pipe already gone
+                pass
+
+    threading.Thread(target=release, daemon=True).start()
+    return stop
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+@pytest.mark.parametrize("name", ["manifest.csv", "session.toml", "binding.json"])
+def test_a_named_pipe_for_a_session_file_is_refused_without_waiting(capsys, small_session, tmp_path, name):
+    (small_session / name).unlink(missing_ok=True)
+    stop = named_pipe(small_session / name)  # opening it for reading would wait for a writer
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    stop.set()
+    assert code == 2
+    assert f"{name}: not a regular file (a named pipe or a device); expected " in err
+    assert tree_digest(tmp_path) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_in_the_camera_folder_is_set_aside_by_bind(capsys, small_session, tmp_path):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):  # in capture order
+        (small_session / image).rename(cam / f"IMG_{i + 1:04d}.png")
+    stop = named_pipe(cam / "IMG_9999.png")  # reading it (a capture time, a hash) would wait
+    before = tree_digest(cam)
+    code, out, err = run(capsys, "bind", small_session, cam, "--by", "name")
+    stop.set()
+    assert code == 1  # the synthetic angles' steps give bind things to look at
+    assert "IMG_9999.png: not a regular file (a named pipe or a device); not bound" in out + err
+    assert tree_digest(cam) == before
+
+
+# -- the output folder is never a folder of the inputs ---------------------------------------
+
+
+@pytest.mark.parametrize("command", ["process", "report"])
+def test_the_folder_of_the_session_s_images_is_refused_as_output(capsys, small_session, command):
+    before = tree_digest(small_session)
+    code, out, err = run(capsys, command, small_session, "-o", small_session / "images")
+    assert code == 2
+    assert f"{small_session / 'images'}: the output folder cannot be a folder of the session's images; " \
+           "use a folder of its own such as results/" in err
+    assert tree_digest(small_session) == before
+
+
+# -- a zero mass where the plan has weights ----------------------------------------------------
+
+
+def test_an_unloading_step_at_zero_mass_before_its_last_names_its_line(capsys, small_session, tmp_path):
+    manifest = small_session / "manifest.csv"
+    rows = manifest.read_text().splitlines()
+    n = next(i for i, r in enumerate(rows) if ",positive_unloading,0," in r)  # the fully loaded step
+    rows[n] = rows[n].rsplit(",", 1)[0] + ",0"
+    manifest.write_text("\n".join(rows) + "\n")
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 2
+    assert re.search(rf"line {n + 1}: mass_kg 0 on step 0 of a positive_unloading row, yet step 1 \(line "
+                     rf"{n + 2}\) still has 0\.02 kg on each pan; an unloading phase reaches 0 only at its "
+                     "last step", err), err
+    assert tree_digest(tmp_path) == before
+
+
+# -- watch: a camera folder that is not there yet has not disappeared ---------------------------
+
+
+def test_watch_on_a_camera_folder_not_made_yet_says_so(small_session, tmp_path):
+    from vision_torsion.session.watch import Watcher
+
+    cam = tmp_path / "cam"  # the camera makes it at its first photograph, or --camera-dir has a typo
+    with Watcher(small_session, camera_dir=cam, events="poll") as w:
+        assert [(e.kind, e.message) for e in w.tick()] == [
+            ("folder_gone", f"{cam}: no such folder yet; waiting for it (check --camera-dir if the camera "
+                            "does not make it; Ctrl-C to stop)")]
+        assert w.tick() == []  # said once
+        cam.mkdir()
+        assert [(e.kind, e.message) for e in w.tick()] == [("folder_back", f"{cam}: the camera folder is there")]
+    assert not cam.exists() or not any(cam.iterdir())
+
+
+def test_a_manifest_of_more_rows_than_a_plan_may_write_is_refused_as_it_is_read(capsys, small_session, tmp_path):
+    from vision_torsion.session.manifest import MAX_MANIFEST_ROWS
+    from vision_torsion.session.plan import MAX_PLAN_IMAGES
+
+    assert MAX_PLAN_IMAGES == MAX_MANIFEST_ROWS  # what plan may write, process may read
+    manifest = small_session / "manifest.csv"
+    n = len(manifest.read_text().splitlines()) - 1
+    with manifest.open("a") as fh:  # a runaway script appending rows
+        fh.writelines(f"images/x{i}.png,0,1,positive_loading,{i + 9},0.02\n" for i in range(MAX_MANIFEST_ROWS))
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 2
+    assert f"manifest.csv: line {MAX_MANIFEST_ROWS + 2}: more than {MAX_MANIFEST_ROWS} rows, the most a session " \
+           "may have (as many as a plan may write)" in err
+    assert n < MAX_MANIFEST_ROWS
+    assert tree_digest(tmp_path) == before
+
+
+def test_a_huge_reference_table_is_refused_before_it_is_read(capsys, folder, tmp_path):
+    table = folder / "reference.csv"
+    with table.open("wb") as fh:  # sparse: 3 GB that take no room; read whole it took 6 GB of memory
+        fh.truncate(3 << 30)
+    before = tree_digest(folder, exclude=["reference.csv"]), table.stat().st_mtime_ns  # not read for the hash
+    code, out, err = run(capsys, "check-accuracy", folder, "-o", tmp_path / "out")
+    assert code == 2
+    assert f"{table}: 3221225472 bytes, more than the 268435456 a reference table may have" in err
+    assert (tree_digest(folder, exclude=["reference.csv"]), table.stat().st_mtime_ns) == before
+
+
+def test_a_huge_plane_correction_json_is_refused_before_it_is_read(tmp_path):
+    from vision_torsion.correction import load_correction
+    from vision_torsion.errors import CalibrationError
+
+    path = tmp_path / "plane.json"
+    with path.open("wb") as fh:  # sparse: 3 GB that take no room; it was read whole
+        fh.truncate(3 << 30)
+    with pytest.raises(CalibrationError, match=r"plane\.json: 3221225472 bytes, more than the 268435456 a plane "
+                                               r"correction file may have") as info:
+        load_correction(path)
+    assert info.value.reason == "too_large"
+
+
+@pytest.mark.parametrize("kind", ["folder", "named pipe"])
+def test_stiffness_given_a_folder_or_a_pipe_says_what_it_is(capsys, tmp_path, kind):
+    data = tmp_path / "record.csv"
+    if kind == "folder":
+        data.mkdir()
+    elif not hasattr(os, "mkfifo"):
+        pytest.skip("named pipes are POSIX")
+    else:
+        os.mkfifo(data)
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, "stiffness", data)
+    assert code == 2
+    assert f"{data}: not a regular file (a folder, a named pipe or a device); expected a torque-angle " \
+           "record CSV" in err  # it said "no such file"
+    assert tree_digest(tmp_path) == before  # no output folder made beside it
+
+
+def test_a_newline_in_a_camera_file_name_cannot_forge_a_line_of_bind(capsys, small_session, tmp_path):
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):
+        (small_session / image).rename(cam / f"IMG_{i + 1:04d}.png")
+    (cam / "IMG_0099\nerror: forged.txt").write_text("x")
+    code, out, err = run(capsys, "bind", small_session, cam, "--by", "name")
+    assert "set aside: IMG_0099\\nerror: forged.txt: not an image file" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_a_newline_in_an_unlisted_file_name_cannot_forge_a_line_of_process(capsys, small_session, tmp_path):
+    (small_session / "images" / "x\nerror: forged.png").write_bytes(cv2.imencode(".png", draw_target(0.0))[1])
+    code, out, err = run(capsys, "process", small_session, "-o", tmp_path / "out")
+    assert code == 0
+    assert "not in the manifest: images/x\\nerror: forged.png" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_a_newline_in_a_failed_image_s_name_cannot_forge_a_line_of_measure(capsys, folder):
+    (folder / "y\nerror: forged.png").write_text("not an image")
+    code, out, err = measure(capsys, folder)
+    assert code == 1
+    assert f"failed: {folder}/y\\nerror: forged.png: not a PNG, TIFF, BMP or JPEG image" in err
+    assert not any(line.startswith("error: forged") for line in (out + err).splitlines())
+
+
+def test_watch_shows_no_nan_for_the_first_photograph_s_step(small_session, tmp_path):
+    from vision_torsion.session.watch import Watcher
+
+    cam = tmp_path / "cam"
+    cam.mkdir()
+    first = pd.read_csv(small_session / "manifest.csv")["image"][0]
+    (small_session / first).rename(cam / "IMG_0001.png")
+    with Watcher(small_session, camera_dir=cam, settle_s=0.0, events="poll") as w:
+        shots = [e for _ in range(3) for e in w.tick() if e.kind == "shot"]
+    assert len(shots) == 1
+    assert re.search(r"θ=[+-]\d+\.\d{4}°  Δθ=—$", shots[0].message), shots[0].message  # it said Δθ=+nan°
+    assert "nan" not in shots[0].message
+
+
+# -- an output folder that is a symbolic link looping on itself --------------------------------
+
+
+@pytest.mark.parametrize("command", ["process", "report", "watch", "measure", "check-accuracy"])
+def test_an_output_folder_that_is_a_looping_link_is_named(capsys, small_session, folder, tmp_path, command):
+    loop = tmp_path / "loop"
+    loop.symlink_to("loop")  # Path.resolve raised RuntimeError on it: an internal error
+    (folder / "reference.csv").write_text("image,reference_angle_deg\n" + "".join(
+        f"{p.name},{i}\n" for i, p in enumerate(sorted(folder.glob("*.png"), key=lambda p: p.name != "reference.png"))))
+    argv = {"process": [small_session], "report": [small_session], "watch": [small_session],
+            "measure": [folder, "--reference", folder / "reference.png"], "check-accuracy": [folder]}[command]
+    before = tree_digest(tmp_path)
+    code, out, err = run(capsys, command, *argv, "-o", loop)
+    assert code == 2
+    assert f"{loop}: cannot create the output folder: a symbolic link that leads nowhere (it loops, or its " \
+           "target is missing)" in err
+    assert tree_digest(tmp_path) == before
+
+
+# -- overlays: a folder that cannot take them is said so, not skipped -------------------------
+
+
+def test_a_user_s_file_under_an_overlay_s_name_stops_the_overlays_by_name(capsys, folder, tmp_path):
+    overlays = tmp_path / "overlays"
+    overlays.mkdir()
+    (overlays / "img_002_overlay.png").write_text("the user's own")
+    before = tree_digest(overlays)
+    code, out, err = measure(capsys, folder, "--overlay", overlays)
+    assert code == 2  # it was 0, 'wrote 4 overlay(s)', the fifth skipped without a word
+    assert f"{overlays / 'img_002_overlay.png'}: not replaced: vision-torsion did not write this file" in err
+    assert tree_digest(overlays) == before  # none drawn, the user's file kept
+    assert (folder.parent / "out" / "angles.csv").is_file()  # the measurements are kept
+
+
+def test_bind_refuses_a_camera_folder_that_is_its_output_folder(capsys, small_session, tmp_path):
+    results = small_session / "results"  # the default output folder, given as the camera's
+    results.mkdir()
+    for i, image in enumerate(pd.read_csv(small_session / "manifest.csv")["image"]):
+        (small_session / image).rename(results / f"IMG_{i + 1:04d}.png")
+    before = tree_digest(small_session)
+    code, out, err = run(capsys, "bind", small_session, results)
+    assert code == 2  # it measured them and wrote its cache among them
+    assert f"{results}: the camera folder cannot be the output folder" in err
+    assert tree_digest(small_session) == before

@@ -54,7 +54,7 @@ import tomli_w
 from .errors import CalibrationError
 from .fileio import atomic_write_text
 from .pair import PairMeasurement
-from .textfiles import decode_utf8, read_toml
+from .textfiles import decode_utf8, read_text_bytes, read_toml
 from .validate import check_number
 
 __all__ = ["PlaneCorrection", "load_correction", "check_suffix", "FORMAT_NAME", "FORMAT_VERSION"]
@@ -314,14 +314,8 @@ class PlaneCorrection:
         if kind == "toml":
             d = read_toml(p, what="a plane correction file", error=CalibrationError)
         else:
-            try:
-                raw = p.read_bytes()
-            except FileNotFoundError:
-                raise CalibrationError(f"{p}: no such file; expected a plane correction file",
-                                       reason="not_found") from None
-            except OSError as exc:
-                raise CalibrationError(f"{p}: cannot be read ({exc.strerror or exc})",
-                                       reason="unreadable") from None
+            # its size before it is read, as the TOML form's (a named pipe refused, never waited on)
+            raw = read_text_bytes(p, what="a plane correction file", error=CalibrationError)
             text = decode_utf8(raw, name=p, error=CalibrationError, what="the correction file")
             try:
                 d = json.loads(text)

@@ -58,6 +58,7 @@ __all__ = [
     "check_replaceable",
     "record_created",
     "replacing_others",
+    "same_folder",
 ]
 
 #: An output folder with less free space than this is refused before any work.
@@ -407,6 +408,14 @@ def _commit(staged: list[tuple[Path, Path, str]]) -> None:
         _append_record(folder, lines)
 
 
+def same_folder(a, b) -> bool:
+    """Whether paths `a` and `b` name the same place, symbolic links followed as far
+    as they go. Never raises: a link that loops compares as itself (``Path.resolve``
+    raises RuntimeError for one before Python 3.13), so the output folder's own check
+    can name it."""
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
 def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES, replaces=()) -> Path:
     """Create the output folder `path` if needed and make sure results can be written there.
 
@@ -430,7 +439,8 @@ def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES, replaces=()) -> 
     Raises
     ------
     OutputError
-        The path is a file (or lies under one), the folder cannot be created or
+        The path is a file (or lies under one) or a symbolic link that leads
+        nowhere, the folder cannot be created or
         written (read-only file system, permission denied), or the disk has less
         than `need_bytes` free; or (``reason="not_ours"``) a file of `replaces` is
         not the tool's own. The message names the path and the reason.
@@ -439,6 +449,9 @@ def check_output_dir(path, *, need_bytes: int = MIN_FREE_BYTES, replaces=()) -> 
     check_replaceable(p / name for name in replaces)
     if p.exists() and not p.is_dir():
         raise OutputError(f"{p}: cannot write results there: it is a file, not a folder")
+    if p.is_symlink() and not p.exists():
+        raise OutputError(f"{p}: cannot create the output folder: a symbolic link that leads nowhere "
+                          "(it loops, or its target is missing)")
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

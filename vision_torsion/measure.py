@@ -26,7 +26,7 @@ from .angle import MAX_STEP_DEG, ORDERS, sequence_angles
 from .batch import measure_each
 from .correction import load_correction
 from .errors import ImageReadError, OutputError, VisionTorsionError
-from .fileio import check_output_dir, write_csv
+from .fileio import check_output_dir, same_folder, write_csv
 from .images import IMAGE_SUFFIXES
 from .measurements import output_folder
 from .pair import measure_pair
@@ -201,7 +201,7 @@ def measure_folder(
     correction = load_correction(settings.correction)
     files = list_images(image_dir)
     out = output_folder(image_dir, out_dir)
-    if out.resolve() == Path(image_dir).resolve():
+    if same_folder(out, image_dir):
         raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
                           "subfolder such as results/")
     check_output_dir(out, replaces=["angles.csv"])

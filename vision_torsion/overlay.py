@@ -182,21 +182,29 @@ def write_overlays(images, out_dir, *, settings: MeasureSettings | None = None,
     Raises
     ------
     OutputError
-        `out_dir` is one of `inputs`.
+        `out_dir` is one of `inputs`; it cannot be created or written, or holds a file
+        under an overlay's name that vision-torsion did not write (all checked before
+        the first overlay is drawn); a write fails.
     """
     from .errors import OutputError, VisionTorsionError
+    from .fileio import check_output_dir, same_folder
 
     out = Path(out_dir)
-    if any(out.resolve() == Path(p).resolve() for p in inputs):
+    if any(same_folder(out, p) for p in inputs):
         raise OutputError(f"{out}: the overlay folder cannot be an input folder (it is never "
                           "written); name another folder")
+    images = [Path(image) for image in images]
+    # before the first is drawn: a folder that cannot take them, or a user's file under
+    # one of their names, stops them all by name (it was skipped without a word)
+    check_output_dir(out, replaces=[f"{image.stem}_overlay.png" for image in images])
     written = []
     for image in images:
-        image = Path(image)
         try:
             written.append(write_overlay(out / f"{image.stem}_overlay.png", image, settings=settings,
                                          name=image.name))
-        except VisionTorsionError:
+        except OutputError:
+            raise
+        except VisionTorsionError:  # cannot be read: reported where it is measured
             continue
     return written
 

@@ -42,7 +42,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -950,14 +949,14 @@ def measure_target_folder(image_dir, *, reference, target, out_dir=None, setting
 
     from .batch import measure_each
     from .errors import OutputError
-    from .fileio import check_output_dir, write_csv
+    from .fileio import check_output_dir, same_folder, write_csv
     from .measure import MeasureResult, list_images, printable_name
     from .measurements import output_folder
 
     settings = settings or MeasureSettings()
     files = list_images(image_dir)
     out = output_folder(image_dir, out_dir)
-    if out.resolve() == Path(image_dir).resolve():
+    if same_folder(out, image_dir):
         raise OutputError(f"{out}: the output folder cannot be the image folder itself; use a "
                           "subfolder such as results/")
     check_output_dir(out)

@@ -22,6 +22,7 @@ One home for what every text reader of the toolkit needs:
 from __future__ import annotations
 
 import os
+import stat
 import sys
 from pathlib import Path
 
@@ -110,14 +111,21 @@ def read_text_bytes(path, *, what: str, error: type[VisionTorsionError] = Vision
     ------
     error
         Reason ``not_found`` (no such file, a broken or looping symbolic link),
-        ``unreadable`` (a folder, no permission, an I/O error) or ``too_large``
+        ``unreadable`` (a folder, no permission, an I/O error; a named pipe or a
+        device, which is refused without waiting for a writer or reading an endless
+        stream) or ``too_large``
         (``PATH: 3000000000 bytes, more than the 268435456 a text input may have``).
     """
     p = Path(path)
     name = p if name is None else name
     try:
-        with open(p, "rb") as fh:
-            size = os.fstat(fh.fileno()).st_size
+        # O_NONBLOCK: opening a named pipe must not wait for a writer
+        with open(os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+                raise error(f"{name}: not a regular file (a named pipe or a device); expected {what}",
+                            reason="unreadable")
+            size = st.st_size
             if size > limit:
                 raise error(f"{name}: {size} bytes, more than the {limit} {what} may have",
                             reason="too_large")

@@ -59,12 +59,12 @@ from scipy import stats
 
 from ..correction import load_correction
 from ..errors import OutputError, ReferenceTableError, VisionTorsionError
-from ..fileio import check_output_dir, output_set, write_csv, write_json
+from ..fileio import check_output_dir, output_set, same_folder, write_csv, write_json
 from ..measure import measure_sequence
 from ..measurements import output_folder
 from ..pair import measure_pair
 from ..settings import MeasureSettings
-from ..textfiles import csv_delimiter, decode_utf8, read_toml
+from ..textfiles import csv_delimiter, decode_utf8, read_text_bytes, read_toml
 from ..validate import check_number
 
 __all__ = [
@@ -164,10 +164,12 @@ def read_reference_table(folder) -> pd.DataFrame:
     """
     folder = Path(folder)
     path = folder / "reference.csv"
-    if not path.is_file():
+    if not path.exists():
         raise ReferenceTableError(f"{path}: no reference table (expected image,reference_angle_deg)")
+    # its size before it is read; a folder, a named pipe or a device refused by name
+    raw = read_text_bytes(path, what="a reference table", error=ReferenceTableError)
     try:
-        text = decode_utf8(path.read_bytes(), name=path, error=ReferenceTableError, what="the table")
+        text = decode_utf8(raw, name=path, error=ReferenceTableError, what="the table")
         sep = csv_delimiter(text.split("\n", 1)[0], ("image", "reference_angle_deg"))
         rows = list(csv.reader(io.StringIO(text, newline=""), delimiter=sep))
     except (OSError, csv.Error) as exc:
@@ -353,7 +355,7 @@ def check_accuracy(
     corr = load_correction(correction if correction is not None else (spec.correction or settings.correction))
     table = read_reference_table(folder)
     out = output_folder(folder, out_dir)
-    if out.resolve() == folder.resolve():
+    if same_folder(out, folder):
         raise OutputError(
             f"{out}: the output folder cannot be the image folder itself (results "
             "written among the images would be taken for images); use a subfolder "

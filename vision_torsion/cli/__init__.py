@@ -51,7 +51,7 @@ import re
 import sys
 
 __all__ = ["main", "build_parser", "COMMAND_MODULES", "failure_line", "add_common_options", "progress_enabled",
-           "Terminal", "printable", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL",
+           "Terminal", "printable", "one_line", "EXIT_OK", "EXIT_FAILED", "EXIT_UNUSABLE", "EXIT_INTERNAL",
            "BLAS_THREAD_VARIABLES"]
 
 EXIT_OK, EXIT_FAILED, EXIT_UNUSABLE, EXIT_INTERNAL = 0, 1, 2, 3
@@ -142,8 +142,15 @@ def failure_line(image: str, message: str, *, status: str = "failed") -> str:
     ``layout_mismatch``) is called by its status; the status decides, not the
     message's wording."""
     if status == "suspect":
-        return f"{image}: {message}"
-    return f"{status}: {message}" if image in message else f"{status}: {image}: {message}"
+        return one_line(f"{image}: {message}")
+    return one_line(f"{status}: {message}" if image in message else f"{status}: {image}: {message}")
+
+
+def one_line(text: str) -> str:
+    """`text` with its line breaks shown escaped (``\\n``, ``\\r``): a file name holding one
+    must not forge a line of the output (:class:`Terminal` escapes the other control
+    characters, but keeps line breaks for the text that has several lines)."""
+    return text.replace("\r", "\\r").replace("\n", "\\n")
 
 
 def _configure_logging(args) -> None:

@@ -44,33 +44,37 @@ def register(subparsers) -> None:
 def run(args) -> int:
     """Bind; 0 when everything fits, 1 when something needs a look."""
     from ..session.bind import bind_session
+    from ..session.watch import printable
+
+    def say(text, file=None):  # one line each: a newline in a camera file name must not forge another
+        print(printable(text), file=file)
 
     res = bind_session(args.session_dir, args.camera_dir, by=args.by, skip=args.skip,
                        missing=args.missing, swap=args.swap, write=not args.dry_run)
     err = sys.stderr
     for name, why in res.ignored:
-        print(f"set aside: {name}: {why}", file=err)
+        say(f"set aside: {name}: {why}", file=err)
     n_bound = len(res.binding.images)
-    print(f"{res.n_files} photograph(s), {res.n_rows} row(s): {n_bound} bound"
-          + (f"; wrote {res.binding_path}" if res.binding_path else " (dry run, nothing written)"))
+    say(f"{res.n_files} photograph(s), {res.n_rows} row(s): {n_bound} bound"
+        + (f"; wrote {res.binding_path}" if res.binding_path else " (dry run, nothing written)"))
     if res.leftovers:
-        print(f"{len(res.leftovers)} file(s) left over after the last row: "
-              + ", ".join(res.leftovers), file=err)
+        say(f"{len(res.leftovers)} file(s) left over after the last row: "
+            + ", ".join(res.leftovers), file=err)
     declared = set(res.binding.missing)
     gaps = [(line, image) for line, image in res.unphotographed if line not in declared]
     if gaps:
-        print(f"{len(gaps)} row(s) without a photograph: "
-              + ", ".join(f"line {line} ({image})" for line, image in gaps[:10])
-              + (" ..." if len(gaps) > 10 else ""), file=err)
+        say(f"{len(gaps)} row(s) without a photograph: "
+            + ", ".join(f"line {line} ({image})" for line, image in gaps[:10])
+            + (" ..." if len(gaps) > 10 else ""), file=err)
     for text in res.diagnoses:
-        print(f"check: {text}", file=err)
+        say(f"check: {text}", file=err)
     for text in res.warnings:
-        print(f"step does not fit: {text}", file=err)
+        say(f"step does not fit: {text}", file=err)
     for fix in res.fixes:
-        print(f"proposed fix: {fix.message}")
+        say(f"proposed fix: {fix.message}")
     if res.command:
-        print(f"to apply: {res.command}")
+        say(f"to apply: {res.command}")
     if res.fixes:
         for text in res.remaining:
-            print(f"not explained by the binding (re-take that step?): {text}", file=err)
+            say(f"not explained by the binding (re-take that step?): {text}", file=err)
     return 0 if res.ok else 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from . import add_common_options, failure_line, progress_enabled
+from . import add_common_options, failure_line, one_line, progress_enabled
 from .options import add_marker_options, add_output_option, settings_from_args
 
 
@@ -53,7 +53,7 @@ def run(args) -> int:
                                     progress=progress_enabled(args))
         for row in res.table.itertuples():
             if row.bump and row.status == "ok":
-                print(f"  {row.image}: {row.message}", file=sys.stderr)
+                print(one_line(f"  {row.image}: {row.message}"), file=sys.stderr)
     else:
         res = measure_folder(
             args.image_dir,

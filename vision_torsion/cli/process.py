@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from . import add_common_options, failure_line, progress_enabled
+from . import add_common_options, failure_line, one_line, progress_enabled
 from .options import add_jobs_option
 
 __all__ = ["register", "run"]
@@ -56,4 +56,4 @@ def print_pending(result, *, quiet: bool = False, limit: int = 10) -> None:
               + ", ".join(image for image, _ in result.pending[:limit])
               + (" ..." if result.n_pending > limit else ""))
     for name in result.unlisted:
-        print(f"not in the manifest: {name}", file=sys.stderr)
+        print(one_line(f"not in the manifest: {name}"), file=sys.stderr)

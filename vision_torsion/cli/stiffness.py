@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from pathlib import Path
 
 from . import add_common_options
@@ -70,10 +71,12 @@ def run(args) -> int:
 
     rig = load_rig(args.rig) if args.rig else None
     out = Path(args.out_dir) if args.out_dir else default_output_dir(args.data)
-    if not Path(args.data).is_file():
+    if not Path(args.data).is_file():  # before the output folder is made
         from ..errors import RecordError
 
-        raise RecordError(f"{args.data}: no such file")
+        raise RecordError(f"{args.data}: " + ("no such file" if not os.path.exists(args.data) else
+                                              "not a regular file (a folder, a named pipe or a device); "
+                                              "expected a torque-angle record CSV"))
     # files every run writes; the optional plots are checked when written (nothing replaced then)
     check_output_dir(out, replaces=["stiffness_curve.csv", "stiffness_summary.json", "torque_angle.png"])
     result = analyze_stiffness_curve(

@@ -46,7 +46,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import check_output_dir, check_replaceable
+from ..fileio import check_output_dir, check_replaceable, same_folder
 from ..measurements import output_folder
 from .binding import BINDING_NAME, Binding, write_binding
 from .camera import list_camera_files
@@ -323,7 +323,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
     Raises
     ------
     SessionError
-        The session or camera folder is unusable, `by` is unknown, a `skip` name is
+        The session or camera folder is unusable (the camera folder is the output
+        folder, which would put the cache among the photographs), `by` is unknown, a `skip` name is
         not a photograph of the camera folder (or is skipped), or a `missing` line
         is not a row.
     ManifestError
@@ -357,6 +358,8 @@ def bind_session(session_dir, camera_dir, *, by: str = "time", skip=(), missing=
         if line not in lines:
             raise SessionError(f"missing: line {line} is not a row of {session.manifest.path}")
     out = output_folder(session.folder, out_dir)
+    if same_folder(camera, out):  # the camera folder is only read; the cache goes to `out`
+        raise SessionError(f"{camera}: the camera folder cannot be the output folder")
     # before measuring: a bind must not measure everything and then fail to write
     check_output_dir(out)  # the cache shared with process
     if write:

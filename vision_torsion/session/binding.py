@@ -31,7 +31,7 @@ from pathlib import Path, PurePosixPath
 
 from ..errors import SessionError
 from ..fileio import atomic_write_text
-from ..textfiles import decode_utf8
+from ..textfiles import decode_utf8, read_text_bytes
 from ..validate import number_problem
 
 __all__ = ["Binding", "load_binding", "write_binding", "BINDING_NAME"]
@@ -111,12 +111,13 @@ def load_binding(session_dir) -> Binding | None:
         or ``missing`` has the wrong type (a hand edit); the message names the key.
     """
     path = Path(session_dir) / BINDING_NAME
-    try:
-        text = decode_utf8(path.read_bytes(), name=path, error=SessionError, what="binding.json")
-    except FileNotFoundError:
-        return None
-    except OSError as exc:
-        raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from exc
+    try:  # a named pipe under its name is refused, never waited on
+        raw = read_text_bytes(path, what="binding.json", error=SessionError)
+    except SessionError as exc:
+        if exc.reason == "not_found":
+            return None
+        raise
+    text = decode_utf8(raw, name=path, error=SessionError, what="binding.json")
     try:
         doc = json.loads(text)
     except ValueError as exc:

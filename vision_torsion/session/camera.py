@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+import stat
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -145,6 +146,9 @@ def list_camera_files(camera_dir, *, by: str = "time") -> CameraListing:
                                        "not bound"))
             continue
         try:
+            if not stat.S_ISREG(os.stat(path).st_mode):  # reading a named pipe would wait for ever
+                ignored.append((path.name, "not a regular file (a named pipe or a device); not bound"))
+                continue
             when, source = capture_time(path)
         except OSError as exc:
             ignored.append((path.name, f"cannot be read ({exc.strerror or exc}); not bound"))

@@ -36,7 +36,7 @@ from ..validate import number_problem
 from .binding import BINDING_NAME, load_binding
 
 __all__ = ["ManifestRow", "Manifest", "load_manifest", "manifest_text", "MANIFEST_NAME",
-           "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS"]
+           "REQUIRED_COLUMNS", "OPTIONAL_COLUMNS", "MAX_MANIFEST_ROWS"]
 
 MANIFEST_NAME = "manifest.csv"
 REQUIRED_COLUMNS = MANIFEST_COLUMNS
@@ -284,6 +284,7 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
     by_key: dict[tuple, int] = {}
     last_step: dict[tuple, tuple[int, int]] = {}
     reference: dict[float, int] = {}
+    unloaded: dict[tuple, ManifestRow] = {}  # an unloading phase's first row at zero mass
     for row in rows:
         where = (f"orientation {row.orientation_deg:g}, cycle {row.cycle}, {row.phase}")
         key = (row.orientation_deg, row.cycle, row.phase, row.step)
@@ -302,6 +303,15 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
                                 f"step {prev_step} (line {prev_line}); steps must increase "
                                 "down the file")
         last_step[group] = (row.step, row.line)
+        if row.phase.endswith("_unloading") and row.torque_nm is None:
+            zero = unloaded.get(group)
+            if zero is not None and row.mass_kg:
+                check.add(zero.line, f"mass_kg 0 on step {zero.step} of a {row.phase} row, yet step "
+                                     f"{row.step} (line {row.line}) still has {row.mass_kg:g} kg on each "
+                                     "pan; an unloading phase reaches 0 only at its last step")
+                del unloaded[group]
+            elif row.mass_kg == 0:
+                unloaded.setdefault(group, row)
         if row.phase == "reference":
             if row.orientation_deg in reference:
                 check.add(row.line, f"second reference row of orientation "
@@ -311,6 +321,8 @@ def _check_sequence(check: _RowChecker, rows: list[ManifestRow]) -> None:
             reference.setdefault(row.orientation_deg, row.line)
 
 
+#: Most rows a manifest may have, counted as it is read (a plan writes at most this many).
+MAX_MANIFEST_ROWS = 100_000
 #: Phases whose steps 1, 2, ... add weights: none of them is at zero mass.
 _LOADING_PHASES = ("negative_loading", "positive_loading")
 _NUMERIC_COLUMNS = ("orientation_deg", "cycle", "step", "mass_kg", "torque_nm", "torque_std_nm")
@@ -348,6 +360,9 @@ def _read_records(path: Path):
         if fields is None:
             break
         if any(f.strip() for f in fields):
+            if len(records) == MAX_MANIFEST_ROWS:  # before the work (and memory) of checking them
+                raise ManifestError(f"{path}: line {start}: more than {MAX_MANIFEST_ROWS} rows, the most "
+                                    "a session may have (as many as a plan may write)", reason="too_large")
             records.append((reader.line_num, fields))
     if sep == ";":  # decimal commas go with semicolons: 0,02 is 0.02
         numeric = [i for i, c in enumerate(columns) if c in _NUMERIC_COLUMNS]

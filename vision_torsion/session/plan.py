@@ -56,7 +56,7 @@ from ..measurements import CYCLE_PHASES, PHASES, couple_torque_nm
 from ..targets import Target, load_target
 from ..validate import check_number
 from .config import CONFIG_NAME, DEFAULT_ORIENTATIONS_DEG, SessionConfig, config_from_dict, config_to_dict, write_config
-from .manifest import MANIFEST_NAME, REQUIRED_COLUMNS, manifest_text
+from .manifest import MANIFEST_NAME, MAX_MANIFEST_ROWS, REQUIRED_COLUMNS, manifest_text
 from .plausibility import check_config_numbers
 from .torque import couple_torque
 
@@ -72,7 +72,7 @@ HEADER_KEYS = {"gear": ("gear", "name"), "serial": ("gear", "serial"), "operator
 
 #: Most images a plan may have, checked before anything is written (a manifest row,
 #: a capture-sheet line and a photograph each; ~10 MB of files at this size).
-MAX_PLAN_IMAGES = 100_000
+MAX_PLAN_IMAGES = MAX_MANIFEST_ROWS  # what process may read
 #: Lost-motion levels as fractions of the rated torque: ±3 % (GB/T 35089) and ±4 %
 #: (harmonic-drive catalogues).
 LOST_MOTION_FRACTIONS = (0.03, 0.04)

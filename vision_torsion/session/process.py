@@ -47,7 +47,7 @@ from pathlib import Path
 from ..angle import sequence_angles
 from ..correction import load_correction
 from ..errors import SessionError, VisionTorsionError
-from ..fileio import check_output_dir, write_records_csv
+from ..fileio import check_output_dir, same_folder, write_records_csv
 from ..measurements import MEASUREMENTS_NAME, RESULT_COLUMNS, TARGET_RESULT_COLUMNS, output_folder
 from ..pair import PairMeasurement, measure_pair
 from ..quality import SUSPECT, residual_flags
@@ -510,7 +510,8 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     Raises
     ------
     SessionError
-        Invalid session folder or session.toml, or `out_dir` is the session folder.
+        Invalid session folder or session.toml, or `out_dir` is the session folder or a
+        folder of its images.
     ManifestError
         Any problem with manifest.csv or the image files it names (all listed);
         an image that does not exist is not a problem but a pending row.
@@ -522,9 +523,13 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
         _start_server()  # its imports overlap with checking the session
     session = load_session(session_dir, missing="pending")
     out = output_folder(session.folder, out_dir)
-    if out.resolve() == session.folder.resolve():
+    if same_folder(out, session.folder):
         raise SessionError(f"{out}: the output folder cannot be the session folder itself; "
                            "use a subfolder such as results/")
+    image_dirs = {session.manifest.image_path(row).parent for row in session.manifest.rows}
+    if any(same_folder(out, d) for d in image_dirs):  # the photographs are only read
+        raise SessionError(f"{out}: the output folder cannot be a folder of the session's images; "
+                           "use a folder of its own such as results/")
     # before measuring: a run must not do its work and then fail to write it
     check_output_dir(out, replaces=[MEASUREMENTS_NAME])
     settings = session.settings

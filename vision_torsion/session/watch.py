@@ -72,7 +72,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SessionError
-from ..fileio import atomic_write_text, check_output_dir, check_replaceable
+from ..fileio import atomic_write_text, check_output_dir, check_replaceable, same_folder
 from ..images import IMAGE_SUFFIXES, MAX_IMAGE_FILE_BYTES
 from ..measure import natural_key
 from ..measurements import output_folder
@@ -100,7 +100,8 @@ class WatchEvent:
         "retracted" (a warning the next image showed to be the gear), "replaced" (a
         bound file changed: measured again), "ignored" (a file set aside), "leftover"
         (a photograph beyond the last row), "deleted",
-        "folder_gone", "folder_back", "complete" (every row has its photograph).
+        "folder_gone" (the camera folder is not there: gone, or not made yet),
+        "folder_back", "complete" (every row has its photograph).
     file : str
         The file concerned ("" for folder events).
     message : str
@@ -200,7 +201,7 @@ class Watcher:
         self.camera_mode = camera_dir is not None
         self.camera = Path(camera_dir).absolute() if camera_dir is not None else folder / "images"
         self.out = output_folder(folder, out_dir)
-        if self.camera.resolve() == self.out.resolve():
+        if same_folder(self.camera, self.out):
             raise SessionError(f"{self.camera}: the camera folder cannot be the output folder")
         # before the first photograph: a watch must not announce itself and then die
         check_output_dir(self.out)  # live.html and the cache
@@ -224,6 +225,7 @@ class Watcher:
         self.order: list[int] = []  # positions in capture order
         self.notices: list[str] = []
         self.folder_gone = False
+        self.folder_seen = False  # a folder never seen has not "disappeared": it is not there yet
         self.timings: list[dict] = []
         cfg = self.session.config
         self.step_torque = cfg.rig.step_torque_nm
@@ -326,10 +328,9 @@ class Watcher:
                                            "complete; not bound"))
         return events
 
-    def tick(self, now: float | None = None) -> list[WatchEvent]:
-        """Look at the camera folder once; return what happened (module docstring)."""
-        now = self.clock() if now is None else now
-        events: list[WatchEvent] = []
+    def _camera_entries(self, events: list[WatchEvent]) -> list | None:
+        """The camera folder's files, or None when the folder is not there (gone, or not
+        made yet: said once, in `events`, as is its coming back)."""
         try:
             entries = [e for e in os.scandir(self.camera) if e.is_file()]
         except (FileNotFoundError, NotADirectoryError):
@@ -337,11 +338,25 @@ class Watcher:
                 self.folder_gone = True
                 events.append(self._notice("folder_gone", "", f"{self.camera}: the camera folder "
                                            "has disappeared; waiting for it to come back "
-                                           "(nothing measured so far is lost; Ctrl-C to stop)"))
-            return events
+                                           "(nothing measured so far is lost; Ctrl-C to stop)"
+                                           if self.folder_seen else f"{self.camera}: no such "
+                                           "folder yet; waiting for it (check --camera-dir if the "
+                                           "camera does not make it; Ctrl-C to stop)"))
+            return None
         if self.folder_gone:
             self.folder_gone = False
-            events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is back"))
+            events.append(self._notice("folder_back", "", f"{self.camera}: the camera folder is "
+                                       + ("back" if self.folder_seen else "there")))
+        self.folder_seen = True
+        return entries
+
+    def tick(self, now: float | None = None) -> list[WatchEvent]:
+        """Look at the camera folder once; return what happened (module docstring)."""
+        now = self.clock() if now is None else now
+        events: list[WatchEvent] = []
+        entries = self._camera_entries(events)
+        if entries is None:
+            return events
         events += self._vanished({e.name for e in entries})
         self.events.ensure()  # on again after the folder was gone or replaced
         closed = self.events.closed()
@@ -571,7 +586,8 @@ class Watcher:
         number = self.order.index(pos) + 1
         line = (f"{number:4d}/{len(self.rows)}  {b.file} → {row_text(row)}  "
                 f"τ={self.torques[pos]:+.5f} N·m  "
-                + (f"θ={b.angle:+.4f}°  Δθ={b.delta:+.4f}°" if math.isfinite(b.angle) else "θ=—")
+                + (f"θ={b.angle:+.4f}°  Δθ=" + (f"{b.delta:+.4f}°" if math.isfinite(b.delta) else "—")
+                   if math.isfinite(b.angle) else "θ=—")
                 + (f"  ({note})" if (note := polarity_note(b.pair, self.session.settings.polarity)) else ""))
         events = [WatchEvent("shot", b.file, line, row.line)]
         for p in sorted(self.bound, key=self.order.index):
