@@ -764,6 +764,18 @@ def test_a_named_pipe_in_the_camera_folder_is_set_aside_by_bind(capsys, small_se
     assert tree_digest(cam) == before
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes are POSIX")
+def test_a_named_pipe_as_an_image_is_refused_without_waiting(capsys, small_session, tmp_path):
+    stop = named_pipe(tmp_path / "reference.png")  # reading it would wait for a writer
+    before = tree_digest(small_session)
+    code, out, err = run(capsys, "measure", small_session / "images", "--reference", tmp_path / "reference.png",
+                         "-o", tmp_path / "out")
+    stop.set()
+    assert code == 2
+    assert f"{tmp_path / 'reference.png'}: not a regular file (a named pipe or a device), not an image file" in err
+    assert tree_digest(small_session) == before
+
+
 # -- the output folder is never a folder of the inputs ---------------------------------------
 
 

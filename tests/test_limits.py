@@ -382,7 +382,7 @@ def test_the_whole_file_is_read_where_reads_return_less(tmp_path, monkeypatch):
     raw = _png(8, 8) + np.random.default_rng(5).integers(0, 256, 4321, np.uint8).tobytes()
     path = tmp_path / "a.png"
     path.write_bytes(raw)
-    monkeypatch.setattr(images_module, "open", lambda p, mode, buffering: Slow(p, mode), raising=False)
+    monkeypatch.setattr(images_module, "open", lambda p, mode, buffering, opener=None: Slow(p, mode), raising=False)
     assert read_image_bytes(path) == raw
     assert read_image_bytes(path, signature=False) == raw
 
