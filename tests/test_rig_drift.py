@@ -102,6 +102,57 @@ def test_markers_of_the_other_polarity_are_measured_with_a_note(tmp_path):
     assert abs(table["angle_deg"].iloc[4] - shots[4].angle_deg) < 0.01
 
 
+def _session_with(tmp_path, scene, replaced: dict):
+    """A captured session of `scene` whose rows in `replaced` hold
+    ``replaced[row](image, angle_deg)`` instead of their image; its table and shots."""
+    import cv2
+    import numpy as np
+
+    from vision_torsion.measurements import read_measurements
+    from vision_torsion.synthetic.render import render
+
+    plan, shots = capture_script(scene, SPEC, tmp_path / "s", seed=2)
+    for s in shots:
+        data = s.png
+        if s.row in replaced:
+            image = render(scene, SPEC.angle_sign * s.angle_deg, seed=4).image
+            data = cv2.imencode(".png", np.clip(np.rint(replaced[s.row](image, s.angle_deg)), 0, 255)
+                                .astype(np.uint8))[1].tobytes()
+        path = tmp_path / "s" / plan.rows[s.row]["image"]
+        path.parent.mkdir(exist_ok=True)
+        path.write_bytes(data)
+    return read_measurements(process_session(tmp_path / "s", jobs=1).measurements_path), shots
+
+
+# a disk inside a dark surround: inverted, the dark-marker search finds no target
+_RIMMED = Scene(image=ImageSpec(480, 360), disk=DiskSpec(center_x=240.3, center_y=180.4, background_level=200.0,
+                                                        radius_px=160.0, outside_level=20.0),
+                markers=MarkerSpec(radius_px=16.0, distance_px=110.0, positions_deg=(10.0, 190.0)), name="rimmed")
+
+
+def test_a_whole_frame_inverted_is_measured_by_the_other_polarity_with_a_note(tmp_path):
+    table, shots = _session_with(tmp_path, _RIMMED, {4: lambda image, angle: 255.0 - image})
+    assert list(table["status"]) == ["ok"] * 18
+    assert table["message"].iloc[4] == ("note: the markers are bright here, the session's are dark (the "
+                                   "lighting changed?); measured all the same")
+    assert abs(table["angle_deg"].iloc[4] - shots[4].angle_deg) < 0.01  # noise ~0.001°, a step 0.25°
+
+
+def test_two_markers_of_the_other_polarity_at_another_separation_are_not_the_target(tmp_path):
+    import dataclasses
+
+    from vision_torsion.synthetic.render import render
+
+    closer = dataclasses.replace(_RIMMED, markers=dataclasses.replace(_RIMMED.markers, distance_px=80.0))
+    table, _ = _session_with(tmp_path, _RIMMED, {4: lambda image, angle: 255.0 - render(
+        closer, SPEC.angle_sign * angle, seed=4).image})
+    assert table["status"].iloc[4] == "failed"
+    assert table["message"].iloc[4] == ("no target of the session's polarity (dark) found, and the two markers of "
+                                       "the other polarity are 160.0 px apart where the reference's are 220.0 px: "
+                                       "not the target")
+    assert [status for k, status in enumerate(table["status"]) if k != 4] == ["ok"] * 17
+
+
 def test_a_blurred_photograph_is_suspect_in_process_by_the_rule_of_watch_and_bind(tmp_path):
     from vision_torsion.measurements import read_measurements
 

@@ -55,7 +55,7 @@ from ..settings import MeasureSettings
 from ..validate import check_number
 from .cache import CACHE_DIRNAME, CacheLog, merge_cache, read_cache, read_logs
 from .load import Session, load_session, unlisted_images
-from .shots import image_warnings, polarity_note
+from .shots import image_warnings, other_polarity_mismatch, polarity_note
 from .worker import digest, finish_task, in_process, measure_task, read_task, start_worker
 
 __all__ = ["ProcessResult", "process_session", "OUTPUT_COLUMNS", "MEASUREMENTS_NAME", "session_measuring",
@@ -426,6 +426,8 @@ def _angles(session: Session, entries: list[dict], correction=None) -> list[tupl
                                                 entries[i].get("saturated_fraction", math.nan)))
             if angle is not None and angle.ambiguous:
                 out[i] = (math.nan, math.nan, angle.ambiguous, "failed")
+            elif angle is not None and (why := other_polarity_mismatch(pair, reference, session.settings.polarity)):
+                out[i] = (math.nan, math.nan, why, "failed")
             elif angle is not None:
                 note = flag or polarity_note(pair, session.settings.polarity)
                 out[i] = (sign * angle.angle_deg + 0.0, angle.angle_std_deg, note, SUSPECT if flag else "ok")

@@ -23,6 +23,7 @@ from .cache import CACHE_DIRNAME, CacheLog, cache_key, merge_cache, read_cache, 
 from .load import Session
 
 __all__ = ["Shot", "ShotMeasurer", "image_warnings", "blur_warning", "edge_width", "polarity_note",
+           "other_polarity_mismatch", "OTHER_POLARITY_SEPARATION_PX", "OTHER_POLARITY_SEPARATION_SHARE",
            "SATURATED_FRACTION", "BLUR_RATIO"]
 
 
@@ -134,6 +135,31 @@ def polarity_note(pair, polarity: str) -> str:
         return ""
     return (f"note: the markers are {seen} here, the session's are {polarity} (the lighting "
             "changed?); measured all the same")
+
+
+#: A pair of the other polarity than the session's is the target's only if its
+#: markers' separation is within this many px, or this share of the reference's
+#: separation (the larger), of the reference's: a turned target or changed lights
+#: keep the separation, two bright specks found instead of the markers do not.
+OTHER_POLARITY_SEPARATION_PX = 2.0
+OTHER_POLARITY_SEPARATION_SHARE = 0.02
+
+
+def other_polarity_mismatch(pair, reference, polarity: str) -> str:
+    """Why `pair`, whose markers have the other polarity than the session's
+    (:func:`polarity_note`), is not the target seen in `reference`: its markers'
+    separation differs from the reference's by more than
+    :data:`OTHER_POLARITY_SEPARATION_PX` and :data:`OTHER_POLARITY_SEPARATION_SHARE`
+    of it. "" when it matches, when the polarity is the session's, or when either
+    pair is missing."""
+    if pair is None or reference is None or not polarity_note(pair, polarity):
+        return ""
+    found, expected = (math.hypot(p.first.x_px - p.second.x_px, p.first.y_px - p.second.y_px)
+                       for p in (pair, reference))
+    if abs(found - expected) <= max(OTHER_POLARITY_SEPARATION_PX, OTHER_POLARITY_SEPARATION_SHARE * expected):
+        return ""
+    return (f"no target of the session's polarity ({polarity}) found, and the two markers of the other "
+            f"polarity are {found:.1f} px apart where the reference's are {expected:.1f} px: not the target")
 
 
 class ShotMeasurer:

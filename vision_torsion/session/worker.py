@@ -18,7 +18,7 @@ import json
 import logging
 import os
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cv2
@@ -27,7 +27,7 @@ import xxhash
 from threadpoolctl import threadpool_limits
 
 from ..batch import attempt
-from ..errors import ImageReadError
+from ..errors import ImageReadError, MarkerError
 from ..images import GreyImage, decode_image, read_image_bytes
 from ..pair import measure_pair, pair_candidates
 from ..settings import MeasureSettings
@@ -39,6 +39,7 @@ __all__ = [
     "prepare_task",
     "saturated_fraction",
     "finish_task",
+    "either_polarity",
     "ReadImage",
     "digest",
     "content_hash",
@@ -176,7 +177,8 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
     def measure(read: ReadImage):
         if read.error is not None:
             raise read.error
-        return _Cache.measure(read.image, settings=_settings_from(settings_json), name=path, candidates=read.candidates)
+        return either_polarity(_Cache.measure, read.image, settings=_settings_from(settings_json), name=path,
+                               candidates=read.candidates)
 
     done = attempt(measure, read, name=path)
     if done.unexpected:  # a bug, not the image: not cached, so the next run tries again
@@ -192,6 +194,24 @@ def finish_task(read: ReadImage, task: tuple[str, str, str]) -> tuple[str, str |
         except OSError as exc:  # the result stands; only a re-run would measure it again
             logger.warning("%s: result not cached (%s)", path, exc)
     return key, text, "measured"
+
+
+def either_polarity(measure, image, *, settings: MeasureSettings, name: str, candidates):
+    """``measure(image, settings=settings, name=name, candidates=candidates)``, or,
+    when it finds no target (:class:`~vision_torsion.errors.MarkerError`), the
+    same with the other polarity (its own candidates): the lights changed, or the
+    target was turned over. That first error stands when the other polarity finds
+    no target either. The markers' fitted contrast tells which polarity was
+    measured (:func:`~.shots.polarity_note`), and ``process`` accepts such a pair
+    only at the reference's marker separation."""
+    try:
+        return measure(image, settings=settings, name=name, candidates=candidates)
+    except MarkerError as first:
+        other = replace(settings, polarity="bright" if settings.polarity == "dark" else "dark")
+        try:
+            return measure(image, settings=other, name=name, candidates=None)
+        except MarkerError:
+            raise first from None
 
 
 def saturated_fraction(image: GreyImage) -> float:
