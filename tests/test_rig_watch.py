@@ -237,6 +237,15 @@ def test_blurred_image(rig):
     assert "blurred: marker edges" in msg and "(camera shake, or focus?)" in msg
 
 
+def test_two_markers_of_the_other_polarity_at_another_separation_are_not_the_target(rig):
+    from helpers import ARM_PX
+
+    (msg,) = warnings_of(rig, 255 - draw_target(5.0, arm_px=0.7 * ARM_PX))  # bright, and closer together
+    assert msg.startswith("IMG_0002.png (line 3: orientation 0, cycle 1, positive_unloading, step 0): no target of "
+                          "the session's polarity (dark) found, and the two markers of the other polarity are ")
+    assert msg.endswith(" px apart where the reference's are {:.1f} px: not the target".format(2 * ARM_PX))
+
+
 def test_the_camera_folder_is_never_written(rig):
     folder, cam, plan, photos = rig
     for k, row in enumerate(plan.rows[:4]):

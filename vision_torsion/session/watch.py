@@ -543,7 +543,7 @@ class Watcher:
         steps, swaps, the axis, the sign); events: its line, then the warnings
         found now, in capture order (on it, or on an image before it that it
         decided)."""
-        from .shots import image_warnings, polarity_note
+        from .shots import image_warnings, other_polarity_mismatch, polarity_note
 
         b = self.bound[pos]
         row = b.row
@@ -555,6 +555,8 @@ class Watcher:
         ref = self._reference(row.orientation_deg)
         reference = self.bound[ref].pair if ref is not None and ref != pos else None
         own += image_warnings(shot.pair, reference, shot.saturated_fraction)
+        if mismatch := other_polarity_mismatch(shot.pair, reference, self.session.settings.polarity):
+            own.append(mismatch)  # process fails its row
         b.own = own
         before = {p: list(x.warnings) for p, x in self.bound.items()}
         derived: dict[int, list[str]] = {p: [] for p in self.bound}
