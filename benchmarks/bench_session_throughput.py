@@ -47,6 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vision_torsion.session.cache import CACHE_DIRNAME
+
 RESULTS = Path(__file__).resolve().parent / "results" / "session_throughput.json"
 #: (name, jobs, mode) of the timed runs; the third is the default on two cores.
 CONFIGS = (("1 job", 1, "default"), ("2 jobs, threads", 2, "threads"),
@@ -215,7 +217,7 @@ def run_child(session: Path, out: Path, jobs: int, *, mode: str = "default",
     cmd = [sys.executable, __file__, "--child", str(session), str(out), str(jobs), mode]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
     peaks: dict[int, float] = {}
-    cache = out / ".cache"
+    cache = out / CACHE_DIRNAME
     next_sample = time.monotonic()
     while proc.poll() is None:
         if kill_at is None and time.monotonic() >= next_sample:
@@ -241,7 +243,7 @@ def kill_and_resume(session: Path, out: Path, jobs: int, n: int) -> dict:
     killed_mid_run = killed and not (out / "measurements.csv").exists()
     from vision_torsion.session.cache import count_entries
 
-    cached = count_entries(out / ".cache")
+    cached = count_entries(out / CACHE_DIRNAME)
     resumed = run_child(session, out, jobs)
     return {"killed_mid_run": killed_mid_run, "cached_at_kill": cached, "resumed": resumed}
 
