@@ -13,7 +13,7 @@ import pytest
 
 from vision_torsion.errors import ImageReadError
 from vision_torsion.images import decode_image
-from vision_torsion.pngrows import decode_grey_png
+from vision_torsion.pngrows import MAX_CHUNKS, MAX_UP_RUNS, decode_grey_png
 
 NONE, SUB, UP, AVERAGE, PAETH = range(5)
 
@@ -121,6 +121,27 @@ def test_other_kinds_of_png_are_left_to_opencv(colour, depth, interlace):
     image = samples((10, 12), np.uint8, 7)
     ihdr = struct.pack(">IIBBBBB", 12, 10, depth, colour, 0, 0, interlace)
     assert decode_grey_png(png(image, ihdr=ihdr)) is None
+
+
+def test_more_runs_of_up_rows_than_the_limit_are_left_to_opencv():
+    rows = 2 * MAX_UP_RUNS + 2
+    image = samples((rows, 9), np.uint8, 11)
+    raw = png(image, [SUB, UP] * (MAX_UP_RUNS + 1))
+    assert decode_grey_png(raw) is None
+    np.testing.assert_array_equal(decode_image(raw, name="a.png", keep_integers=True).data, image)
+    within = png(image, [SUB, UP] * MAX_UP_RUNS + [SUB, SUB])
+    np.testing.assert_array_equal(decode_grey_png(within), image)
+
+
+def test_more_chunks_than_the_limit_are_left_to_opencv():
+    image = samples((16, 16), np.uint8, 12)
+    stream = zlib.compress(filtered_rows(image, [SUB] * 16))
+    pieces = [chunk(b"tEXt", b"k\x00v")] * MAX_CHUNKS
+    raw = png(image, stream=stream, extra_before=pieces)
+    assert decode_grey_png(raw) is None
+    np.testing.assert_array_equal(decode_image(raw, name="a.png", keep_integers=True).data, image)
+    fewer = png(image, stream=stream, extra_before=pieces[:MAX_CHUNKS - 4])  # IHDR, IDAT, IEND
+    np.testing.assert_array_equal(decode_grey_png(fewer), image)
 
 
 def test_a_png_with_a_palette_chunk_is_left_to_opencv():

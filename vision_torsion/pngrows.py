@@ -4,8 +4,8 @@ zlib), their row filters undone by array operations.
 
 A PNG's rows are each stored with one of five filters. OpenCV writes every row
 "Sub" (each byte stored as its difference from the byte one sample to the left), and
-so do the cameras and tools built on it; "None" and "Up" are the other two that
-depend on no sample diagonal to the one being decoded. For 8- and 16-bit grey PNGs
+so does every program that saves its images through OpenCV; "None" and "Up" are the
+other two that depend on no sample diagonal to the one being decoded. For 8- and 16-bit grey PNGs
 of those three filters, not interlaced, :func:`decode_grey_png` gives the same
 samples as OpenCV's decoder (libpng) for less work: inflating is most of a PNG's
 decoding, and ISA-L inflates ~2.7x faster than the zlib OpenCV and Python are built
@@ -14,7 +14,9 @@ with (``benchmarks/bench_commands.py`` times the whole command).
 Any other PNG, and any doubt about one (a chunk's CRC that does not match, a chunk
 out of order, a critical chunk this decoder does not know, image data that does not
 end where its rows do), gives None: the caller then decodes the file with OpenCV,
-whose verdict and messages stand. A Sub row's bytes are running sums modulo 256,
+whose verdict and messages stand. So does a file whose structure would cost this
+decoder's Python loops much more than its pixels: over :data:`MAX_CHUNKS` chunks, or
+over :data:`MAX_UP_RUNS` runs of Up rows. A Sub row's bytes are running sums modulo 256,
 which :func:`cv2.integral` computes; only the low byte of its 32-bit sums is used,
 and the rows are taken in bands small enough that no sum exceeds 2**31 - 1.
 """
@@ -32,13 +34,19 @@ try:  # the same bytes as zlib gives, sooner; not built for every platform
 except ImportError:  # pragma: no cover - isal is a dependency where it has wheels
     import zlib as _zlib
 
-__all__ = ["decode_grey_png"]
+__all__ = ["decode_grey_png", "MAX_CHUNKS", "MAX_UP_RUNS"]
 
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _NONE, _SUB, _UP = 0, 1, 2
 #: Index of a little- or big-endian int32's lowest byte among its four.
 _LOW_BYTE = 0 if sys.byteorder == "little" else 3
 _INT32_MAX = 2**31 - 1
+#: Most chunks a PNG may have for this decoder (OpenCV's 8 kB IDAT chunks: ~1000 for
+#: a 20-Mpx grey image); more are left to OpenCV, which reads them in C.
+MAX_CHUNKS = 1 << 16
+#: Most runs of consecutive Up rows (each one array operation here); more are left
+#: to OpenCV.
+MAX_UP_RUNS = 64
 
 
 def decode_grey_png(raw: bytes) -> np.ndarray | None:
@@ -76,6 +84,8 @@ def decode_grey_png(raw: bytes) -> np.ndarray | None:
     if int(filters.max()) > _UP:
         return None
     samples = _unfilter(rows[:, 1:], filters, sample_bytes)
+    if samples is None:
+        return None
     if sample_bytes == 1:
         return samples
     return samples.view(">u2").astype(np.uint16)
@@ -88,7 +98,7 @@ def _header_and_data(raw: bytes):
         return None
     view = memoryview(raw)
     pos, header, parts, idat_done = 8, None, [], False
-    while True:
+    for _ in range(MAX_CHUNKS):
         if pos + 12 > len(raw):
             return None
         length, kind = struct.unpack_from(">I4s", raw, pos)
@@ -117,11 +127,13 @@ def _header_and_data(raw: bytes):
         else:  # an ancillary chunk (text, sBIT, pHYs, gamma...): the samples stay as stored
             idat_done = idat_done or bool(parts)
         pos = end
+    return None
 
 
-def _unfilter(filtered: np.ndarray, filters: np.ndarray, sample_bytes: int) -> np.ndarray:
+def _unfilter(filtered: np.ndarray, filters: np.ndarray, sample_bytes: int) -> np.ndarray | None:
     """The rows' bytes with their None, Sub and Up filters undone (the PNG
-    specification, section 9.2), ``(height, width * sample_bytes)`` uint8."""
+    specification, section 9.2), ``(height, width * sample_bytes)`` uint8; None
+    for more than :data:`MAX_UP_RUNS` runs of Up rows."""
     sub, up = filters == _SUB, filters == _UP
     if sub.all():
         return _running_sums(filtered, sample_bytes)
@@ -131,6 +143,8 @@ def _unfilter(filtered: np.ndarray, filters: np.ndarray, sample_bytes: int) -> n
     if up.any():
         starts = np.flatnonzero(up & ~np.concatenate(([False], up[:-1])))
         ends = np.flatnonzero(up & ~np.concatenate((up[1:], [False]))) + 1
+        if starts.size > MAX_UP_RUNS:
+            return None
         for start, end in zip(starts, ends):
             run = np.cumsum(filtered[start:end], axis=0, dtype=np.uint8)
             if start:
