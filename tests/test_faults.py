@@ -779,14 +779,20 @@ def test_a_named_pipe_as_an_image_is_refused_without_waiting(capsys, small_sessi
 # -- the output folder is never a folder of the inputs ---------------------------------------
 
 
+def refused(capsys, tree, *argv) -> str:
+    """Run a command that must refuse (status 2) and leave `tree` as it was; its stderr."""
+    before = tree_digest(tree)
+    code, _, err = run(capsys, *argv)
+    assert code == 2
+    assert tree_digest(tree) == before
+    return err
+
+
 @pytest.mark.parametrize("command", ["process", "report"])
 def test_the_folder_of_the_session_s_images_is_refused_as_output(capsys, small_session, command):
-    before = tree_digest(small_session)
-    code, out, err = run(capsys, command, small_session, "-o", small_session / "images")
-    assert code == 2
+    err = refused(capsys, small_session, command, small_session, "-o", small_session / "images")
     assert f"{small_session / 'images'}: the output folder cannot be a folder of the session's images; " \
            "use a folder of its own such as results/" in err
-    assert tree_digest(small_session) == before
 
 
 # -- a zero mass where the plan has weights ----------------------------------------------------
@@ -935,12 +941,9 @@ def test_an_output_folder_that_is_a_looping_link_is_named(capsys, small_session,
         f"{p.name},{i}\n" for i, p in enumerate(sorted(folder.glob("*.png"), key=lambda p: p.name != "reference.png"))))
     argv = {"process": [small_session], "report": [small_session], "watch": [small_session],
             "measure": [folder, "--reference", folder / "reference.png"], "check-accuracy": [folder]}[command]
-    before = tree_digest(tmp_path)
-    code, out, err = run(capsys, command, *argv, "-o", loop)
-    assert code == 2
+    err = refused(capsys, tmp_path, command, *argv, "-o", loop)
     assert f"{loop}: cannot create the output folder: a symbolic link that leads nowhere (it loops, or its " \
            "target is missing)" in err
-    assert tree_digest(tmp_path) == before
 
 
 # -- overlays: a folder that cannot take them is said so, not skipped -------------------------
