@@ -574,7 +574,7 @@ def process_session(session_dir, *, out_dir=None, jobs: int | None = None,
     # report figures in the default output folder are not shots, whichever -o this run has
     unlisted = tuple(unlisted_images(session, exclude=[out, output_folder(session.folder)]))
     n_ok = len(records) - len(failed) - len(waiting)
-    logger.info("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
+    logger.debug("%s: %d images, %d ok, %d failed, %d pending (%d measured, %d from the cache)",
                 path, len(records), n_ok, len(failed), len(waiting),
                 sources.count("measured"), sources.count("cached"))
     return ProcessResult(measurements_path=path, n_images=len(records),
