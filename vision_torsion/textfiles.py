@@ -34,7 +34,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
     import tomli as tomllib
 
 __all__ = ["read_toml", "read_text", "parse_toml", "TOMLDecodeError", "decode_utf8", "csv_delimiter",
-           "CSV_DELIMITERS", "read_text_bytes", "MAX_TEXT_BYTES", "MAX_TOML_DEPTH"]
+           "CSV_DELIMITERS", "read_text_bytes", "MAX_TEXT_BYTES", "MAX_TOML_DEPTH", "nonblocking_opener"]
 
 #: The TOML parser's error (``tomllib.TOMLDecodeError`` or ``tomli.TOMLDecodeError``).
 TOMLDecodeError = tomllib.TOMLDecodeError
@@ -90,6 +90,13 @@ def csv_delimiter(header_line: str, required) -> str:
     return ","
 
 
+def nonblocking_opener(path, flags: int) -> int:
+    """An ``opener`` for :func:`open` that does not wait for a named pipe's writer
+    (``O_NONBLOCK``, where the system has it); a regular file reads as it would
+    without it, and the caller refuses what :func:`os.fstat` says is no file."""
+    return os.open(path, flags | getattr(os, "O_NONBLOCK", 0))
+
+
 def read_text_bytes(path, *, what: str, error: type[VisionTorsionError] = VisionTorsionError,
                     limit: int = MAX_TEXT_BYTES, name=None) -> bytes:
     """The bytes of a text input, its size checked before it is read.
@@ -119,8 +126,7 @@ def read_text_bytes(path, *, what: str, error: type[VisionTorsionError] = Vision
     p = Path(path)
     name = p if name is None else name
     try:
-        # O_NONBLOCK: opening a named pipe must not wait for a writer
-        with open(os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as fh:
+        with open(p, "rb", opener=nonblocking_opener) as fh:
             st = os.fstat(fh.fileno())
             if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
                 raise error(f"{name}: not a regular file (a named pipe or a device); expected {what}",
