@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from . import add_common_options
+from . import add_common_options, one_line
 
 __all__ = ["register", "run"]
 
@@ -44,10 +44,9 @@ def register(subparsers) -> None:
 def run(args) -> int:
     """Bind; 0 when everything fits, 1 when something needs a look."""
     from ..session.bind import bind_session
-    from ..session.watch import printable
 
     def say(text, file=None):  # one line each: a newline in a camera file name must not forge another
-        print(printable(text), file=file)
+        print(one_line(text), file=file)
 
     res = bind_session(args.session_dir, args.camera_dir, by=args.by, skip=args.skip,
                        missing=args.missing, swap=args.swap, write=not args.dry_run)
